@@ -1,0 +1,92 @@
+/*
+ * fmugen_model.h -- the contract between generated model code and the
+ * hand-written FMI 2.0 runtime.
+ *
+ * Generated code (model.c) holds only the model: sizes, start values, names,
+ * and two pure functions.  Everything FMI -- the state machine, value
+ * references, logging, the Co-Simulation solvers, FMU state -- lives in the
+ * runtime and works for any model that fills in this struct.
+ *
+ * The model is   dx/dt = f(t, x, u, p),   y = g(t, x, u, p).
+ *
+ * Value references of fmi2Real variables (contiguous blocks, in this order):
+ *   [0, nx)                         states x
+ *   [nx, 2nx)                       derivatives der(x)
+ *   [2nx, 2nx+nu)                   inputs u
+ *   [2nx+nu, 2nx+nu+ny)             computed outputs y
+ *   [2nx+nu+ny, 2nx+nu+ny+np)       parameters p
+ *   then the runtime's own Real parameters (FMUGEN_RT_* offsets below).
+ * States that are also outputs keep the value reference of the state.
+ * fmi2Integer value references: FMUGEN_INT_* below.
+ */
+#ifndef FMUGEN_MODEL_H
+#define FMUGEN_MODEL_H
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* status codes returned by evaluate/jacobian */
+#define FMUGEN_OK 0
+#define FMUGEN_NOT_POSITIVE_DEFINITE 1 /* mass matrix Cholesky failed */
+#define FMUGEN_NOT_FINITE 2            /* a result is NaN or Inf */
+
+/* runtime Real parameters, offset from first_runtime_vr = 2nx+nu+ny+np */
+#define FMUGEN_RT_RTOL 0      /* relative tolerance of the CS solver */
+#define FMUGEN_RT_ATOL 1      /* absolute tolerance (scaled by x_nominal) */
+#define FMUGEN_RT_MAX_STEP 2  /* largest internal step, 0 = no limit */
+#define FMUGEN_RT_FIXED_STEP 3 /* step of the fixed-step methods, 0 = one step per communication step */
+#define FMUGEN_RT_COUNT 4
+
+/* fmi2Integer value references */
+#define FMUGEN_INT_SOLVER 0     /* parameter: 1 Dormand-Prince 5(4), 2 implicit (stiff), 3 RK4 fixed step */
+#define FMUGEN_INT_N_STEPS 1    /* local: accepted internal steps so far */
+#define FMUGEN_INT_N_REJECTED 2 /* local: rejected internal steps so far */
+#define FMUGEN_INT_N_RHS 3      /* local: evaluations of f so far */
+#define FMUGEN_INT_N_JAC 4      /* local: evaluations of the Jacobian so far */
+#define FMUGEN_INT_COUNT 5
+
+#define FMUGEN_SOLVER_DOPRI5 1
+#define FMUGEN_SOLVER_IMPLICIT 2
+#define FMUGEN_SOLVER_RK4 3
+
+typedef struct fmugen_model_def {
+    const char *model_identifier;
+    const char *guid;
+    int nx, nu, ny, np;
+    const double *x_start;   /* nx */
+    const double *x_nominal; /* nx, for error scaling */
+    const double *u_start;   /* nu */
+    const double *p_start;   /* np */
+    const char *const *x_names;
+    const char *const *u_names;
+    const char *const *y_names;
+    const char *const *p_names;
+    int has_jacobian;
+
+    /* Computes der(x) into dx (length nx) and y (length ny) in one pass;
+     * either pointer may be NULL when not wanted.  Returns FMUGEN_OK or an
+     * error code.  Pure: no state kept between calls. */
+    int (*evaluate)(const double *p, double t, const double *x, const double *u,
+                    double *dx, double *y);
+
+    /* Exact partial derivatives, dense row-major: dfdx nx*nx, dfdu nx*nu,
+     * dgdx ny*nx, dgdu ny*nu.  Any pointer may be NULL.  NULL function when
+     * has_jacobian is 0. */
+    int (*jacobian)(const double *p, double t, const double *x, const double *u,
+                    double *dfdx, double *dfdu, double *dgdx, double *dgdu);
+} fmugen_model_def;
+
+/* Defined by the generated model.c */
+extern const fmugen_model_def fmugen_model;
+
+/* Provided by the runtime (linalg.c): solves A X = B for symmetric positive
+ * definite A (n x n, row-major, only the lower triangle read, overwritten by
+ * its Cholesky factor) and B (n x k, row-major, overwritten by X).  Returns
+ * FMUGEN_OK or FMUGEN_NOT_POSITIVE_DEFINITE. */
+int fmugen_spd_solve(int n, int k, double *A, double *B);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,218 @@
+"""The generic symbolic model that the code generator and the FMU builder take.
+
+Every component fmugen exports -- a manipulator, an actuator, a controller --
+is first a :class:`SymbolicModel`:
+
+    x' = f(x, u, p),   y = g(x, u, p)
+
+with states x, inputs u, parameters p and (computed) outputs y.  ``program``
+is a straight-line program (:mod:`fmugen.codegen.program`) after which the
+expressions ``derivatives`` (one per state) and ``outputs`` (one per output
+variable) can be read.  ``jacobian`` (optional) is a second program whose
+results ``dfdx, dfdu, dgdx, dgdu`` give the exact partial derivatives; it may
+use the symbols of ``program`` (it runs after it).
+
+States can also be outputs (``Variable.output``), which is how the arm exposes
+q and qd for co-simulation without direct feedthrough.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Optional, Sequence
+
+import sympy as sp
+
+from .program import Assign, Program, SolveSPD
+
+
+@dataclass(frozen=True)
+class Variable:
+    """A model variable: FMI name, C/sympy symbol, unit, description, start."""
+
+    name: str  # FMI name, e.g. "q[1]"
+    symbol: sp.Symbol  # identifier used in generated code, e.g. q_1
+    unit: str = ""
+    description: str = ""
+    start: Optional[float] = None
+    nominal: Optional[float] = None
+    min: Optional[float] = None
+    max: Optional[float] = None
+    output: bool = False  # for states: also exposed as an output
+
+
+@dataclass(frozen=True)
+class SymbolicModel:
+    name: str
+    description: str
+    states: tuple
+    inputs: tuple
+    parameters: tuple
+    outputs: tuple
+    program: Program
+    derivatives: tuple  # expressions, one per state
+    output_exprs: tuple  # expressions, one per output
+    jacobian: Optional[Program] = None
+    dfdx: Optional[sp.Matrix] = None
+    dfdu: Optional[sp.Matrix] = None
+    dgdx: Optional[sp.Matrix] = None
+    dgdu: Optional[sp.Matrix] = None
+    # where the equations come from, printed in generated files
+    provenance: str = ""
+
+    # -- construction ----------------------------------------------------
+    @staticmethod
+    def from_equations(
+        name: str,
+        states: Sequence[Variable],
+        inputs: Sequence[Variable],
+        parameters: Sequence[Variable],
+        derivatives: Sequence[sp.Expr],
+        outputs: Sequence[Variable] = (),
+        output_exprs: Sequence[sp.Expr] = (),
+        description: str = "",
+        provenance: str = "",
+    ) -> "SymbolicModel":
+        """An explicit ODE model from plain expressions (small components).
+
+        The Jacobians are obtained by symbolic differentiation.
+        """
+        states, inputs = tuple(states), tuple(inputs)
+        f = sp.Matrix([sp.sympify(e) for e in derivatives])
+        g = sp.Matrix([sp.sympify(e) for e in output_exprs]) if outputs else sp.zeros(0, 1)
+        if len(f) != len(states):
+            raise ValueError(f"{name}: {len(f)} derivative expressions for {len(states)} states")
+        if len(g) != len(outputs):
+            raise ValueError(f"{name}: {len(g)} output expressions for {len(outputs)} outputs")
+        xs = [v.symbol for v in states]
+        us = [v.symbol for v in inputs]
+        prog = Program("w")
+        fd = tuple(prog.let(e, "f") for e in f)
+        gd = tuple(prog.let(e, "g") for e in g)
+        jac = Program("j")
+
+        def jm(exprs, wrt):
+            if not wrt or len(exprs) == 0:
+                return sp.zeros(len(exprs), len(wrt))
+            return sp.Matrix(len(exprs), len(wrt), lambda i, j: jac.let(sp.diff(exprs[i], wrt[j])))
+
+        return SymbolicModel(
+            name=name,
+            description=description,
+            states=states,
+            inputs=inputs,
+            parameters=tuple(parameters),
+            outputs=tuple(outputs),
+            program=prog,
+            derivatives=fd,
+            output_exprs=gd,
+            jacobian=jac,
+            dfdx=jm(f, xs),
+            dfdu=jm(f, us),
+            dgdx=jm(g, xs),
+            dgdu=jm(g, us),
+            provenance=provenance,
+        )
+
+    # -- queries -----------------------------------------------------------
+    @property
+    def nx(self) -> int:
+        return len(self.states)
+
+    @property
+    def nu(self) -> int:
+        return len(self.inputs)
+
+    @property
+    def ny(self) -> int:
+        return len(self.outputs)
+
+    @property
+    def np(self) -> int:
+        return len(self.parameters)
+
+    def dependencies(self) -> dict:
+        """Exact structural dependencies of derivatives and outputs.
+
+        Returns ``{"derivatives": [set, ...], "outputs": [set, ...]}`` where
+        each set holds the state/input *symbols* the quantity depends on,
+        propagated through the program (a linear solve couples all its
+        unknowns).
+        """
+        knowns = {v.symbol for v in self.states} | {v.symbol for v in self.inputs}
+        deps: dict = {}
+
+        def of(expr) -> set:
+            out = set()
+            for s in sp.sympify(expr).free_symbols:
+                if s in knowns:
+                    out.add(s)
+                elif s in deps:
+                    out |= deps[s]
+            return out
+
+        for st in self.program.steps:
+            if isinstance(st, Assign):
+                deps[st.symbol] = of(st.expr)
+            else:
+                d = set()
+                for e in list(st.A) + list(st.B):
+                    d |= of(e)
+                for x in st.X:
+                    deps[x] = d
+        return {
+            "derivatives": [of(e) for e in self.derivatives],
+            "outputs": [of(e) for e in self.output_exprs],
+        }
+
+    def parameter_values(self) -> dict:
+        return {v.symbol: v.start for v in self.parameters if v.start is not None}
+
+    def with_parameters_folded(self, names: Optional[Sequence[str]] = None) -> "SymbolicModel":
+        """A copy in which parameters (all, or those named) become constants.
+
+        Folding lets the generator simplify with the numbers (zeros vanish,
+        products of constants are computed once); the folded parameters are
+        no longer settable in the FMU.
+        """
+        chosen = [v for v in self.parameters if names is None or v.name in names]
+        missing = [v.name for v in chosen if v.start is None]
+        if missing:
+            raise ValueError(f"{self.name}: cannot fold parameters without a value: {', '.join(missing)}")
+        values = {v.symbol: sp.Float(v.start) if not float(v.start).is_integer() else sp.Integer(int(v.start))
+                  for v in chosen}
+
+        def fold_program(prog: Optional[Program]) -> tuple:
+            if prog is None:
+                return None, {}
+            env = dict(values)
+            out = Program(prog.prefix)
+            out._count = prog._count
+            for st in prog.steps:
+                if isinstance(st, Assign):
+                    e = st.expr.xreplace(env)
+                    if e.is_Number:
+                        env[st.symbol] = e
+                    else:
+                        out.steps.append(Assign(st.symbol, e))
+                else:
+                    out.steps.append(SolveSPD(st.X, st.A.xreplace(env), st.B.xreplace(env)))
+            return out, env
+
+        prog, env = fold_program(self.program)
+        jprog, jenv = fold_program(self.jacobian)
+        full = {**env, **jenv}
+        sub = lambda e: sp.sympify(e).xreplace(full)  # noqa: E731
+        subm = lambda m: None if m is None else m.xreplace(full)  # noqa: E731
+        kept = tuple(v for v in self.parameters if v not in chosen)
+        return replace(
+            self,
+            parameters=kept,
+            program=prog,
+            derivatives=tuple(sub(e) for e in self.derivatives),
+            output_exprs=tuple(sub(e) for e in self.output_exprs),
+            jacobian=jprog,
+            dfdx=subm(self.dfdx),
+            dfdu=subm(self.dfdu),
+            dgdx=subm(self.dgdx),
+            dgdu=subm(self.dgdu),
+        )
