@@ -1,0 +1,411 @@
+"""Read a robot file (TOML) into an immutable :class:`~fmugen.robot.description.Robot`.
+
+The schema is documented field by field in ``robots/README.md``.  In short::
+
+    [robot]       name, gravity (required); description, source, convention,
+                  allow_unrealisable_inertia
+    [parameters]  name = value | { value, unit, description }
+    [[links]]     joint, a, alpha, d, theta, mass, com, inertia | gyration_sq
+                  (required); name, inertia_about, rotor_inertia, damping,
+                  external_wrench, allow_unrealisable_inertia
+    [payload]     mass, com
+
+Conversion to the canonical description
+---------------------------------------
+* Quantities are parsed by :mod:`fmugen.robot.expressions` (never evaluated).
+* Every non-zero *numeric* quantity (a number, or a string without symbols)
+  given for a length, mass, centre-of-mass component, inertia component,
+  squared radius of gyration, rotor inertia, damping, gravity component or
+  payload becomes a :class:`Parameter` with an automatic name (``a_2``,
+  ``m_2``, ``rc_2_x``, ``I_2_xy``, ``k2_2_zz``, ``Ia_2``, ``b_2``, ``g_z``,
+  ``m_L``, ``rc_L_x``; i is the 1-based link index) and the number as its
+  default value, so FMUs can expose it.  Zeros stay exact structural zeros.
+  DH angles (alpha, theta) stay exact constants (they are structure).
+* ``Link.inertia_com`` is always the tensor about the centre of mass in the
+  link-frame axes.  Data given about the link-frame origin are moved with the
+  parallel-axis theorem ``I_c = I_o - m (|r|^2 E - r r^T)`` (r: COM, m: mass).
+  ``gyration_sq = [kxx2, kyy2, kzz2]`` means ``I = m diag(kxx2, kyy2, kzz2)``
+  about the stated point, products of inertia zero.
+"""
+from __future__ import annotations
+
+import difflib
+import tomllib
+import warnings
+from pathlib import Path
+
+import sympy as sp
+
+from .checks import (
+    RobotFileError,
+    UnrealisableInertiaWarning,
+    check_nonnegative,
+    check_symmetric,
+    inertia_problems,
+    numeric,
+    numeric_matrix,
+    where,
+)
+from .description import MODIFIED, PRISMATIC, REVOLUTE, STANDARD, Link, Parameter, Payload, Robot
+from .expressions import ExpressionError, NAME_PATTERN, quantity, snap_angle, symbol_name_problem
+
+TOP_KEYS = {"robot": True, "parameters": False, "links": True, "payload": False}
+ROBOT_KEYS = {
+    "name": True,
+    "gravity": True,
+    "description": False,
+    "source": False,
+    "convention": False,
+    "allow_unrealisable_inertia": False,
+}
+LINK_KEYS = {
+    "joint": True,
+    "a": True,
+    "alpha": True,
+    "d": True,
+    "theta": True,
+    "mass": True,
+    "com": True,
+    "inertia": False,
+    "gyration_sq": False,
+    "name": False,
+    "inertia_about": False,
+    "rotor_inertia": False,
+    "damping": False,
+    "external_wrench": False,
+    "allow_unrealisable_inertia": False,
+}
+PAYLOAD_KEYS = {"mass": True, "com": True}
+PARAMETER_KEYS = {"value": False, "unit": False, "description": False}
+JOINTS = (REVOLUTE, PRISMATIC)
+CONVENTIONS = (STANDARD, MODIFIED)
+AXES = "xyz"
+PAIRS = ((0, 0, "xx"), (1, 1, "yy"), (2, 2, "zz"), (0, 1, "xy"), (0, 2, "xz"), (1, 2, "yz"))
+
+
+def load_robot_description(path) -> Robot:
+    """Read, check and convert the robot file at ``path``.
+
+    Raises :class:`RobotFileError` naming the file, link and field of the
+    first problem found; warns (:class:`UnrealisableInertiaWarning`) for an
+    unrealisable inertia the file explicitly allows.
+    """
+    path = Path(path)
+    return robot_from_toml(path.read_text(encoding="utf-8"), source=str(path))
+
+
+def robot_from_toml(text: str, source: str = "<string>") -> Robot:
+    """Like :func:`load_robot_description` for TOML text; ``source`` names it in messages."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise RobotFileError(f"{source}: TOML syntax error: {exc}") from None
+    return _Reader(source).robot(data)
+
+
+class _Reader:
+    """Turns the parsed TOML tables into a Robot, collecting parameters."""
+
+    def __init__(self, source: str):
+        self.file = source
+        self.declared: dict[str, Parameter] = {}  # [parameters], in file order
+        self.auto: dict[str, Parameter] = {}  # auto-named numbers, in file order
+        self.auto_origin: dict[str, str] = {}  # auto name -> location that made it
+        self.values: dict = {}  # symbol -> default value, for the checks
+        self.user_names: set = set()  # every symbol name written in the file
+
+    # ------------------------------------------------------------------ top
+    def robot(self, data: dict) -> Robot:
+        self._keys(data, TOP_KEYS, self.file)
+        head = self._table(data["robot"], "[robot]")
+        self._keys(head, ROBOT_KEYS, where(self.file, field="[robot]"))
+        name = self._string(head["name"], "[robot]: name")
+        if not NAME_PATTERN.match(name):
+            raise RobotFileError(
+                f"{self.file}: [robot]: name: {name!r} is not an identifier "
+                "(it becomes the FMU model identifier)"
+            )
+        convention = self._choice(head.get("convention", STANDARD), CONVENTIONS, "[robot]: convention")
+        allow_all = self._bool(head.get("allow_unrealisable_inertia", False), "[robot]: allow_unrealisable_inertia")
+        text = self._string(head.get("description", ""), "[robot]: description")
+        provenance = self._string(head.get("source", ""), "[robot]: source")
+        if provenance:
+            text = f"{text}\nSource: {provenance}" if text else f"Source: {provenance}"
+
+        self._declare_parameters(data.get("parameters", {}))
+        gravity = self._vector(head["gravity"], where(self.file, field="[robot]: gravity"), "g_{}", "m/s2",
+                               "gravitational acceleration, {} component in the base frame")
+
+        links_data = data["links"]
+        if not isinstance(links_data, list) or not links_data:
+            raise RobotFileError(f"{self.file}: links: at least one [[links]] table is required")
+        links = tuple(self._link(i, t, allow_all) for i, t in enumerate(links_data, start=1))
+        names = [link.name for link in links]
+        for i, n in enumerate(names, start=1):
+            if names.index(n) != i - 1:
+                raise RobotFileError(f"{where(self.file, i, n, 'name')}: duplicate link name (also link {names.index(n) + 1})")
+
+        payload = self._payload(data["payload"]) if "payload" in data else None
+        parameters = self._parameters(links, gravity, payload)
+        return Robot(
+            name=name,
+            convention=convention,
+            links=links,
+            gravity=gravity,
+            parameters=parameters,
+            payload=payload,
+            description=text,
+            source=self.file,
+        )
+
+    # ----------------------------------------------------------- parameters
+    def _declare_parameters(self, table) -> None:
+        table = self._table(table, "[parameters]")
+        for name, spec in table.items():
+            loc = where(self.file, field=f"[parameters]: {name}")
+            problem = symbol_name_problem(name)
+            if problem:
+                raise RobotFileError(f"{loc}: invalid parameter name: {problem}")
+            unit = description = ""
+            value = None
+            if isinstance(spec, dict):
+                self._keys(spec, PARAMETER_KEYS, loc)
+                unit = self._string(spec.get("unit", ""), f"[parameters]: {name}: unit")
+                description = self._string(spec.get("description", ""), f"[parameters]: {name}: description")
+                raw = spec.get("value")
+            else:
+                raw = spec
+            if raw is not None:
+                expr = self._parse(raw, loc + ": value")
+                if expr.free_symbols:
+                    raise RobotFileError(f"{loc}: value: must be a number, got {raw!r}")
+                value = float(expr)
+            symbol = sp.Symbol(name, real=True)
+            self.declared[name] = Parameter(name, symbol, value, unit, description)
+            if value is not None:
+                self.values[symbol] = value
+
+    def _parameters(self, links, gravity, payload) -> tuple:
+        exprs = list(gravity)
+        for link in links:
+            exprs += [link.a, link.alpha, link.d, link.theta, link.mass, link.rotor_inertia, link.damping]
+            exprs += list(link.com) + [e for row in link.inertia_com for e in row]
+        if payload is not None:
+            exprs += [payload.mass, *payload.com]
+        used = set().union(*(sp.sympify(e).free_symbols for e in exprs))
+        used_names = {s.name for s in used}
+        user_names = used_names - set(self.auto)
+        clashes = [n for n in self.auto if n in self.user_names or n in self.declared]
+        if clashes:
+            n = clashes[0]
+            raise RobotFileError(
+                f"{self.auto_origin[n]}: the automatic parameter name {n!r} of this number clashes "
+                f"with the user symbol {n!r}; rename the symbol"
+            )
+        unused = [n for n in self.declared if n not in used_names]
+        if unused:
+            warnings.warn(f"{self.file}: [parameters]: declared but not used: {', '.join(unused)}", stacklevel=4)
+        params = [self.declared[n] for n in self.declared if n in used_names]
+        params += [Parameter(n, sp.Symbol(n, real=True), None) for n in sorted(user_names - set(self.declared))]
+        params += list(self.auto.values())
+        assert {p.name for p in params} == used_names, "every free symbol is a parameter"
+        return tuple(params)
+
+    def _auto_parameter(self, expr, name: str, unit: str, description: str, loc: str):
+        """A symbol for a non-zero numeric ``expr``; zeros and expressions pass through."""
+        if expr.free_symbols:
+            return expr
+        if expr == 0:
+            return sp.Integer(0)
+        value = float(expr)
+        symbol = sp.Symbol(name, real=True)
+        self.auto[name] = Parameter(name, symbol, value, unit, description)
+        self.auto_origin[name] = loc
+        self.values[symbol] = value
+        return symbol
+
+    # ---------------------------------------------------------------- links
+    def _link(self, i: int, table, allow_all: bool) -> Link:
+        table = self._table(table, f"links[{i}]")
+        name = table.get("name", f"link{i}")
+        loc0 = where(self.file, i, name if isinstance(name, str) else None)
+        self._keys(table, LINK_KEYS, loc0)
+        name = self._string(name, None, loc0 + ": name")
+        if not NAME_PATTERN.match(name):
+            raise RobotFileError(f"{loc0}: name: {name!r} is not an identifier")
+        label = f"link {i} ({name})"
+
+        def loc(field):
+            return where(self.file, i, name, field)
+
+        joint = self._choice(table["joint"], JOINTS, None, loc("joint"))
+        prismatic = joint == PRISMATIC
+
+        def number(field, auto, unit, what, angle=False, nonnegative=False):
+            expr = self._parse(table[field], loc(field)) if field in table else sp.Integer(0)
+            if angle:
+                return snap_angle(expr)
+            if nonnegative:
+                check_nonnegative(expr, self.values, loc(field), what.split(" of ")[0], unit)
+            return self._auto_parameter(expr, auto, unit, f"{what} of {label}", loc(field))
+
+        a = number("a", f"a_{i}", "m", "DH link length a")
+        alpha = number("alpha", None, "rad", "", angle=True)
+        d_what = "constant offset added to the joint displacement" if prismatic else "DH link offset d"
+        d = number("d", f"d_{i}", "m", d_what)
+        theta = number("theta", None, "rad", "", angle=True)
+        mass = number("mass", f"m_{i}", "kg", "mass", nonnegative=True)
+        com = self._vector(table["com"], loc("com"), f"rc_{i}_" + "{}", "m",
+                           "centre of mass, {} in frame " + f"{i}, of {label}")
+        rotor_unit = "kg" if prismatic else "kg.m2"
+        rotor = number("rotor_inertia", f"Ia_{i}", rotor_unit, "rotor (actuator) inertia", nonnegative=True)
+        damping_unit = "N.s/m" if prismatic else "N.m.s/rad"
+        damping = number("damping", f"b_{i}", damping_unit, "viscous joint damping", nonnegative=True)
+        wrench = self._bool(table.get("external_wrench", False), None, loc("external_wrench"))
+        allow = allow_all or self._bool(table.get("allow_unrealisable_inertia", False), None,
+                                        loc("allow_unrealisable_inertia"))
+
+        inertia_com = self._inertia(table, i, label, mass, com, loc)
+        self._check_body(mass, inertia_com, allow, loc("inertia"), label)
+        return Link(
+            name=name,
+            joint=joint,
+            a=a,
+            alpha=alpha,
+            d=d,
+            theta=theta,
+            mass=mass,
+            com=com,
+            inertia_com=tuple(tuple(inertia_com.row(r)) for r in range(3)),
+            rotor_inertia=rotor,
+            damping=damping,
+            external_wrench=wrench,
+        )
+
+    def _inertia(self, table, i, label, mass, com, loc) -> sp.Matrix:
+        has_tensor, has_gyration = "inertia" in table, "gyration_sq" in table
+        if has_tensor == has_gyration:
+            raise RobotFileError(f"{loc('inertia')}: give exactly one of 'inertia' and 'gyration_sq'")
+        about = self._choice(table.get("inertia_about", "com"), ("com", "origin"), None, loc("inertia_about"))
+        point = "its centre of mass" if about == "com" else f"the frame-{i} origin"
+        if has_tensor:
+            J = self._tensor(table["inertia"], loc("inertia"), i, label, point)
+        else:
+            k2 = self._vector(table["gyration_sq"], loc("gyration_sq"), f"k2_{i}_" + "{}", "m2",
+                              "squared radius of gyration about the {} axis through " + f"{point}, of {label}",
+                              nonnegative="squared radius of gyration")
+            J = mass * sp.diag(*k2)
+        if about == "origin":
+            r = sp.Matrix(com)
+            J = J - mass * ((r.T * r)[0, 0] * sp.eye(3) - r * r.T)
+        return J
+
+    def _tensor(self, value, loc, i, label, point) -> sp.Matrix:
+        if isinstance(value, list) and len(value) == 3 and not any(isinstance(v, list) for v in value):
+            rows = [[self._parse(value[r], f"{loc}[{r}]") if r == c else sp.Integer(0) for c in range(3)]
+                    for r in range(3)]
+        elif isinstance(value, list) and len(value) == 3 and all(isinstance(v, list) and len(v) == 3 for v in value):
+            rows = [[self._parse(value[r][c], f"{loc}[{r}][{c}]") for c in range(3)] for r in range(3)]
+        else:
+            raise RobotFileError(
+                f"{loc}: expected a 3x3 matrix [[Ixx, Ixy, Ixz], [Ixy, Iyy, Iyz], [Ixz, Iyz, Izz]] "
+                f"or the diagonal [Ixx, Iyy, Izz], got {value!r}"
+            )
+        check_symmetric(rows, loc)
+        for r in range(3):
+            check_nonnegative(rows[r][r], self.values, f"{loc}[{r}][{r}]", "moment of inertia", "kg m^2")
+        J = sp.zeros(3, 3)
+        for r, c, axes in PAIRS:
+            what = (f"inertia tensor entry {axes} (products negated) about {point}, frame-{i} axes, of {label}")
+            J[r, c] = J[c, r] = self._auto_parameter(rows[r][c], f"I_{i}_{axes}", "kg.m2", what, loc)
+        return J
+
+    def _check_body(self, mass, inertia_com, allow: bool, loc: str, label: str) -> None:
+        m = numeric(mass, self.values)
+        I = numeric_matrix(inertia_com.tolist(), self.values)
+        if m is None or I is None:
+            return  # symbolic: nothing to check until values are given
+        problems = inertia_problems(m, I)
+        if not problems:
+            return
+        text = "; ".join(problems)
+        if allow:
+            warnings.warn(
+                f"{loc}: {label} is not a realisable rigid body: {text} "
+                "(accepted because the file sets allow_unrealisable_inertia = true)",
+                UnrealisableInertiaWarning,
+                stacklevel=5,
+            )
+            return
+        raise RobotFileError(
+            f"{loc}: {label} is not a realisable rigid body: {text}. "
+            "Fix the data, or set allow_unrealisable_inertia = true on the link or in [robot] "
+            "if you really mean it"
+        )
+
+    def _payload(self, table) -> Payload:
+        loc = where(self.file, field="[payload]")
+        table = self._table(table, "[payload]")
+        self._keys(table, PAYLOAD_KEYS, loc)
+        mass = self._parse(table["mass"], loc + ": mass")
+        check_nonnegative(mass, self.values, loc + ": mass", "payload mass", "kg")
+        mass = self._auto_parameter(mass, "m_L", "kg", "payload mass (point mass on the last link)", loc + ": mass")
+        com = self._vector(table["com"], loc + ": com", "rc_L_{}", "m", "payload position, {} in the last link frame")
+        return Payload(mass=mass, com=com)
+
+    # -------------------------------------------------------------- helpers
+    def _parse(self, value, loc: str) -> sp.Expr:
+        try:
+            expr = quantity(value)
+        except ExpressionError as exc:
+            raise RobotFileError(f"{loc}: {exc}") from None
+        self.user_names |= {s.name for s in expr.free_symbols}
+        return expr
+
+    def _vector(self, value, loc, auto, unit, what, nonnegative=None) -> tuple:
+        if not isinstance(value, list) or len(value) != 3 or any(isinstance(v, (list, dict)) for v in value):
+            raise RobotFileError(f"{loc}: expected a list of 3 numbers or expressions, got {value!r}")
+        out = []
+        for k, v in enumerate(value):
+            axis = AXES[k]
+            expr = self._parse(v, f"{loc}[{k}]")
+            if nonnegative:
+                check_nonnegative(expr, self.values, f"{loc}[{k}]", nonnegative, unit)
+            out.append(self._auto_parameter(expr, auto.format(axis), unit, what.format(axis), f"{loc}[{k}]"))
+        return tuple(out)
+
+    def _keys(self, table: dict, spec: dict, loc: str) -> None:
+        unknown = [k for k in table if k not in spec]
+        if unknown:
+            k = unknown[0]
+            close = difflib.get_close_matches(k, list(spec), n=1, cutoff=0.6)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            allowed = ", ".join(spec)
+            raise RobotFileError(f"{loc}: unknown field {k!r}{hint}; allowed: {allowed}")
+        missing = [k for k, required in spec.items() if required and k not in table]
+        if missing:
+            raise RobotFileError(f"{loc}: missing required field(s): {', '.join(missing)}")
+
+    def _table(self, value, name: str) -> dict:
+        if not isinstance(value, dict):
+            raise RobotFileError(f"{self.file}: {name}: expected a table, got {type(value).__name__}")
+        return value
+
+    def _string(self, value, field, loc=None) -> str:
+        if not isinstance(value, str):
+            raise RobotFileError(f"{loc or where(self.file, field=field)}: expected a string, got {value!r}")
+        return value
+
+    def _bool(self, value, field, loc=None) -> bool:
+        if not isinstance(value, bool):
+            raise RobotFileError(f"{loc or where(self.file, field=field)}: expected true or false, got {value!r}")
+        return value
+
+    def _choice(self, value, allowed, field, loc=None) -> str:
+        loc = loc or where(self.file, field=field)
+        if value not in allowed:
+            close = difflib.get_close_matches(str(value), allowed, n=1, cutoff=0.5)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise RobotFileError(f"{loc}: unknown value {value!r}{hint}; allowed: {', '.join(allowed)}")
+        return value
+
