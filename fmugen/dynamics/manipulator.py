@@ -1,0 +1,372 @@
+"""A manipulator's equations of motion, symbolic and numeric.
+
+    tau = M(q) qdd + h(q, qd)        (thesis eq. 40; DYNAMAN eq. 17 with B = M)
+
+``Manipulator`` derives, for either formulation,
+
+* ``inverse_dynamics``  tau(q, qd, qdd)       -- one recursion
+* ``mass_matrix``       M(q), n x n            -- the recursion with qd = 0, g = 0
+                                                  and qdd = e_j, column by column
+                                                  (the thesis's ARM2, eqs. 41-42)
+* ``bias``              h(q, qd)               -- the recursion with qdd = 0
+* ``forward_dynamics``  qdd = M^{-1}(tau - h)  -- Cholesky solve, never an inverse
+* ``fk`` / ``jacobian`` pose and 6 x n geometric Jacobian of the last frame
+
+as straight-line programs, numeric evaluators (numpy in, numpy out), and the
+state-space :class:`~fmugen.codegen.model.SymbolicModel` that becomes an FMU.
+
+Symbols: q_i, qd_i, qdd_i, tau_i (i = 1..n); external wrenches on a link k
+that asks for them: f_ext_k_x.., t_ext_k_x.. (base coordinates, force at the
+link's centre of mass).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Optional, Sequence
+
+import numpy as np
+import sympy as sp
+
+from ..codegen.differentiate import differentiate
+from ..codegen.model import SymbolicModel, Variable
+from ..codegen.program import Program
+from ..codegen.python_code import compile_program
+from ..robot.description import REVOLUTE, Robot
+from . import kinematics
+from .joint_frames import joint_frame_chain
+from .lagrange import RecursiveLagrange
+from .newton_euler import NestedBodyInverseDynamics
+from .trig import TrigCache
+
+FORMULATIONS = ("newton_euler", "lagrange")
+
+
+def _real(name):
+    return sp.Symbol(name, real=True)
+
+
+@dataclass
+class Derivation:
+    """One Program with the inverse-dynamics engine that writes into it."""
+
+    program: Program
+    engine: object
+    trig: TrigCache
+
+
+class Manipulator:
+    """Equations of motion of a :class:`~fmugen.robot.description.Robot`.
+
+    >>> from fmugen.robot.chain import n_link_chain          # doctest: +SKIP
+    >>> arm = Manipulator(n_link_chain(2, seed=1))            # doctest: +SKIP
+    >>> arm.mass_matrix([0.1, 0.2]).shape                     # doctest: +SKIP
+    (2, 2)
+    """
+
+    def __init__(self, robot: Robot, formulation: str = "newton_euler"):
+        if formulation not in FORMULATIONS:
+            raise ValueError(f"formulation must be one of {FORMULATIONS}, not {formulation!r}")
+        self.robot = robot
+        self.formulation = formulation
+        n = robot.n
+        self.q = [_real(f"q_{i + 1}") for i in range(n)]
+        self.qd = [_real(f"qd_{i + 1}") for i in range(n)]
+        self.qdd = [_real(f"qdd_{i + 1}") for i in range(n)]
+        self.tau = [_real(f"tau_{i + 1}") for i in range(n)]
+        self.external_links = [i for i, L in enumerate(robot.links) if L.external_wrench]
+        self.ext = {}
+        for k in self.external_links:
+            f = [_real(f"f_ext_{k + 1}_{c}") for c in "xyz"]
+            t = [_real(f"t_ext_{k + 1}_{c}") for c in "xyz"]
+            self.ext[k] = (f, t)
+        self.parameter_symbols = [p.symbol for p in robot.parameters]
+        self._compiled: dict = {}
+
+    @property
+    def n(self) -> int:
+        return self.robot.n
+
+    @property
+    def ext_symbols(self) -> list:
+        return [s for k in self.external_links for s in self.ext[k][0] + self.ext[k][1]]
+
+    # ------------------------------------------------------------------
+    # symbolic derivations
+    def derivation(self, formulation: Optional[str] = None, prefix: str = "w") -> Derivation:
+        formulation = formulation or self.formulation
+        P = Program(prefix)
+        trig = TrigCache(P)
+        if formulation == "newton_euler":
+            engine = NestedBodyInverseDynamics(P, joint_frame_chain(self.robot), trig)
+        elif formulation == "lagrange":
+            engine = RecursiveLagrange(P, self.robot, trig)
+        else:
+            raise ValueError(f"formulation must be one of {FORMULATIONS}, not {formulation!r}")
+        return Derivation(P, engine, trig)
+
+    def _mass_matrix_into(self, d: Derivation) -> sp.Matrix:
+        """Lower triangle by unit accelerations; the upper mirrors it (symmetry)."""
+        n = self.n
+        zeros = [sp.Integer(0)] * n
+        M = sp.zeros(n, n)
+        for j in range(n):
+            e = [sp.Integer(int(k == j)) for k in range(n)]
+            col = d.engine.torques(self.q, zeros, e, gravity=None, external=None, first=j)
+            for i in range(j, n):
+                M[i, j] = M[j, i] = col[i]
+        return M
+
+    def _bias_into(self, d: Derivation) -> list:
+        zeros = [sp.Integer(0)] * self.n
+        return d.engine.torques(self.q, self.qd, zeros, gravity=self.robot.gravity, external=self.ext or None)
+
+    def inverse_dynamics_program(self, formulation=None) -> tuple:
+        """(Program, [tau_i]) for tau = ID(q, qd, qdd)."""
+        d = self.derivation(formulation)
+        tau = d.engine.torques(self.q, self.qd, self.qdd, gravity=self.robot.gravity, external=self.ext or None)
+        return d.program, tau
+
+    def mass_matrix_program(self, formulation=None) -> tuple:
+        d = self.derivation(formulation)
+        return d.program, self._mass_matrix_into(d)
+
+    def bias_program(self, formulation=None) -> tuple:
+        d = self.derivation(formulation)
+        return d.program, self._bias_into(d)
+
+    def kinematics_program(self) -> tuple:
+        """(Program, T_N as 4x4 Matrix, J as 6 x n Matrix)."""
+        P = Program("k")
+        Ts = kinematics.link_frames(P, self.robot, self.q)
+        J = kinematics.geometric_jacobian(P, self.robot, Ts)
+        return P, sp.Matrix(Ts[-1]), J
+
+    # closed forms (small robots, tests and printing only)
+    def closed_form(self, formulation=None) -> tuple:
+        """(M, h) as closed-form sympy matrices.  Grows fast with n: n <= 3."""
+        Pm, M = self.mass_matrix_program(formulation)
+        Ph, h = self.bias_program(formulation)
+        Mc = sp.Matrix(self.n, self.n, Pm.inline(list(M)))
+        hc = sp.Matrix(Ph.inline(h))
+        return Mc, hc
+
+    # ------------------------------------------------------------------
+    # the state-space model that becomes an FMU
+    def state_space_model(self, outputs: Sequence[str] = ("p_ee",), formulation=None, name=None) -> SymbolicModel:
+        """x = [q, qd], u = [tau, external wrenches], x' = [qd, M^{-1}(tau - h)].
+
+        ``outputs``: any of "p_ee" (end-effector position, frame N origin) and
+        "qdd" (joint accelerations, which have direct feedthrough from tau).
+        q and qd are outputs as states (no direct feedthrough).
+        """
+        unknown = set(outputs) - {"p_ee", "qdd"}
+        if unknown:
+            raise ValueError(f"unknown outputs {sorted(unknown)}; choose from p_ee, qdd")
+        n, robot = self.n, self.robot
+        d = self.derivation(formulation)
+        P = d.program
+        h = self._bias_into(d)
+        M = self._mass_matrix_into(d)
+        rhs = sp.Matrix([P.let(self.tau[i] - h[i], "r") for i in range(n)])
+        X = P.solve_spd(M, rhs, "qdd")
+        qdd = list(X)
+        out_vars, out_exprs = [], []
+        if "p_ee" in outputs:
+            Ts = kinematics.link_frames(P, robot, self.q, d.trig)
+            for r in range(3):
+                out_vars.append(Variable(f"p_ee[{r + 1}]", _real(f"p_ee_{r + 1}"), "m",
+                                         f"end-effector position (origin of frame {n}), base {'xyz'[r]}"))
+                out_exprs.append(Ts[-1][r][3])
+        if "qdd" in outputs:
+            for i, L in enumerate(robot.links):
+                unit = "rad/s2" if L.joint == REVOLUTE else "m/s2"
+                out_vars.append(Variable(f"qdd[{i + 1}]", _real(f"qdd_out_{i + 1}"), unit,
+                                         f"acceleration of joint {i + 1} ({L.name})"))
+                out_exprs.append(qdd[i])
+
+        # exact Jacobians: ID(q, qd, qdd*) = tau  =>  dqdd/dz = -M^{-1} dID/dz
+        Jp = Program("j")
+        d.engine.P = Jp  # keep the shared constants and sin/cos, write new steps to Jp
+        d.trig.program = Jp
+        idx = d.engine.torques(self.q, self.qd, qdd, gravity=robot.gravity, external=self.ext or None)
+        ext = self.ext_symbols
+        D = differentiate([P, Jp], idx, self.q + self.qd + ext, Jp)
+        B = sp.zeros(n, 2 * n + n + len(ext))
+        B[:, : 2 * n] = -D[:, : 2 * n]
+        B[:, 2 * n: 3 * n] = sp.eye(n)
+        if ext:
+            B[:, 3 * n:] = -D[:, 2 * n:]
+        Y = Jp.solve_spd(M, B, "y")
+        nx, nu = 2 * n, n + len(ext)
+        dfdx = sp.zeros(nx, nx)
+        dfdx[:n, n:] = sp.eye(n)
+        dfdx[n:, :] = Y[:, :nx]
+        dfdu = sp.zeros(nx, nu)
+        dfdu[n:, :] = Y[:, nx:]
+        dgdx = sp.zeros(len(out_vars), nx)
+        dgdu = sp.zeros(len(out_vars), nu)
+        row = 0
+        if "p_ee" in outputs:
+            Jk = differentiate([P], out_exprs[:3], self.q, Jp)
+            dgdx[:3, :n] = Jk
+            row = 3
+        if "qdd" in outputs:
+            dgdx[row:row + n, :] = Y[:, :nx]
+            dgdu[row:row + n, :] = Y[:, nx:]
+
+        states = []
+        for i, L in enumerate(robot.links):
+            rev = L.joint == REVOLUTE
+            states.append(Variable(f"q[{i + 1}]", self.q[i], "rad" if rev else "m",
+                                   f"position of joint {i + 1} ({L.name}, {L.joint})", start=0.0, output=True))
+        for i, L in enumerate(robot.links):
+            rev = L.joint == REVOLUTE
+            states.append(Variable(f"qd[{i + 1}]", self.qd[i], "rad/s" if rev else "m/s",
+                                   f"velocity of joint {i + 1} ({L.name})", start=0.0, output=True))
+        inputs = []
+        for i, L in enumerate(robot.links):
+            rev = L.joint == REVOLUTE
+            inputs.append(Variable(f"tau[{i + 1}]", self.tau[i], "N.m" if rev else "N",
+                                   f"{'torque' if rev else 'force'} applied by actuator {i + 1}", start=0.0))
+        for k in self.external_links:
+            f, t = self.ext[k]
+            for c in range(3):
+                inputs.append(Variable(f"f_ext_{k + 1}[{c + 1}]", f[c], "N",
+                                       f"external force on link {k + 1} at its centre of mass, base {'xyz'[c]}",
+                                       start=0.0))
+            for c in range(3):
+                inputs.append(Variable(f"t_ext_{k + 1}[{c + 1}]", t[c], "N.m",
+                                       f"external torque on link {k + 1}, base {'xyz'[c]}", start=0.0))
+        params = tuple(
+            Variable(p.name, p.symbol, p.unit, p.description, start=p.value) for p in robot.parameters
+        )
+        return SymbolicModel(
+            name=name or robot.name,
+            description=robot.description or f"{robot.name}: {n}-link manipulator",
+            states=tuple(states),
+            inputs=tuple(inputs),
+            parameters=params,
+            outputs=tuple(out_vars),
+            program=P,
+            derivatives=tuple(self.qd) + tuple(qdd),
+            output_exprs=tuple(out_exprs),
+            jacobian=Jp,
+            dfdx=dfdx,
+            dfdu=dfdu,
+            dgdx=dgdx,
+            dgdu=dgdu,
+            provenance=f"{robot.source or robot.name}; {formulation or self.formulation} formulation",
+        )
+
+    # ------------------------------------------------------------------
+    # numeric evaluators
+    def parameter_vector(self, values: Optional[dict] = None) -> np.ndarray:
+        """Parameter values in ``robot.parameters`` order: file defaults, overridden by ``values``."""
+        values = dict(values or {})
+        known = {p.name for p in self.robot.parameters}
+        unknown = set(values) - known
+        if unknown:
+            raise KeyError(f"{self.robot.name}: unknown parameter(s) {sorted(unknown)}; known: {sorted(known)}")
+        vec, missing = [], []
+        for p in self.robot.parameters:
+            v = values.get(p.name, p.value)
+            if v is None:
+                missing.append(p.name)
+            vec.append(v)
+        if missing:
+            raise ValueError(f"{self.robot.name}: no value for symbolic parameter(s) {missing}; "
+                             f"pass them as keywords, e.g. {missing[0]}=1.0")
+        return np.asarray(vec, dtype=float)
+
+    def _fn(self, key, formulation):
+        formulation = formulation or self.formulation
+        k = (key, formulation)
+        if k not in self._compiled:
+            ps = self.parameter_symbols
+            if key == "M":
+                P, M = self.mass_matrix_program(formulation)
+                fn = compile_program(P, [self.q, ps], [M], "mass_matrix")
+            elif key == "h":
+                P, h = self.bias_program(formulation)
+                fn = compile_program(P, [self.q, self.qd, self.ext_symbols, ps], [sp.Matrix(h)], "bias")
+            elif key == "ID":
+                P, tau = self.inverse_dynamics_program(formulation)
+                fn = compile_program(P, [self.q, self.qd, self.qdd, self.ext_symbols, ps], [sp.Matrix(tau)],
+                                     "inverse_dynamics")
+            elif key == "K":
+                P, T, J = self.kinematics_program()
+                fn = compile_program(P, [self.q, ps], [T, J], "kinematics")
+            else:
+                raise KeyError(key)
+            self._compiled[k] = fn
+        return self._compiled[k]
+
+    def _ext_vector(self, ext):
+        m = 6 * len(self.external_links)
+        if ext is None:
+            return np.zeros(m)
+        ext = np.asarray(ext, dtype=float).ravel()
+        if ext.size != m:
+            raise ValueError(f"ext must have {m} entries (f, t per link with external_wrench), got {ext.size}")
+        return ext
+
+    def _vec(self, name, v):
+        v = np.asarray(v, dtype=float).ravel()
+        if v.size != self.n:
+            raise ValueError(f"{name} must have {self.n} entries, got {v.size}")
+        return v
+
+    def mass_matrix(self, q, formulation=None, **params) -> np.ndarray:
+        """M(q), n x n, symmetric positive definite."""
+        return self._fn("M", formulation)(self._vec("q", q), self.parameter_vector(params))[0]
+
+    def bias(self, q, qd, ext=None, formulation=None, **params) -> np.ndarray:
+        """h(q, qd) with tau = M qdd + h: Coriolis, centrifugal, gravity, damping, -J^T w."""
+        return self._fn("h", formulation)(self._vec("q", q), self._vec("qd", qd), self._ext_vector(ext),
+                                          self.parameter_vector(params))[0][:, 0]
+
+    def inverse_dynamics(self, q, qd, qdd, ext=None, formulation=None, **params) -> np.ndarray:
+        return self._fn("ID", formulation)(self._vec("q", q), self._vec("qd", qd), self._vec("qdd", qdd),
+                                           self._ext_vector(ext), self.parameter_vector(params))[0][:, 0]
+
+    def forward_dynamics(self, q, qd, tau, ext=None, formulation=None, **params) -> np.ndarray:
+        """qdd = M(q)^{-1} (tau - h(q, qd)) by a Cholesky factorisation."""
+        M = self.mass_matrix(q, formulation, **params)
+        h = self.bias(q, qd, ext, formulation, **params)
+        L = np.linalg.cholesky(M)
+        return np.linalg.solve(L.T, np.linalg.solve(L, self._vec("tau", tau) - h))
+
+    def fk(self, q, **params) -> np.ndarray:
+        """4x4 pose of the last link frame in base coordinates (thesis TRANSP)."""
+        return self._fn("K", None)(self._vec("q", q), self.parameter_vector(params))[0]
+
+    def jacobian(self, q, **params) -> np.ndarray:
+        """6 x n geometric Jacobian of the last frame's origin, linear rows first."""
+        return self._fn("K", None)(self._vec("q", q), self.parameter_vector(params))[1]
+
+    def energy(self, q, qd, **params) -> tuple:
+        """(kinetic, potential) energy; kinetic = qd^T M qd / 2, potential from gravity.
+
+        Potential energy: -sum m_i g . c_i with c_i the centres of mass (payload
+        included), evaluated from the link frames.
+        """
+        M = self.mass_matrix(q, **params)
+        qd = self._vec("qd", qd)
+        return 0.5 * qd @ M @ qd, self._potential(q, params)
+
+    def _potential(self, q, params) -> float:
+        k = ("PE", None)
+        if k not in self._compiled:
+            from ..robot.description import combined_last_link
+
+            P = Program("e")
+            Ts = kinematics.link_frames(P, self.robot, self.q)
+            g = [sp.sympify(x) for x in self.robot.gravity]
+            pe = 0
+            for i, L in enumerate(combined_last_link(self.robot)):
+                T = Ts[i + 1]
+                c = [sum(T[r][m] * L.com[m] for m in range(3)) + T[r][3] for r in range(3)]
+                pe += -L.mass * sum(g[r] * c[r] for r in range(3))
+            self._compiled[k] = compile_program(P, [self.q, self.parameter_symbols], [pe], "potential")
+        return self._compiled[k](self._vec("q", q), self.parameter_vector(params))[0]

@@ -1,0 +1,182 @@
+"""Inverse dynamics by the Newton-Euler nested-body formulation (DYNAMAN).
+
+Source: DYNAMAN report (1985), section 2, after Velman's method of nested
+bodies.  *Nest i* is the set of links i..N.  Newton's and Euler's laws for
+nest i (report eqs. 6-13),
+
+    sum_{j>=i} m_j  c''_j            = F^c_i + F^motor_i + sum_{j>=i} (m_j g + F^ext_j)
+    sum_{j>=i} d/dt L_j (about O_i)  = T^c_i + T^motor_i + moments of gravity and F^ext,
+
+are projected on the joint axis by the principle of virtual work (eqs. 14-16):
+the constraint force/torque does no work along the joint's degree of freedom,
+so the projection of the nest's momentum balance on the axis is the joint's
+generalized force.  Collected for all joints this is the report's eq. (17),
+B(x) x'' = f(x, x') + e(x, F^ext, T^ext, F^motor, T^motor).
+
+The report writes every vector in inertial coordinates.  Here the same nest
+sums are accumulated in each link's *joint frame* (see
+:mod:`fmugen.dynamics.joint_frames`), where the joint axis is z: the nest
+force f_i and the nest moment n_i about the joint origin are built outward-in
+from f_{i+1}, n_{i+1}, so the projection q_i^T (.) of eq. (16) is just the z
+component.  Same scalar equations, a fraction of the operations, and no
+expression is ever expanded: every vector component is a named intermediate.
+
+Per link, the inertial parameters are taken about the joint-frame origin
+(first moment m*c and inertia I_o), so that a link's contribution is
+
+    F_i = m a_i + w'_i x (m c_i) + w_i x (w_i x (m c_i))
+    N_i = I_o w'_i + w_i x (I_o w_i) + (m c_i) x a_i
+
+with a_i the acceleration of the frame origin (gravity enters as a base
+acceleration -g, which is exact for a uniform field).
+"""
+from __future__ import annotations
+
+from typing import Optional, Sequence
+
+import sympy as sp
+
+from ..codegen.program import Program
+from ..robot.description import PRISMATIC, REVOLUTE
+from . import vectors as V
+from .joint_frames import joint_angle_and_offset
+from .trig import TrigCache
+
+
+class NestedBodyInverseDynamics:
+    """Builds tau = M(q) qdd + h(q, qd) into a Program, link by link.
+
+    One instance per Program: the per-link parameter combinations (first
+    moments, inertia about the joint origin) and the sin/cos of every joint
+    angle are bound once and shared by every call of :meth:`torques`.
+    """
+
+    def __init__(self, program: Program, chain: Sequence, trig: Optional[TrigCache] = None):
+        self.P = program
+        self.chain = tuple(chain)
+        self.trig = trig or TrigCache(program)
+        self._inertial = {}
+        self._frames = {}
+
+    # --- per-link constants -----------------------------------------------
+    def inertial(self, i: int):
+        """(m, m*c, I_o) of link i in its joint frame, bound once."""
+        if i not in self._inertial:
+            L, P = self.chain[i], self.P
+            m = P.let(L.mass, "m")
+            c = [sp.sympify(x) for x in L.com]
+            mc = [P.let(m * ck, "mc") for ck in c]
+            Ic = L.inertia_com
+            # parallel axis: I_o = I_c + m (|c|^2 E - c c^T)
+            cc = sum(ck * ck for ck in c)
+            Io = [[None] * 3 for _ in range(3)]
+            for r in range(3):
+                for k in range(r, 3):
+                    e = Ic[r, k] + m * ((cc if r == k else 0) - c[r] * c[k])
+                    Io[r][k] = Io[k][r] = P.let(e, "I")
+            self._inertial[i] = (m, mc, Io)
+        return self._inertial[i]
+
+    def rotation_translation(self, i: int, q_i):
+        """^{i-1}R_i = Rx(alpha) Rz(theta) and ^{i-1}p_i = [a, -s_a d, c_a d], bound once."""
+        key = (i, q_i)
+        if key in self._frames:
+            return self._frames[key]
+        L = self.chain[i]
+        theta, d = joint_angle_and_offset(L, q_i)
+        ca, sa = self.trig.cos_sin(L.alpha)
+        ct, st = self.trig.cos_sin(theta)
+        P = self.P
+        R = [
+            [ct, -st, sp.Integer(0)],
+            [P.let(ca * st), P.let(ca * ct), -sa],
+            [P.let(sa * st), P.let(sa * ct), ca],
+        ]
+        p = [sp.sympify(L.a), P.let(-sa * d), P.let(ca * d)]
+        self._frames[key] = (R, p)
+        return R, p
+
+    # --- the recursion ----------------------------------------------------
+    def torques(
+        self,
+        q: Sequence,
+        qd: Sequence,
+        qdd: Sequence,
+        gravity: Optional[Sequence] = None,
+        external: Optional[dict] = None,
+        first: int = 0,
+        joint_terms: bool = True,
+    ) -> list:
+        """Generalized forces tau_i for i >= ``first`` (others returned as None).
+
+        ``gravity``: base-frame gravitational acceleration, or None for none.
+        ``external``: {link index: (force[3], torque[3])} in base coordinates,
+        the force acting at the link's centre of mass.
+        ``joint_terms``: add rotor inertia Ia_i qdd_i and damping b_i qd_i.
+        """
+        P, n = self.P, len(self.chain)
+        external = external or {}
+        w = list(V.ZERO3)
+        dw = list(V.ZERO3)
+        acc = [-sp.sympify(g) for g in gravity] if gravity is not None else list(V.ZERO3)
+        R0 = [[sp.Integer(int(r == k)) for k in range(3)] for r in range(3)]
+        frames, Fs, Ns = [], [], []
+        for i, L in enumerate(self.chain):
+            R, p = self.rotation_translation(i, q[i])
+            frames.append((R, p))
+            # acceleration of this frame's origin, in the previous frame
+            a_prev = V.add(P, acc, V.add(P, V.cross(P, dw, p), V.cross(P, w, V.cross(P, w, p))))
+            acc = V.matTvec(P, R, a_prev, "a")
+            w_in = V.matTvec(P, R, w, "w")
+            dw_in = V.matTvec(P, R, dw, "dw")
+            if L.joint == REVOLUTE:
+                w = [w_in[0], w_in[1], P.let(w_in[2] + qd[i], "w")]
+                # w_in x (qd z) = [w_y qd, -w_x qd, 0]
+                dw = [
+                    P.let(dw_in[0] + w_in[1] * qd[i], "dw"),
+                    P.let(dw_in[1] - w_in[0] * qd[i], "dw"),
+                    P.let(dw_in[2] + qdd[i], "dw"),
+                ]
+            else:  # prismatic: Coriolis 2 w x (qd z) and qdd along z
+                w, dw = w_in, dw_in
+                acc = [
+                    P.let(acc[0] + 2 * w[1] * qd[i], "a"),
+                    P.let(acc[1] - 2 * w[0] * qd[i], "a"),
+                    P.let(acc[2] + qdd[i], "a"),
+                ]
+            m, mc, Io = self.inertial(i)
+            F = V.add(P, V.scale(P, m, acc), V.add(P, V.cross(P, dw, mc), V.cross(P, w, V.cross(P, w, mc))), "F")
+            N = V.add(P, V.add(P, V.matvec(P, Io, dw), V.cross(P, w, V.matvec(P, Io, w))), V.cross(P, mc, acc), "N")
+            if external:
+                R0 = V.matmul(P, R0, R, "R0")
+                if i in external:
+                    f_b, t_b = external[i]
+                    f = V.matTvec(P, R0, f_b, "fe")
+                    t = V.matTvec(P, R0, t_b, "te")
+                    c = [sp.sympify(x) for x in L.com]
+                    F = V.sub(P, F, f, "F")
+                    N = V.sub(P, N, V.add(P, V.cross(P, c, f), t), "N")
+            Fs.append(F)
+            Ns.append(N)
+
+        tau: list = [None] * n
+        f_next = n_next = None
+        for i in range(n - 1, first - 1, -1):
+            f, nm = Fs[i], Ns[i]
+            if f_next is not None:
+                R, p = frames[i + 1]
+                Rf = V.matvec(P, R, f_next, "Rf")
+                f = V.add(P, f, Rf, "f")
+                nm = V.add(P, nm, V.add(P, V.matvec(P, R, n_next), V.cross(P, p, Rf)), "n")
+            f_next, n_next = f, nm
+            L = self.chain[i]
+            t = nm[2] if L.joint == REVOLUTE else f[2]
+            if joint_terms:
+                t = t + L.rotor_inertia * qdd[i] + L.damping * qd[i]
+            tau[i] = P.let(t, "tau")
+        return tau
+
+
+def inverse_dynamics(program: Program, chain, q, qd, qdd, gravity, external=None, trig=None) -> list:
+    """tau = M(q) qdd + h(q, qd) (+ external-force terms) as program expressions."""
+    return NestedBodyInverseDynamics(program, chain, trig).torques(q, qd, qdd, gravity, external)
