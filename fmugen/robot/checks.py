@@ -46,7 +46,9 @@ def where(file, link: int | None = None, link_name: str | None = None, field: st
 
 def numeric(expr, values: dict) -> float | None:
     """Value of ``expr`` with ``values`` substituted, or None if still symbolic."""
-    e = sp.sympify(expr).xreplace(values) if values else sp.sympify(expr)
+    e = sp.sympify(expr)
+    if values:
+        e = sp.sympify(e.xreplace(values))  # a bare symbol is replaced by a Python float
     if e.free_symbols:
         return None
     return float(e)

@@ -266,7 +266,8 @@ class _Reader:
                                         loc("allow_unrealisable_inertia"))
 
         inertia_com = self._inertia(table, i, label, mass, com, loc)
-        self._check_body(mass, inertia_com, allow, loc("inertia"), label)
+        field = "gyration_sq" if "gyration_sq" in table else "inertia"
+        self._check_body(mass, inertia_com, allow, loc(field), label)
         return Link(
             name=name,
             joint=joint,
@@ -291,7 +292,7 @@ class _Reader:
         if has_tensor:
             J = self._tensor(table["inertia"], loc("inertia"), i, label, point)
         else:
-            k2 = self._vector(table["gyration_sq"], loc("gyration_sq"), f"k2_{i}_" + "{}", "m2",
+            k2 = self._vector(table["gyration_sq"], loc("gyration_sq"), f"k2_{i}_" + "{0}{0}", "m2",
                               "squared radius of gyration about the {} axis through " + f"{point}, of {label}",
                               nonnegative="squared radius of gyration")
             J = mass * sp.diag(*k2)
@@ -331,14 +332,14 @@ class _Reader:
         text = "; ".join(problems)
         if allow:
             warnings.warn(
-                f"{loc}: {label} is not a realisable rigid body: {text} "
+                f"{loc}: not a realisable rigid body: {text} "
                 "(accepted because the file sets allow_unrealisable_inertia = true)",
                 UnrealisableInertiaWarning,
                 stacklevel=5,
             )
             return
         raise RobotFileError(
-            f"{loc}: {label} is not a realisable rigid body: {text}. "
+            f"{loc}: not a realisable rigid body: {text}. "
             "Fix the data, or set allow_unrealisable_inertia = true on the link or in [robot] "
             "if you really mean it"
         )
