@@ -1,0 +1,18 @@
+"""Actuator-chain and controller components as SymbolicModels.
+
+Each factory returns a :class:`fmugen.codegen.model.SymbolicModel`; the
+fidelity is a keyword (what it leaves out is absent from the model).
+:func:`assemble` connects components Modelica-style into one model;
+:func:`load_assembly` reads an assembly TOML file.  See README.md here.
+"""
+from .base import TIME
+from .amplifier import amplifier
+from .current_driver import current_driver
+from .servo_valve import servo_valve
+from .hydraulic_actuator import hydraulic_actuator
+from .joint import joint_inertia
+from .connect import assemble
+from .parameters import load_parameter_set, available_sets
+
+__all__ = ["TIME", "amplifier", "current_driver", "servo_valve", "hydraulic_actuator", "joint_inertia",
+           "assemble", "load_parameter_set", "available_sets"]

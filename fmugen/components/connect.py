@@ -1,0 +1,186 @@
+"""Modelica-style composition of component models into one SymbolicModel.
+
+``assemble(name, components, connections)`` takes instances (name ->
+SymbolicModel) and causal connections ``("source.var", "target.input")`` and
+returns one model:
+
+* every variable is renamed with its instance name: FMI name ``valve.x_v``,
+  sympy/C symbol ``valve__x_v`` (parameters too: ``valve.P_s``); the time
+  symbol ``t`` is shared and never renamed;
+* a connected input is replaced by the source's expression (a state, or an
+  output -- an algebraic function of its component's states and inputs);
+  an output that depends on inputs which are themselves connected is resolved
+  recursively, and a cycle of such direct feedthroughs (an algebraic loop)
+  is an error that names the loop;
+* unconnected inputs become the assembly's inputs;
+* states keep their ``output`` flag unless ``outputs`` says otherwise; all
+  component outputs become assembly outputs unless ``outputs`` chooses;
+* derivatives, outputs and the exact Jacobians are rebuilt by
+  :meth:`SymbolicModel.from_equations` (symbolic differentiation of the
+  assembled closed forms -- the components are small).
+
+Components whose program contains a linear solve (the arm) cannot be inlined
+into closed form; they are rejected here with a clear message.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Mapping, Optional, Sequence
+
+import sympy as sp
+
+from ..codegen.model import SymbolicModel, Variable
+from ..codegen.program import Assign
+
+SEP = "__"  # C-safe separator of instance and variable in symbols
+
+
+def _renamed(inst: str, v: Variable, **changes) -> Variable:
+    return replace(v, name=f"{inst}.{v.name}", symbol=sp.Symbol(f"{inst}{SEP}{v.symbol.name}", real=True),
+                   **changes)
+
+
+def _split(endpoint, where: str):
+    if not isinstance(endpoint, str) or endpoint.count(".") < 1:
+        raise ValueError(f"{where}: {endpoint!r} is not of the form 'instance.variable'")
+    inst, var = endpoint.split(".", 1)
+    return inst, var
+
+
+def assemble(name: str, components: Mapping[str, SymbolicModel], connections: Sequence,
+             inputs: Optional[Sequence[str]] = None, outputs: Optional[Sequence[str]] = None,
+             description: str = "", provenance: str = "", where: str = "assemble") -> SymbolicModel:
+    """One SymbolicModel from connected components (see module docstring).
+
+    ``inputs`` (optional) orders the unconnected inputs and must list all of
+    them; ``outputs`` (optional) lists the exposed variables (states or
+    outputs, ``"inst.var"``).  ``where`` prefixes error messages (a file name).
+
+    >>> from fmugen.components import joint_inertia, hydraulic_actuator
+    >>> m = assemble("a", {"act": hydraulic_actuator(), "joint": joint_inertia()},
+    ...              [("act.tau", "joint.tau"), ("joint.w", "act.w")])
+    >>> [v.name for v in m.states], [v.name for v in m.inputs]
+    (['act.P_L', 'joint.theta', 'joint.w'], ['act.Q_L', 'joint.tau_load'])
+    """
+    for inst in components:
+        if not inst.isidentifier() or SEP in inst:
+            raise ValueError(f"{where}: instance name {inst!r} must be an identifier without '{SEP}'")
+    # --- closed forms of every component, renamed ----------------------------
+    info = {}
+    for inst, m in components.items():
+        if any(not isinstance(st, Assign) for st in m.program.steps):
+            raise NotImplementedError(f"{where}: component {inst!r} ({m.name}) contains a linear solve; "
+                                      "only closed-form components can be assembled symbolically")
+        ren = {}
+        for group in (m.states, m.inputs, m.parameters, m.outputs):
+            for v in group:
+                ren[v.symbol] = sp.Symbol(f"{inst}{SEP}{v.symbol.name}", real=True)
+        closed = m.program.inline(list(m.derivatives) + list(m.output_exprs))
+        closed = [sp.sympify(e).xreplace(ren) for e in closed]
+        info[inst] = dict(
+            model=m, ren=ren,
+            f=closed[:m.nx], g=closed[m.nx:],
+            states={v.name: v for v in m.states}, inputs={v.name: v for v in m.inputs},
+            outputs={v.name: k for k, v in enumerate(m.outputs)},
+        )
+
+    # --- validate connections --------------------------------------------------
+    source_of = {}  # (inst, input name) -> (inst, var name, "state"|"output")
+    for k, conn in enumerate(connections):
+        if not (isinstance(conn, (list, tuple)) and len(conn) == 2):
+            raise ValueError(f"{where}: connection {k} must be a pair [source, target], got {conn!r}")
+        (si, sv), (ti, tv) = _split(conn[0], f"{where}: connection {k}"), _split(conn[1], f"{where}: connection {k}")
+        for i_, end in ((si, conn[0]), (ti, conn[1])):
+            if i_ not in info:
+                raise ValueError(f"{where}: connection {k} ({conn[0]} -> {conn[1]}): no component named {i_!r}; "
+                                 f"components: {', '.join(info)}")
+        if sv in info[si]["states"]:
+            kind = "state"
+        elif sv in info[si]["outputs"]:
+            kind = "output"
+        else:
+            raise ValueError(f"{where}: connection {k}: {conn[0]} is neither a state nor an output of {si} "
+                             f"(states: {', '.join(info[si]['states']) or '-'}; "
+                             f"outputs: {', '.join(info[si]['outputs']) or '-'})")
+        if tv not in info[ti]["inputs"]:
+            raise ValueError(f"{where}: connection {k}: {conn[1]} is not an input of {ti} "
+                             f"(inputs: {', '.join(info[ti]['inputs']) or '-'})")
+        if (ti, tv) in source_of:
+            a = source_of[(ti, tv)]
+            raise ValueError(f"{where}: input {conn[1]} is connected twice (from {a[0]}.{a[1]} and {conn[0]})")
+        source_of[(ti, tv)] = (si, sv, kind)
+
+    # --- resolve connected inputs (depth first, detecting algebraic loops) --------
+    resolved = {}  # renamed input symbol -> expression in states / free inputs / parameters / t
+    in_progress = []
+
+    def input_symbol(inst, vname):
+        return info[inst]["ren"][info[inst]["inputs"][vname].symbol]
+
+    def resolve(inst, vname):
+        sym = input_symbol(inst, vname)
+        if sym in resolved:
+            return resolved[sym]
+        if (inst, vname) not in source_of:
+            return sym  # a free input of the assembly
+        if (inst, vname) in in_progress:
+            loop = in_progress[in_progress.index((inst, vname)):] + [(inst, vname)]
+            raise ValueError(f"{where}: algebraic loop through inputs {' -> '.join(f'{a}.{b}' for a, b in loop)} "
+                             "(every output on it depends directly on its input); break it with a state")
+        in_progress.append((inst, vname))
+        si, sv, kind = source_of[(inst, vname)]
+        if kind == "state":
+            expr = info[si]["ren"][info[si]["states"][sv].symbol]
+        else:
+            expr = info[si]["g"][info[si]["outputs"][sv]]
+            sub = {}
+            for iv in info[si]["inputs"].values():
+                isym = info[si]["ren"][iv.symbol]
+                if isym in expr.free_symbols:
+                    sub[isym] = resolve(si, iv.name)
+            expr = expr.xreplace(sub)
+        in_progress.pop()
+        resolved[sym] = expr
+        return expr
+
+    for (ti, tv) in source_of:
+        resolve(ti, tv)
+
+    # --- assembled variables -----------------------------------------------------
+    chosen = None if outputs is None else list(outputs)
+    chosen_set = set(chosen or [])
+    for o in chosen_set:
+        oi, ov = _split(o, f"{where}: outputs")
+        if oi not in info or (ov not in info[oi]["states"] and ov not in info[oi]["outputs"]):
+            raise ValueError(f"{where}: outputs: {o} is neither a state nor an output of a component")
+    states, ders, free, params, outs, out_exprs = [], [], [], [], [], []
+    for inst, d in info.items():
+        m = d["model"]
+        for v, f in zip(m.states, d["f"]):
+            flag = v.output if chosen is None else f"{inst}.{v.name}" in chosen_set
+            states.append(_renamed(inst, v, output=flag))
+            ders.append(f.xreplace(resolved))
+        for v in m.inputs:
+            if (inst, v.name) not in source_of:
+                free.append(_renamed(inst, v))
+        params += [_renamed(inst, v) for v in m.parameters]
+    # outputs in the order asked for (or component order)
+    order = chosen if chosen is not None else [f"{i}.{v.name}" for i, d in info.items() for v in d["model"].outputs]
+    for o in order:
+        oi, ov = o.split(".", 1)
+        if ov in info[oi]["outputs"]:
+            k = info[oi]["outputs"][ov]
+            outs.append(_renamed(oi, info[oi]["model"].outputs[k]))
+            out_exprs.append(info[oi]["g"][k].xreplace(resolved))
+    if inputs is not None:
+        by_name = {v.name: v for v in free}
+        missing = sorted(set(by_name) - set(inputs))
+        extra = sorted(set(inputs) - set(by_name))
+        if missing or extra:
+            raise ValueError(f"{where}: inputs must list every unconnected input exactly; "
+                             f"missing: {', '.join(missing) or '-'}; not unconnected inputs: {', '.join(extra) or '-'}")
+        free = [by_name[n] for n in inputs]
+    desc = description or "assembly of " + ", ".join(f"{i} ({d['model'].description})" for i, d in info.items())
+    prov = provenance or "; ".join(f"{i}: {d['model'].provenance}" for i, d in info.items() if d["model"].provenance)
+    return SymbolicModel.from_equations(name, states, free, params, ders, outs, out_exprs,
+                                        description=desc, provenance=prov)
