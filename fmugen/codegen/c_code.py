@@ -1,0 +1,945 @@
+"""C code generation: a :class:`SymbolicModel` printed as one ``model.c``.
+
+The generated file fills in the ``fmugen_model_def`` struct of
+``c_runtime/fmugen_model.h`` and holds only the model:
+
+* ``evaluate(p, t, x, u, dx, y)``  --  dx = f(t, x, u, p) and y = g(t, x, u, p)
+  in one pass (the output-only part runs only when ``y != NULL``);
+* ``jacobian(p, t, x, u, dfdx, dfdu, dgdx, dgdu)``  --  the exact partial
+  derivatives, dense row-major (nx*nx, nx*nu, ny*nx, ny*nu).
+
+Each function body is straight-line C produced from a
+:class:`~fmugen.codegen.program.Program`:
+
+1. the steps' expressions and the results (derivatives, outputs, Jacobian
+   entries) go through **one joint** common-subexpression elimination
+   (:func:`sympy.cse`), so a quantity used by several steps -- sin(q1) in the
+   kinematics, the dynamics and the end-effector position -- is computed once;
+2. integer powers whose base is not a plain variable get their base named
+   first, so ``sin(a)**2`` never evaluates ``sin(a)`` twice;
+3. statements are emitted in program order, each CSE temporary just before
+   its first use, dead statements dropped (no unused variables under
+   ``-Wall -Wextra``);
+4. a :class:`~fmugen.codegen.program.SolveSPD` step becomes two local arrays
+   (lower triangle of A, and B) and a call of ``fmugen_spd_solve`` (Cholesky,
+   ``c_runtime/linalg.c``), whose error code is returned on failure.
+
+Operation counts are taken from the printed C itself (see :class:`OpCount`),
+so they describe exactly the code the compiler gets.
+
+Example (a pendulum; the count is of the C that is printed):
+
+>>> import sympy as sp
+>>> from fmugen.codegen.model import SymbolicModel, Variable
+>>> phi, w, g, L = sp.symbols("phi w g L", real=True)
+>>> m = SymbolicModel.from_equations(
+...     "Pendulum",
+...     states=[Variable("phi", phi, "rad", start=0.1), Variable("w", w, "rad/s", start=0.0)],
+...     inputs=[], parameters=[Variable("g", g, "m/s2", start=9.81), Variable("L", L, "m", start=1.0)],
+...     derivatives=[w, -g / L * sp.sin(phi)])
+>>> gen = generate_c(m)
+>>> str(gen.op_counts["evaluate"])
+'1 mul, 0 add, 1 div, 1 call (sin 1)'
+"""
+from __future__ import annotations
+
+import keyword
+import re
+import uuid
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Iterable, Optional, Sequence
+
+import sympy as sp
+from sympy.printing.c import C99CodePrinter
+
+from .model import SymbolicModel, Variable
+from .program import Assign, Program, SolveSPD
+
+__all__ = [
+    "OpCount",
+    "FunctionOps",
+    "GeneratedC",
+    "generate_c",
+    "count_operations",
+    "c_identifier",
+    "deterministic_guid",
+    "CSE_OPTIMIZATIONS",
+]
+
+#: Optimisations handed to :func:`sympy.cse`.  ``None`` (no pre/post passes):
+#: the programs fmugen prints already name every non-trivial intermediate, so
+#: each expression is one step of a recursion and the 'basic' passes
+#: (``factor_terms`` and the negation rewriting) find next to nothing to
+#: factor while costing time superlinear in the program size.  Measured on the
+#: test models: identical multiplication counts, several times slower with
+#: 'basic'.
+CSE_OPTIMIZATIONS = None
+
+#: Integer powers up to this exponent are printed as repeated products.
+MAX_PRODUCT_POWER = 6
+
+GUID_NAMESPACE = uuid.UUID("7b0f2f5e-2a71-5d0e-9a59-6c1f0d3f6a10")
+
+_C_KEYWORDS = {
+    "auto", "break", "case", "char", "const", "continue", "default", "do", "double", "else",
+    "enum", "extern", "float", "for", "goto", "if", "inline", "int", "long", "register",
+    "restrict", "return", "short", "signed", "sizeof", "static", "struct", "switch", "typedef",
+    "union", "unsigned", "void", "volatile", "while", "_Bool", "_Complex", "_Imaginary",
+    "NULL", "main",
+}
+_C_MATH = {
+    "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh", "asinh",
+    "acosh", "atanh", "exp", "exp2", "expm1", "log", "log10", "log2", "log1p", "pow", "sqrt",
+    "cbrt", "hypot", "fabs", "floor", "ceil", "fmod", "fmin", "fmax", "copysign", "erf", "erfc",
+    "tgamma", "lgamma", "round", "trunc", "isfinite", "isnan", "isinf", "signbit", "memset",
+    "M_PI", "M_E", "INFINITY", "NAN", "HUGE_VAL",
+}
+# names the generated functions use for themselves
+_ARGS = {"p", "t", "x", "u", "dx", "y", "dfdx", "dfdu", "dgdx", "dgdu", "status",
+         "evaluate", "jacobian", "x_start", "x_nominal", "u_start", "p_start",
+         "x_names", "u_names", "y_names", "p_names", "fmugen_model"}
+RESERVED_NAMES = frozenset(_C_KEYWORDS | _C_MATH | _ARGS)
+
+
+# --------------------------------------------------------------------------
+# operation counts
+# --------------------------------------------------------------------------
+@dataclass(frozen=True)
+class OpCount:
+    """Floating-point operations of a piece of straight-line C.
+
+    Counting rules (applied to the printed C, token by token):
+
+    * every binary ``*`` is one multiplication (so a product of k factors is
+      k-1), including products with literals such as ``2.0*a``;
+    * every binary ``+``/``-`` is one addition; a unary minus counts nothing
+      (the compiler folds it into a neighbouring add/sub or flips a sign bit);
+    * every ``/`` is one division (``1.0/sqrt(a)`` is one division and one
+      call);
+    * every call of a math function (``sin``, ``cos``, ``sqrt``, ``pow``, ...)
+      is one call, also listed by name in ``calls``;
+    * copies (``const double a = b;``, stores into the result arrays) are
+      free.
+    """
+
+    mul: int = 0
+    add: int = 0
+    div: int = 0
+    calls: tuple = ()  # sorted ((name, count), ...)
+
+    @property
+    def n_calls(self) -> int:
+        return sum(n for _, n in self.calls)
+
+    def __add__(self, other: "OpCount") -> "OpCount":
+        c = Counter(dict(self.calls))
+        c.update(dict(other.calls))
+        return OpCount(self.mul + other.mul, self.add + other.add, self.div + other.div,
+                       tuple(sorted(c.items())))
+
+    def __str__(self) -> str:
+        s = f"{self.mul} mul, {self.add} add, {self.div} div, {self.n_calls} call"
+        if self.n_calls != 1:
+            s += "s"
+        if self.calls:
+            s += " (" + ", ".join(f"{k} {n}" for k, n in self.calls) + ")"
+        return s
+
+    def as_dict(self) -> dict:
+        return {"mul": self.mul, "add": self.add, "div": self.div, "calls": dict(self.calls)}
+
+
+@dataclass(frozen=True)
+class FunctionOps:
+    """Operation count of one generated function.
+
+    ``expressions`` is the straight-line code; ``linear_solve`` the Cholesky
+    solves (:func:`cholesky_solve_ops`), counted apart because they are loops
+    in the runtime, not generated code.
+    """
+
+    expressions: OpCount = OpCount()
+    linear_solve: OpCount = OpCount()
+
+    @property
+    def total(self) -> OpCount:
+        return self.expressions + self.linear_solve
+
+    @property
+    def mul(self) -> int:
+        return self.total.mul
+
+    @property
+    def add(self) -> int:
+        return self.total.add
+
+    def __str__(self) -> str:
+        if self.linear_solve == OpCount():
+            return str(self.expressions)
+        return f"{self.expressions}; linear solve: {self.linear_solve}"
+
+
+def cholesky_solve_ops(n: int, k: int) -> OpCount:
+    """Exact counts of ``fmugen_spd_solve(n, k, A, B)`` (c_runtime/linalg.c).
+
+    Factorisation A = L L^T: sum_j j (n - j) = (n^3 - n)/6 multiplications and
+    as many subtractions, n(n-1)/2 divisions, n square roots.  Each of the k
+    right-hand sides: forward and back substitution, n(n-1) multiplications,
+    n(n-1) subtractions, 2n divisions.
+    """
+    chol = (n ** 3 - n) // 6
+    return OpCount(
+        mul=chol + k * n * (n - 1),
+        add=chol + k * n * (n - 1),
+        div=n * (n - 1) // 2 + 2 * n * k,
+        calls=(("sqrt", n),) if n else (),
+    )
+
+
+_TOKEN = re.compile(
+    r"\s*(?:(?P<num>(?:\d+\.\d*|\.\d+|\d+)(?:[eE][+-]?\d+)?)|(?P<id>[A-Za-z_]\w*)|(?P<op>\S))"
+)
+
+
+def count_c_expression(code: str) -> OpCount:
+    """Count the operations of one printed C expression (rules in :class:`OpCount`)."""
+    mul = add = div = 0
+    calls: Counter = Counter()
+    prev = None  # kind of previous token: "val" (operand or ')') or "op"
+    pos = 0
+    toks = []
+    while pos < len(code):
+        m = _TOKEN.match(code, pos)
+        if m is None or m.end() == pos:
+            break
+        pos = m.end()
+        if m.group("num"):
+            toks.append(("num", m.group("num")))
+        elif m.group("id"):
+            toks.append(("id", m.group("id")))
+        else:
+            toks.append(("op", m.group("op")))
+    for i, (kind, text) in enumerate(toks):
+        if kind == "id":
+            if i + 1 < len(toks) and toks[i + 1] == ("op", "("):
+                calls[text] += 1
+                prev = "op"
+            else:
+                prev = "val"
+        elif kind == "num":
+            prev = "val"
+        else:
+            if text in "+-":
+                if prev == "val":
+                    add += 1
+            elif text == "*":
+                mul += 1
+            elif text == "/":
+                div += 1
+            prev = "val" if text in ")]" else "op"
+    return OpCount(mul, add, div, tuple(sorted(calls.items())))
+
+
+# --------------------------------------------------------------------------
+# printing
+# --------------------------------------------------------------------------
+class _Printer(C99CodePrinter):
+    """C99 printer with named symbols, double literals and cheap powers."""
+
+    def __init__(self, names: dict):
+        super().__init__({"strict": False})
+        self._names = names
+
+    def _print_Symbol(self, expr):
+        try:
+            return self._names[expr]
+        except KeyError:
+            raise ValueError(f"symbol {expr} has no C name (not a state, input, parameter, "
+                             f"time or program symbol)") from None
+
+    def _print_Integer(self, expr):
+        return f"{int(expr)}.0"
+
+    def _print_Rational(self, expr):
+        return repr(float(expr))
+
+    def _print_Float(self, expr):
+        return repr(float(expr))
+
+    def parenthesize(self, item, level, strict=False):
+        # A small integer power is printed as a product or a quotient, so it
+        # binds like a Mul, not like a power: a/L**2 must become a/(L*L).
+        if isinstance(item, sp.Pow) and item.exp.is_Integer and item.exp != 1 \
+                and abs(int(item.exp)) <= MAX_PRODUCT_POWER:
+            text = self._print(item)
+            return f"({text})" if level >= 50 else text
+        if isinstance(item, (sp.Rational, sp.Float)) and item > 0:
+            return self._print(item)  # a literal needs no parentheses
+        return super().parenthesize(item, level, strict)
+
+    def _print_Mul(self, expr):
+        # sign, then numerator factors, then one '/' for all denominator
+        # factors (so a/(b*c) costs one division, not two)
+        c, rest = expr.as_coeff_Mul()
+        sign = ""
+        if c < 0:
+            sign, c = "-", -c
+        factors = ([] if c == 1 else [c]) + list(sp.Mul.make_args(rest))
+        factors = [f for f in factors if f != 1]
+        num, den = [], []
+        for f in sorted(factors, key=sp.default_sort_key):
+            if f.is_Pow and f.exp.is_Rational and f.exp.is_negative:
+                den.append(f.base if f.exp == -1 else sp.Pow(f.base, -f.exp, evaluate=False))
+            else:
+                num.append(f)
+        mul = 50  # sympy's precedence of Mul
+
+        def factor(f):
+            if f.is_Pow and f.exp.is_Integer and 1 < int(f.exp) <= MAX_PRODUCT_POWER:
+                return self._print(f)  # a product inside a product needs no parentheses
+            return self.parenthesize(f, mul)
+
+        text = "*".join(factor(f) for f in num) if num else "1.0"
+        if den:
+            ds = [self.parenthesize(f, mul) for f in den]
+            text += "/" + (ds[0] if len(ds) == 1 else "(" + "*".join(ds) + ")")
+        return sign + text
+
+    def _print_Pow(self, expr):
+        base, e = expr.base, expr.exp
+        b = self.parenthesize(base, 50)  # above Mul precedence: parenthesise sums
+        if e.is_Integer:
+            n = int(e)
+            if 1 <= n <= MAX_PRODUCT_POWER:
+                return "*".join([b] * n)
+            if -MAX_PRODUCT_POWER <= n <= -1:
+                prod = "*".join([b] * -n)
+                return f"1.0/{prod}" if n == -1 else f"1.0/({prod})"
+        if e == sp.Rational(1, 2) or (e.is_Float and float(e) == 0.5):
+            return f"sqrt({self._print(base)})"
+        if e == -sp.Rational(1, 2) or (e.is_Float and float(e) == -0.5):
+            return f"1.0/sqrt({self._print(base)})"
+        return f"pow({self._print(base)}, {self._print(e)})"
+
+
+def c_identifier(name: str) -> str:
+    """A valid C identifier from an arbitrary name (``"PUMA 560"`` -> ``PUMA_560``)."""
+    s = re.sub(r"[^A-Za-z0-9_]", "_", name.strip())
+    s = re.sub(r"_+", "_", s).strip("_") or "model"
+    if s[0].isdigit():
+        s = "m_" + s
+    if s in _C_KEYWORDS or keyword.iskeyword(s):
+        s += "_"
+    return s
+
+
+class _Names:
+    """Unique C names for sympy symbols."""
+
+    def __init__(self):
+        self.map: dict = {}
+        self.used: set = set(RESERVED_NAMES)
+
+    def add(self, sym: sp.Symbol, preferred: Optional[str] = None) -> str:
+        if sym in self.map:
+            return self.map[sym]
+        base = preferred or re.sub(r"[^A-Za-z0-9_]", "_", sym.name) or "v"
+        if base[0].isdigit():
+            base = "v_" + base
+        if base.startswith("_"):  # leading underscores are reserved in C
+            base = "v" + base
+        name, k = base, 2
+        while name in self.used:
+            name = f"{base}_{k}"
+            k += 1
+        self.used.add(name)
+        self.map[sym] = name
+        return name
+
+
+# --------------------------------------------------------------------------
+# lowering: program + results -> C statements
+# --------------------------------------------------------------------------
+@dataclass
+class Sink:
+    """A result stored into an output array: ``array[index] = expr``."""
+
+    array: str
+    index: int
+    expr: sp.Expr
+
+
+@dataclass
+class SinkGroup:
+    """Results stored together, under ``if (guard)`` when guard is given.
+
+    With ``own_block`` the statements needed only by this group are emitted
+    inside the guarded block, so their work is skipped when the guard fails.
+    ``preamble`` lines open the guarded block (e.g. a memset of zeros).
+    """
+
+    guard: Optional[str]
+    sinks: list
+    own_block: bool = False
+    preamble: tuple = ()
+
+
+@dataclass
+class Body:
+    """Emitted C statements of one function body and what they cost."""
+
+    lines: list = field(default_factory=list)
+    ops: OpCount = OpCount()
+    solve_ops: OpCount = OpCount()
+    reads: set = field(default_factory=set)  # known symbols read (x, u, p, t)
+    n_solves: int = 0
+
+    @property
+    def function_ops(self) -> FunctionOps:
+        return FunctionOps(self.ops, self.solve_ops)
+
+
+def _name_pow_bases(repl: list, exprs: list, symbols) -> tuple:
+    """Name every non-symbol base of a small integer power.
+
+    ``sin(a)**2`` printed as ``sin(a)*sin(a)`` would call sin twice (a C
+    compiler may not merge the calls: sin can set errno).
+    """
+    named: dict = {}
+    new: list = []
+
+    def visit(e):
+        if not isinstance(e, sp.Basic) or e.is_Atom:
+            return e
+        args = tuple(visit(a) for a in e.args)
+        if args != e.args:
+            e = e.func(*args)
+        if (e.is_Pow and e.exp.is_Integer and 2 <= abs(int(e.exp)) <= MAX_PRODUCT_POWER
+                and not e.base.is_Symbol):
+            if e.base not in named:
+                s = next(symbols)
+                named[e.base] = s
+                new.append([s, e.base])
+            return sp.Pow(named[e.base], e.exp)
+        return e
+
+    repl = [(s, visit(v)) for s, v in repl]
+    exprs = [visit(v) for v in exprs]
+    i = 0
+    while i < len(new):  # a named base may hold such a power itself
+        new[i][1] = visit(new[i][1])
+        i += 1
+    return repl + [tuple(x) for x in new], exprs
+
+
+def _cse_prefix(pool: Sequence[sp.Expr], names: "_Names", prefix: str) -> str:
+    """A prefix whose numbered symbols collide with no symbol of the pool.
+
+    (sympy identifies symbols by name and assumptions, so a CSE temporary
+    ``c0`` would silently *be* a program symbol ``c0``.)
+    """
+    taken = set(names.used)
+    for e in pool:
+        taken |= {s.name for s in e.free_symbols}
+    while any(re.fullmatch(re.escape(prefix) + r"\d+", t) for t in taken):
+        prefix += "c"
+    return prefix
+
+
+def lower(
+    steps: Sequence,
+    groups: Sequence[SinkGroup],
+    names: "_Names",
+    known: set,
+    indent: str = "    ",
+) -> Body:
+    """C statements for a straight-line program followed by stores of results.
+
+    One joint CSE runs over every expression (step right-hand sides, the
+    lower triangles of the SPD matrices, right-hand sides of solves, results).
+    Statements follow program order; each CSE temporary is emitted just
+    before its first use; steps no result needs are dropped.  ``known`` are
+    the symbols readable without a statement (states, inputs, parameters,
+    time).
+    """
+    # 1. the pool of expressions, in order
+    pool: list = []
+    layout: list = []  # ("assign", step, idx) | ("solve", step, [(i, j, idx)], [(i, j, idx)])
+    for st in steps:
+        if isinstance(st, Assign):
+            layout.append(("assign", st, len(pool)))
+            pool.append(sp.sympify(st.expr))
+        elif isinstance(st, SolveSPD):
+            n, k = st.B.shape
+            if st.A.shape != (n, n) or st.X.shape != (n, k):
+                raise ValueError(f"SolveSPD with A {st.A.shape}, B {st.B.shape}, X {st.X.shape}")
+            a_idx, b_idx = [], []
+            for i in range(n):
+                for j in range(i + 1):
+                    a_idx.append((i, j, len(pool)))
+                    pool.append(sp.sympify(st.A[i, j]))
+            for i in range(n):
+                for j in range(k):
+                    b_idx.append((i, j, len(pool)))
+                    pool.append(sp.sympify(st.B[i, j]))
+            layout.append(("solve", st, a_idx, b_idx))
+        else:
+            raise TypeError(f"unknown program step {type(st).__name__}")
+    group_start = []
+    for g in groups:
+        group_start.append(len(pool))
+        pool.extend(sp.sympify(s.expr) for s in g.sinks)
+
+    symbols = sp.numbered_symbols(_cse_prefix(pool, names, "c"), real=True)
+    repl, reduced = sp.cse(pool, symbols=symbols, optimizations=CSE_OPTIMIZATIONS,
+                           order="canonical")
+    repl, reduced = _name_pow_bases(list(repl), list(reduced), symbols)
+    temps = dict(repl)
+
+    # 2. liveness, backwards from each group's results
+    def closure(syms: Iterable) -> set:
+        out, stack = set(), list(syms)
+        while stack:
+            s = stack.pop()
+            if s not in out:
+                out.add(s)
+                if s in temps:
+                    stack.extend(temps[s].free_symbols)
+        return out
+
+    def live_steps(need: set) -> tuple:
+        need = closure(need)
+        live = set()
+        for li in range(len(layout) - 1, -1, -1):
+            ent = layout[li]
+            if ent[0] == "assign":
+                if ent[1].symbol in need:
+                    live.add(li)
+                    need |= closure(reduced[ent[2]].free_symbols)
+            elif any(xs in need for xs in ent[1].X):
+                live.add(li)
+                for _, _, idx in ent[2] + ent[3]:
+                    need |= closure(reduced[idx].free_symbols)
+        return live, need
+
+    lives, all_need = [], set()
+    for g, start in zip(groups, group_start):
+        need = set()
+        for i in range(len(g.sinks)):
+            need |= reduced[start + i].free_symbols
+        live, need = live_steps(need)
+        lives.append(live)
+        all_need |= need
+
+    # 3. emission
+    printer = _Printer(names.map)
+    body = Body()
+    defined: set = set(known)
+    cost = [OpCount(), OpCount()]  # expressions, linear solves
+
+    def code_of(e) -> str:
+        code = printer.doprint(e)
+        cost[0] = cost[0] + count_c_expression(code)
+        return code
+
+    def emit_temps_for(e, out, ind):
+        for s in sorted(e.free_symbols, key=lambda z: z.name):
+            if s in temps and s not in defined:
+                emit_temps_for(temps[s], out, ind)
+                out.append(f"{ind}const double {names.add(s)} = {code_of(temps[s])};")
+                defined.add(s)
+
+    def emit_expr(e, out, ind) -> str:
+        emit_temps_for(e, out, ind)
+        return code_of(e)
+
+    def emit_step(ent, out, ind):
+        if ent[0] == "assign":
+            st = ent[1]
+            code = emit_expr(reduced[ent[2]], out, ind)
+            out.append(f"{ind}const double {names.add(st.symbol)} = {code};")
+            defined.add(st.symbol)
+            return
+        st = ent[1]
+        n, k = st.B.shape
+        a, b = f"spd_A{body.n_solves}", f"spd_B{body.n_solves}"
+        body.n_solves += 1
+        fills = []
+        for i, j, idx in ent[2]:
+            fills.append(f"{ind}{a}[{i * n + j}] = {emit_expr(reduced[idx], out, ind)};")
+        for i, j, idx in ent[3]:
+            fills.append(f"{ind}{b}[{i * k + j}] = {emit_expr(reduced[idx], out, ind)};")
+        out.append(f"{ind}/* X = A^-1 B by Cholesky: A {n}x{n} symmetric positive definite "
+                   f"(lower triangle filled), B {n}x{k} */")
+        out.append(f"{ind}double {a}[{n * n}], {b}[{n * k}];")
+        out.extend(fills)
+        out.append(f"{ind}status = fmugen_spd_solve({n}, {k}, {a}, {b});")
+        out.append(f"{ind}if (status != FMUGEN_OK) return status;")
+        cost[1] = cost[1] + cholesky_solve_ops(n, k)
+        for i in range(n):
+            for j in range(k):
+                xs = st.X[i, j]
+                if xs in all_need:
+                    out.append(f"{ind}const double {names.add(xs)} = {b}[{i * k + j}];")
+                    defined.add(xs)
+
+    emitted: set = set()
+    for g, start, live in zip(groups, group_start, lives):
+        inner = indent * 2 if g.guard else indent
+        work = [] if (g.own_block and g.guard) else body.lines
+        work_ind = inner if work is not body.lines else indent
+        for li in sorted(live):
+            if li not in emitted:
+                emitted.add(li)
+                emit_step(layout[li], work, work_ind)
+        stores = []
+        for i, s in enumerate(g.sinks):
+            code = emit_expr(reduced[start + i], work, work_ind)
+            stores.append(f"{inner}{s.array}[{s.index}] = {code};")
+        if g.guard:
+            if not (stores or g.preamble or work is not body.lines):
+                continue
+            body.lines.append(f"{indent}if ({g.guard}) {{")
+            body.lines.extend(f"{inner}{p}" for p in g.preamble)
+            if work is not body.lines:
+                body.lines.extend(work)
+            body.lines.extend(stores)
+            body.lines.append(f"{indent}}}")
+        else:
+            body.lines.extend(f"{indent}{p}" for p in g.preamble)
+            body.lines.extend(stores)
+    body.ops, body.solve_ops = cost
+    body.reads = {s for s in all_need if s in known}
+    return body
+
+
+# --------------------------------------------------------------------------
+# the model file
+# --------------------------------------------------------------------------
+@dataclass(frozen=True)
+class GeneratedC:
+    """``source`` of model.c and the operation count of each function."""
+
+    source: str
+    op_counts: dict  # "evaluate" / "jacobian" -> FunctionOps
+    model_identifier: str
+    guid: str
+
+
+def deterministic_guid(*texts: str) -> str:
+    """A GUID that depends only on the given texts (uuid5), in FMI's braces."""
+    return "{" + str(uuid.uuid5(GUID_NAMESPACE, "\n".join(texts))) + "}"
+
+
+GUID_PLACEHOLDER = "@FMUGEN_GUID@"
+
+
+def _c_string(s: str) -> str:
+    return '"' + s.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
+
+
+def _c_double(v: float) -> str:
+    v = float(v)
+    if v != v or v in (float("inf"), float("-inf")):
+        raise ValueError(f"non-finite start/nominal value {v}")
+    return repr(v)
+
+
+def _comment_safe(s: str) -> str:
+    return s.replace("*/", "* /")
+
+
+def _time_symbol(model: SymbolicModel, known: set) -> Optional[sp.Symbol]:
+    """The symbol standing for time: any free symbol named ``t`` that is not
+    a state, input, parameter or program symbol.  Any other unknown symbol
+    is an error."""
+    assigned = model.program.assigned_symbols()
+    if model.jacobian is not None:
+        assigned |= model.jacobian.assigned_symbols()
+    free: set = set()
+    progs = [model.program] + ([model.jacobian] if model.jacobian is not None else [])
+    for prog in progs:
+        for st in prog.steps:
+            if isinstance(st, Assign):
+                free |= sp.sympify(st.expr).free_symbols
+            else:
+                free |= st.A.free_symbols | st.B.free_symbols
+    for e in list(model.derivatives) + list(model.output_exprs):
+        free |= sp.sympify(e).free_symbols
+    for m in (model.dfdx, model.dfdu, model.dgdx, model.dgdu):
+        if m is not None:
+            free |= m.free_symbols
+    unknown = free - known - assigned
+    time = [s for s in unknown if s.name == "t"]
+    other = sorted(s.name for s in unknown if s.name != "t")
+    if other:
+        raise ValueError(f"model {model.name!r}: symbols {', '.join(other)} are neither states, "
+                         f"inputs, parameters, time t, nor assigned by the program")
+    if len(time) > 1:
+        raise ValueError(f"model {model.name!r}: more than one symbol named t")
+    return time[0] if time else None
+
+
+def _check_model(model: SymbolicModel) -> None:
+    if len(model.derivatives) != model.nx:
+        raise ValueError(f"model {model.name!r}: {len(model.derivatives)} derivatives for {model.nx} states")
+    if len(model.output_exprs) != model.ny:
+        raise ValueError(f"model {model.name!r}: {len(model.output_exprs)} output expressions for "
+                         f"{model.ny} outputs")
+    syms = [v.symbol for v in model.states + model.inputs + model.parameters]
+    dup = sorted({s.name for s in syms if syms.count(s) > 1})
+    if dup:
+        raise ValueError(f"model {model.name!r}: symbols used by more than one variable: {', '.join(dup)}")
+    if model.jacobian is not None:
+        shapes = {"dfdx": (model.nx, model.nx), "dfdu": (model.nx, model.nu),
+                  "dgdx": (model.ny, model.nx), "dgdu": (model.ny, model.nu)}
+        for attr, shape in shapes.items():
+            m = getattr(model, attr)
+            if m is None:
+                raise ValueError(f"model {model.name!r}: has a jacobian program but {attr} is missing")
+            if tuple(m.shape) != shape:
+                raise ValueError(f"model {model.name!r}: {attr} is {m.shape[0]}x{m.shape[1]}, "
+                                 f"expected {shape[0]}x{shape[1]}")
+
+
+def _declare_reads(body: Body, names: "_Names", model: SymbolicModel, time) -> list:
+    """``const double q_1 = x[0];`` for every state/input/parameter read."""
+    lines = []
+    for arr, vars_ in (("x", model.states), ("u", model.inputs), ("p", model.parameters)):
+        for i, v in enumerate(vars_):
+            if v.symbol in body.reads:
+                lines.append(f"    const double {names.map[v.symbol]} = {arr}[{i}]; "
+                             f"/* {_comment_safe(v.name)} */")
+    if time is not None and time in body.reads:
+        lines.append(f"    const double {names.map[time]} = t;")
+    return lines
+
+
+def _function(signature: str, args: Sequence[str], body: Body, reads: list) -> str:
+    out = [f"static int {signature}", "{"]
+    out.append("    " + " ".join(f"(void){a};" for a in args))
+    if body.n_solves:
+        out.append("    int status;")
+    out.extend(reads)
+    out.extend(body.lines)
+    out.append("    return FMUGEN_OK;")
+    out.append("}")
+    return "\n".join(out)
+
+
+def _new_names(model: SymbolicModel, time) -> _Names:
+    names = _Names()
+    for v in model.states + model.inputs + model.parameters:
+        names.add(v.symbol)
+    if time is not None:
+        # time is read as the argument t; its local copy needs another name
+        names.add(time, "time" if time.name == "t" else None)
+    return names
+
+
+def _array(ctype: str, name: str, values: list) -> str:
+    if not values:
+        return ""
+    return f"static const {ctype} {name}[{len(values)}] = {{{', '.join(values)}}};"
+
+
+def _variable_table(model: SymbolicModel) -> list:
+    rows = []
+    nx, nu, ny = model.nx, model.nu, model.ny
+    vr = 0
+
+    def row(kind, i, v: Variable, vref):
+        unit = v.unit or "-"
+        desc = _comment_safe(v.description)
+        return f" *   {vref:4d}  {kind:<10s} {i:3d}  {_comment_safe(v.name):<22s} {unit:<10s} {desc}"
+
+    for i, v in enumerate(model.states):
+        rows.append(row("state", i, v, vr + i))
+    vr += 2 * nx
+    for i, v in enumerate(model.inputs):
+        rows.append(row("input", i, v, vr + i))
+    vr += nu
+    for i, v in enumerate(model.outputs):
+        rows.append(row("output", i, v, vr + i))
+    vr += ny
+    for i, v in enumerate(model.parameters):
+        rows.append(row("parameter", i, v, vr + i))
+    return rows
+
+
+def generate_c(
+    model: SymbolicModel,
+    model_identifier: Optional[str] = None,
+    guid: Optional[str] = None,
+) -> GeneratedC:
+    """Print ``model`` as the ``model.c`` of the fmugen runtime.
+
+    ``model_identifier`` defaults to :func:`c_identifier` of the model name;
+    ``guid`` to a hash of the generated text (identical models give identical
+    files).  Pass :data:`GUID_PLACEHOLDER` to get a source to hash together
+    with the modelDescription.xml, then substitute (what the FMU builder does).
+    """
+    _check_model(model)
+    ident = model_identifier or c_identifier(model.name)
+    if c_identifier(ident) != ident:
+        raise ValueError(f"model identifier {ident!r} is not a valid C identifier")
+    for v in model.states:
+        if v.start is None:
+            raise ValueError(f"model {model.name!r}: state {v.name!r} has no start value")
+    known = {v.symbol for v in model.states + model.inputs + model.parameters}
+    time = _time_symbol(model, known)
+    if time is not None:
+        known.add(time)
+    names = _new_names(model, time)
+    nx, nu, ny = model.nx, model.nu, model.ny
+
+    # evaluate(): derivatives, then the output-only work under if (y)
+    ev = lower(
+        model.program.steps,
+        [SinkGroup("dx != NULL", [Sink("dx", i, e) for i, e in enumerate(model.derivatives)]),
+         SinkGroup("y != NULL", [Sink("y", i, e) for i, e in enumerate(model.output_exprs)],
+                   own_block=True)],
+        names, known)
+    evaluate = _function(
+        "evaluate(const double *p, double t, const double *x, const double *u, double *dx, double *y)",
+        ["p", "t", "x", "u", "dx", "y"], ev, _declare_reads(ev, names, model, time))
+    op_counts = {"evaluate": ev.function_ops}
+
+    jac_src = ""
+    has_jac = model.jacobian is not None
+    if has_jac:
+        groups = []
+        for arr, m in (("dfdx", model.dfdx), ("dfdu", model.dfdu),
+                       ("dgdx", model.dgdx), ("dgdu", model.dgdu)):
+            rows, cols = m.shape
+            if rows * cols == 0:
+                continue
+            entries = [(r * cols + c, m[r, c]) for r in range(rows) for c in range(cols)]
+            nz = [Sink(arr, k, e) for k, e in entries if not (sp.sympify(e).is_zero is True)]
+            pre = ()
+            if len(nz) < len(entries):  # structural zeros, written once by memset
+                pre = (f"memset({arr}, 0, {len(entries)} * sizeof(double));",)
+            groups.append(SinkGroup(f"{arr} != NULL", nz, preamble=pre))
+        # the Jacobian program may read program symbols: run both, pruned by lower()
+        jb = lower(list(model.program.steps) + list(model.jacobian.steps), groups, names, known)
+        jac_src = _function(
+            "jacobian(const double *p, double t, const double *x, const double *u,\n"
+            "                    double *dfdx, double *dfdu, double *dgdx, double *dgdu)",
+            ["p", "t", "x", "u", "dfdx", "dfdu", "dgdx", "dgdu"], jb,
+            _declare_reads(jb, names, model, time))
+        op_counts["jacobian"] = jb.function_ops
+
+    guid_text = GUID_PLACEHOLDER if guid is None else guid
+    header = [
+        "/*",
+        f" * model.c -- {_comment_safe(model.name)}: generated by fmugen, do not edit.",
+        " *",
+    ]
+    if model.description:
+        header += [f" * {_comment_safe(line)}" for line in model.description.splitlines()] + [" *"]
+    if model.provenance:
+        header += [" * Provenance:"] + [f" *   {_comment_safe(line)}"
+                                        for line in model.provenance.splitlines()] + [" *"]
+    header += [
+        f" * dx/dt = f(t, x, u, p), y = g(t, x, u, p) with nx = {nx}, nu = {nu}, ny = {ny}, "
+        f"np = {model.np}.",
+        " * Variables (value reference, kind, index in x/u/y/p, FMI name, unit, description):",
+        *_variable_table(model),
+        " *",
+        " * Operation counts (binary * + - / and calls in the code below; unary minus free;",
+        " * Cholesky solves in the runtime counted separately):",
+    ]
+    for fn, oc in op_counts.items():
+        header.append(f" *   {fn}: {_comment_safe(str(oc.expressions))}")
+        if oc.linear_solve != OpCount():
+            header.append(f" *   {' ' * len(fn)}  linear solve: {oc.linear_solve}")
+    header += [" */"]
+
+    def names_array(name, vars_):
+        return _array("char *const", name, [_c_string(v.name) for v in vars_])
+
+    decls = [
+        _array("double", "x_start", [_c_double(v.start) for v in model.states]),
+        _array("double", "x_nominal", [_c_double(v.nominal if v.nominal else 1.0) for v in model.states]),
+        _array("double", "u_start", [_c_double(v.start if v.start is not None else 0.0)
+                                     for v in model.inputs]),
+        _array("double", "p_start", [_c_double(v.start if v.start is not None else 0.0)
+                                     for v in model.parameters]),
+        names_array("x_names", model.states),
+        names_array("u_names", model.inputs),
+        names_array("y_names", model.outputs),
+        names_array("p_names", model.parameters),
+    ]
+
+    def ptr(name, n):
+        return name if n else "NULL"
+
+    struct = [
+        "const fmugen_model_def fmugen_model = {",
+        f"    .model_identifier = {_c_string(ident)},",
+        f"    .guid = {_c_string(guid_text)},",
+        f"    .nx = {nx}, .nu = {nu}, .ny = {ny}, .np = {model.np},",
+        f"    .x_start = {ptr('x_start', nx)},",
+        f"    .x_nominal = {ptr('x_nominal', nx)},",
+        f"    .u_start = {ptr('u_start', nu)},",
+        f"    .p_start = {ptr('p_start', model.np)},",
+        f"    .x_names = {ptr('x_names', nx)},",
+        f"    .u_names = {ptr('u_names', nu)},",
+        f"    .y_names = {ptr('y_names', ny)},",
+        f"    .p_names = {ptr('p_names', model.np)},",
+        f"    .has_jacobian = {1 if has_jac else 0},",
+        "    .evaluate = evaluate,",
+        f"    .jacobian = {'jacobian' if has_jac else 'NULL'},",
+        "};",
+    ]
+    parts = ["\n".join(header), "#include <math.h>\n#include <stddef.h>\n#include <string.h>\n"
+             '#include "fmugen_model.h"',
+             "\n".join(d for d in decls if d),
+             "/* dx = f(t, x, u, p) and y = g(t, x, u, p) in one pass */\n" + evaluate]
+    if has_jac:
+        parts.append("/* exact partial derivatives, dense row-major */\n" + jac_src)
+    parts.append("\n".join(struct))
+    source = "\n\n".join(parts) + "\n"
+    if guid is None:
+        guid = deterministic_guid(source)
+        source = source.replace(GUID_PLACEHOLDER, guid)
+    return GeneratedC(source=source, op_counts=op_counts, model_identifier=ident, guid=guid)
+
+
+def count_operations(
+    outputs: Sequence[sp.Expr],
+    program: Optional[Program] = None,
+) -> FunctionOps:
+    """Operations of C code computing ``outputs`` after ``program``.
+
+    The same lowering as :func:`generate_c` (joint CSE, dead steps dropped,
+    the counting rules of :class:`OpCount`), so the counts of e.g. the
+    inverse dynamics or the mass matrix alone are comparable with the counts
+    of the generated functions.  Every free symbol that the program does not
+    assign is an input.
+
+    >>> import sympy as sp
+    >>> a, b = sp.symbols("a b")
+    >>> str(count_operations([sp.sin(a) * b + sp.sin(a) / b]))
+    '1 mul, 1 add, 1 div, 1 call (sin 1)'
+    """
+    outputs = [sp.sympify(e) for e in (outputs.tolist() if hasattr(outputs, "tolist") else outputs)]
+    outputs = [e for row in outputs for e in (row if isinstance(row, list) else [row])]
+    steps = list(program.steps) if program is not None else []
+    assigned = program.assigned_symbols() if program is not None else set()
+    free: set = set()
+    for e in outputs:
+        free |= e.free_symbols
+    for st in steps:
+        if isinstance(st, Assign):
+            free |= sp.sympify(st.expr).free_symbols
+        else:
+            free |= st.A.free_symbols | st.B.free_symbols
+    known = free - assigned
+    names = _Names()
+    for s in sorted(known, key=lambda z: z.name):
+        names.add(s)
+    body = lower(steps, [SinkGroup(None, [Sink("out", i, e) for i, e in enumerate(outputs)])],
+                 names, known)
+    return body.function_ops
