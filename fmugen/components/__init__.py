@@ -12,7 +12,14 @@ from .servo_valve import servo_valve
 from .hydraulic_actuator import hydraulic_actuator
 from .joint import joint_inertia
 from .connect import assemble
+from .dc_motor import dc_motor
+from .controller import controller
+from .trajectory import ptp_trajectory, quintic_trajectory, table_trajectory
+from .chains import single_joint
+from .assembly import load_assembly
+from .numeric import NumericModel, linearise, stable_step
 from .parameters import load_parameter_set, available_sets
 
 __all__ = ["TIME", "amplifier", "current_driver", "servo_valve", "hydraulic_actuator", "joint_inertia",
-           "assemble", "load_parameter_set", "available_sets"]
+           "assemble", "dc_motor", "controller", "ptp_trajectory", "quintic_trajectory",
+           "table_trajectory", "single_joint", "load_assembly", "NumericModel", "linearise", "stable_step", "load_parameter_set", "available_sets"]

@@ -1,0 +1,156 @@
+"""Load an assembly TOML file into one SymbolicModel.
+
+File format (all keys checked; the file is parsed by :mod:`tomllib`, never
+evaluated)::
+
+    [assembly]
+    name = "single_joint_default"          # FMU model identifier (C identifier)
+    parameter_set = "default"              # shipped set name, or a .toml path
+                                           # (relative to this file)
+    description = "..."                    # optional
+    inputs = ["amp.theta_ref", "joint.tau_load"]   # optional: order of free inputs
+    outputs = ["joint.theta", "joint.w"]           # optional: exposed variables
+    connections = [                        # [source, target]: state/output -> input
+      ["joint.theta", "amp.theta"],
+      ...
+    ]
+
+    [components.amp]                       # instance name
+    type = "amplifier"                     # a factory of COMPONENT_TYPES
+    kind = "ideal"                         # the factory's fidelity options
+    control = "P"
+    parameter_set = "stiff"                # optional, per instance
+    [components.amp.parameters]            # optional overrides
+    K_a = 12.0
+
+The lead's ``fmugen build FILE --fmi-type me|cs`` calls :func:`load_assembly`.
+"""
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Union
+
+from ..codegen.model import SymbolicModel
+from .amplifier import amplifier
+from .connect import assemble
+from .controller import controller
+from .current_driver import current_driver
+from .dc_motor import dc_motor
+from .hydraulic_actuator import hydraulic_actuator
+from .joint import joint_inertia
+from .parameters import load_parameter_set
+from .servo_valve import servo_valve
+from .trajectory import ptp_trajectory, quintic_trajectory, table_trajectory
+
+#: type name -> (factory, {option: allowed python type(s)})
+COMPONENT_TYPES = {
+    "amplifier": (amplifier, {"kind": str, "control": str, "rails": bool}),
+    "current_driver": (current_driver, {"kind": str}),
+    "servo_valve": (servo_valve, {"order": int, "stroke_limit": bool, "flow": str}),
+    "hydraulic_actuator": (hydraulic_actuator, {"form": str, "kind": str}),
+    "joint_inertia": (joint_inertia, {"kind": str}),
+    "dc_motor": (dc_motor, {"current_loop": str, "elasticity": bool}),
+    "controller": (controller, {"speed_loop": str}),
+    "ptp_trajectory": (ptp_trajectory, {}),
+    "quintic_trajectory": (quintic_trajectory, {}),
+    "table_trajectory": (table_trajectory, {"times": list, "values": list, "kind": str, "output": str,
+                                            "unit": str}),
+}
+
+_ASSEMBLY_KEYS = {"name", "parameter_set", "description", "inputs", "outputs", "connections"}
+
+
+def _str_list(val, where):
+    if not isinstance(val, list) or not all(isinstance(s, str) for s in val):
+        raise ValueError(f"{where} must be a list of strings")
+    return val
+
+
+def load_assembly(path: Union[str, Path]) -> SymbolicModel:
+    """Read an assembly file and return the assembled SymbolicModel."""
+    path = Path(path)
+    src = str(path)
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"assembly file not found: {path}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{src}: not valid TOML: {exc}") from None
+    extra = sorted(set(data) - {"assembly", "components"})
+    if extra:
+        raise ValueError(f"{src}: unknown top-level key(s) {', '.join(extra)}; expected [assembly] and [components.*]")
+    asm = data.get("assembly")
+    if not isinstance(asm, dict):
+        raise ValueError(f"{src}: missing [assembly] table")
+    bad = sorted(set(asm) - _ASSEMBLY_KEYS)
+    if bad:
+        raise ValueError(f"{src}: [assembly] has unknown key(s) {', '.join(bad)}; known: {', '.join(sorted(_ASSEMBLY_KEYS))}")
+    name = asm.get("name")
+    if not isinstance(name, str) or not name.isidentifier():
+        raise ValueError(f"{src}: [assembly] name must be a C identifier string, got {name!r}")
+    pset_name = asm.get("parameter_set", "default")
+    if not isinstance(pset_name, str):
+        raise ValueError(f"{src}: [assembly] parameter_set must be a string")
+
+    def pset_of(value, where):
+        if value.endswith(".toml"):
+            p = Path(value)
+            value = str(p if p.is_absolute() else path.parent / p)
+        try:
+            return load_parameter_set(value)
+        except (ValueError, FileNotFoundError) as exc:
+            raise ValueError(f"{src}: {where}: {exc}") from None
+
+    default_set = pset_of(pset_name, "[assembly] parameter_set")
+    comps_tab = data.get("components")
+    if not isinstance(comps_tab, dict) or not comps_tab:
+        raise ValueError(f"{src}: no [components.<name>] tables")
+    components = {}
+    for inst, spec in comps_tab.items():
+        where = f"[components.{inst}]"
+        if not isinstance(spec, dict):
+            raise ValueError(f"{src}: {where} must be a table")
+        typ = spec.get("type")
+        if typ not in COMPONENT_TYPES:
+            raise ValueError(f"{src}: {where} type = {typ!r} is not a component type; "
+                             f"known: {', '.join(COMPONENT_TYPES)}")
+        factory, options = COMPONENT_TYPES[typ]
+        kwargs = {}
+        for key, val in spec.items():
+            if key in ("type", "parameter_set", "parameters"):
+                continue
+            if key not in options:
+                raise ValueError(f"{src}: {where} has unknown option {key!r} for type {typ}; "
+                                 f"known: {', '.join(options) or '-'}")
+            want = options[key]
+            if isinstance(val, bool) != (want is bool) or not isinstance(val, want):
+                raise ValueError(f"{src}: {where} {key} = {val!r} must be of type {want.__name__}")
+            kwargs[key] = val
+        if typ != "table_trajectory":
+            pset = default_set
+            if "parameter_set" in spec:
+                if not isinstance(spec["parameter_set"], str):
+                    raise ValueError(f"{src}: {where} parameter_set must be a string")
+                pset = pset_of(spec["parameter_set"], f"{where} parameter_set")
+            kwargs["parameter_set"] = pset
+            over = spec.get("parameters", {})
+            if not isinstance(over, dict) or any(isinstance(v, bool) or not isinstance(v, (int, float))
+                                                 for v in over.values()):
+                raise ValueError(f"{src}: {where}.parameters must be a table of numbers")
+            kwargs["overrides"] = over
+        elif "parameters" in spec or "parameter_set" in spec:
+            raise ValueError(f"{src}: {where}: a table_trajectory has no parameters (its knots are data)")
+        try:
+            components[inst] = factory(name=inst, **kwargs)
+        except (ValueError, KeyError, TypeError) as exc:
+            raise ValueError(f"{src}: {where}: {exc}") from None
+    conns = asm.get("connections", [])
+    if not isinstance(conns, list):
+        raise ValueError(f"{src}: [assembly] connections must be a list of [source, target] pairs")
+    inputs = _str_list(asm["inputs"], f"{src}: [assembly] inputs") if "inputs" in asm else None
+    outputs = _str_list(asm["outputs"], f"{src}: [assembly] outputs") if "outputs" in asm else None
+    return assemble(name, components, [tuple(c) if isinstance(c, list) else c for c in conns],
+                    inputs=inputs, outputs=outputs, description=asm.get("description", ""),
+                    where=src)
