@@ -1,2 +1,37 @@
-"""fmugen: FMI 2.0 components for robot manipulators and their actuator chains."""
+"""fmugen: FMI 2.0 components for robot manipulators and their actuator chains.
+
+The one-call API::
+
+    import fmugen
+    arm = fmugen.load_robot("robots/puma_thesis_com.toml")     # a Manipulator
+    arm.mass_matrix(q); arm.forward_dynamics(q, qd, tau)       # numeric evaluators
+    model = arm.state_space_model()                            # symbolic x' = f(x, u, p)
+    fmugen.build_fmu(model, "puma.fmu", fmi_type="both")       # FMI 2.0 FMU
+"""
+from __future__ import annotations
+
 __version__ = "0.1.0"
+
+from .dynamics.manipulator import FORMULATIONS, Manipulator  # noqa: E402
+
+
+def load_robot(path, formulation: str = "newton_euler") -> Manipulator:
+    """Read a robot file (TOML) and return its :class:`Manipulator`.
+
+    ``formulation`` chooses the default derivation: "newton_euler" (DYNAMAN's
+    nested bodies) or "lagrange" (the thesis's recursive Lagrange); every
+    numeric evaluator also takes ``formulation=`` per call.
+    """
+    from .robot.loader import load_robot_description
+
+    return Manipulator(load_robot_description(path), formulation)
+
+
+def build_fmu(model, output_path, fmi_type: str = "both", **options):
+    """Generate, compile and package ``model`` (a SymbolicModel) as an FMU."""
+    from .fmi.build import build_fmu as _build
+
+    return _build(model, output_path, fmi_type=fmi_type, **options)
+
+
+__all__ = ["load_robot", "build_fmu", "Manipulator", "FORMULATIONS", "__version__"]
