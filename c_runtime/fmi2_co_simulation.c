@@ -1,0 +1,307 @@
+/* fmi2_co_simulation.c -- the FMI 2.0 Co-Simulation functions: fmi2DoStep
+ * runs the selected solver (solver_*.c) over one communication step, with
+ * inputs held constant or extrapolated linearly from the derivatives given
+ * by fmi2SetRealInputDerivatives.  The states allowed for each function are
+ * listed in fmi2_functions.c. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include "fmugen_runtime.h"
+#include "solver.h"
+
+#define INST ((fmugen_instance *)c)
+#define CS_CHECK(mask, fn)                                   \
+    if (!fmugen_check_state(INST, (mask), (fn))) return fmi2Error; \
+    if (!is_cs(INST, (fn))) return fmi2Error
+#define MASK_STATUS (FMUGEN_STEP_COMPLETE | FMUGEN_STEP_FAILED | FMUGEN_TERMINATED)
+
+static int is_cs(fmugen_instance *inst, const char *fn)
+{
+    if (inst->type == fmi2CoSimulation) return 1;
+    fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+               "%s: a Co-Simulation function called on a Model Exchange instance", fn);
+    return 0;
+}
+
+/*
+ * Input derivatives: order 1 is stored and used to extrapolate the input
+ * linearly over the following communication steps, u(t) = u(t_c) + du (t -
+ * t_c), until it is set again (0 switches extrapolation off).  FMI 2.0 has
+ * no flag telling the master the highest order a slave uses, so higher
+ * orders are accepted and ignored with a warning.
+ */
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                       const fmi2Integer order[], const fmi2Real value[])
+{
+    CS_CHECK(FMUGEN_INSTANTIATED | FMUGEN_INITIALIZATION_MODE | FMUGEN_STEP_COMPLETE,
+             "fmi2SetRealInputDerivatives");
+    fmugen_instance *inst = INST;
+    const fmugen_model_def *m = inst->model;
+    const char *fn = "fmi2SetRealInputDerivatives";
+    if (nvr > 0 && (!vr || !order || !value)) {
+        fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "%s: vr[], order[] or value[] is NULL with nvr = %zu",
+                   fn, nvr);
+        return fmi2Error;
+    }
+    char name[256];
+    for (size_t i = 0; i < nvr; i++) {
+        if (vr[i] < fmugen_vr_u(m) || vr[i] >= fmugen_vr_y(m)) {
+            fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "%s: %s (value reference %u) is not an input", fn,
+                       vr[i] < fmugen_vr_end(m) ? fmugen_real_name(inst, vr[i], name, sizeof name) : "<unknown>",
+                       vr[i]);
+            return fmi2Error;
+        }
+        if (order[i] < 1) {
+            fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "%s: order %d for %s must be >= 1", fn, order[i],
+                       fmugen_real_name(inst, vr[i], name, sizeof name));
+            return fmi2Error;
+        }
+        if (!isfinite(value[i])) {
+            fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                       "%s: derivative %g of %s (value reference %u) is not finite; rejected", fn, value[i],
+                       fmugen_real_name(inst, vr[i], name, sizeof name), vr[i]);
+            return fmi2Error;
+        }
+    }
+    fmi2Status status = fmi2OK;
+    for (size_t i = 0; i < nvr; i++) {
+        if (order[i] == 1) {
+            inst->du[vr[i] - fmugen_vr_u(m)] = value[i];
+        } else {
+            fmugen_log(inst, fmi2Warning, FMUGEN_LOG_STATUS_WARNING,
+                       "%s: derivative of order %d of %s ignored (inputs are extrapolated linearly)", fn, order[i],
+                       fmugen_real_name(inst, vr[i], name, sizeof name));
+            status = fmi2Warning;
+        }
+    }
+    return status;
+}
+
+/*
+ * First time derivatives of outputs (order 1 only):
+ *   a state used as an output:  dx_i/dt = f_i(t, x, u, p);
+ *   a computed output y_j:      dy/dt = dg/dx f + dg/du du + dg/dt,
+ * with the model's exact Jacobian and a central difference for the explicit
+ * time dependence dg/dt (exactly zero when g does not depend on t).  Needs
+ * the Jacobian: without it the call fails.
+ */
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                                        const fmi2Integer order[], fmi2Real value[])
+{
+    CS_CHECK(FMUGEN_STEP_COMPLETE | FMUGEN_STEP_FAILED | FMUGEN_TERMINATED | FMUGEN_ERROR,
+             "fmi2GetRealOutputDerivatives");
+    fmugen_instance *inst = INST;
+    const fmugen_model_def *m = inst->model;
+    const char *fn = "fmi2GetRealOutputDerivatives";
+    if (nvr > 0 && (!vr || !order || !value)) {
+        fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "%s: vr[], order[] or value[] is NULL with nvr = %zu",
+                   fn, nvr);
+        return fmi2Error;
+    }
+    char name[256];
+    int need_jac = 0;
+    for (size_t i = 0; i < nvr; i++) {
+        int is_state = vr[i] < fmugen_vr_der(m), is_y = vr[i] >= fmugen_vr_y(m) && vr[i] < fmugen_vr_p(m);
+        if (!is_state && !is_y) {
+            fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "%s: %s (value reference %u) is not an output", fn,
+                       vr[i] < fmugen_vr_end(m) ? fmugen_real_name(inst, vr[i], name, sizeof name) : "<unknown>",
+                       vr[i]);
+            return fmi2Error;
+        }
+        if (order[i] != 1) {
+            fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                       "%s: order %d for %s not provided (maxOutputDerivativeOrder is 1)", fn, order[i],
+                       fmugen_real_name(inst, vr[i], name, sizeof name));
+            return fmi2Error;
+        }
+        if (is_y) need_jac = 1;
+    }
+    if (nvr == 0) return fmi2OK;
+    if (need_jac && (!m->has_jacobian || !m->jacobian)) {
+        fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                   "%s: derivatives of computed outputs need the model's Jacobian, which was not generated", fn);
+        return fmi2Error;
+    }
+    if (fmugen_evaluate_cached(inst, fn) != FMUGEN_OK) return fmi2Error;
+    const int nx = m->nx, nu = m->nu, ny = m->ny;
+    double *dydt = NULL;
+    if (need_jac) {
+        size_t need = (size_t)ny * nx + (size_t)ny * nu + 3 * (size_t)ny + 1;
+        double *buf = inst->cb.allocateMemory ? inst->cb.allocateMemory(need, sizeof(double))
+                                              : calloc(need, sizeof(double));
+        if (!buf) {
+            fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "%s: out of memory", fn);
+            return fmi2Error;
+        }
+        double *dgdx = buf, *dgdu = dgdx + ny * nx, *yp = dgdu + ny * nu, *ym = yp + ny;
+        dydt = ym + ny;
+        const double t = inst->s.time, dt = 1.4901161193847656e-08 * fmax(fabs(t), 1.0);
+        int rc = m->jacobian(inst->p, t, inst->x, inst->u, NULL, NULL, dgdx, dgdu);
+        if (rc == FMUGEN_OK) rc = m->evaluate(inst->p, t + dt, inst->x, inst->u, NULL, yp);
+        if (rc == FMUGEN_OK) rc = m->evaluate(inst->p, t - dt, inst->x, inst->u, NULL, ym);
+        if (rc == FMUGEN_OK) {
+            for (int j = 0; j < ny; j++) {
+                double s = (yp[j] - ym[j]) / (2 * dt);
+                for (int k = 0; k < nx; k++) s += dgdx[j * nx + k] * inst->dx_cache[k];
+                for (int k = 0; k < nu; k++) s += dgdu[j * nu + k] * inst->du[k];
+                dydt[j] = s;
+            }
+            if (!fmugen_all_finite(dydt, ny)) rc = FMUGEN_NOT_FINITE;
+        }
+        if (rc != FMUGEN_OK) {
+            fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "%s: Jacobian evaluation failed at t = %.17g: %s",
+                       fn, t, fmugen_model_status_text(rc));
+            if (inst->cb.freeMemory) inst->cb.freeMemory(buf);
+            else free(buf);
+            return fmi2Error;
+        }
+        for (size_t i = 0; i < nvr; i++)
+            if (vr[i] >= fmugen_vr_y(m)) value[i] = dydt[vr[i] - fmugen_vr_y(m)];
+        if (inst->cb.freeMemory) inst->cb.freeMemory(buf);
+        else free(buf);
+    }
+    for (size_t i = 0; i < nvr; i++)
+        if (vr[i] < fmugen_vr_der(m)) value[i] = inst->dx_cache[vr[i]];
+    return fmi2OK;
+}
+
+static const char *solver_name(int solver)
+{
+    switch (solver) {
+    case FMUGEN_SOLVER_DOPRI5: return "Dormand-Prince 5(4)";
+    case FMUGEN_SOLVER_IMPLICIT: return "RODAS3";
+    default: return "RK4";
+    }
+}
+
+fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
+                      fmi2Boolean noSetFMUStatePriorToCurrentPoint)
+{
+    (void)noSetFMUStatePriorToCurrentPoint;
+    CS_CHECK(FMUGEN_STEP_COMPLETE, "fmi2DoStep");
+    fmugen_instance *inst = INST;
+    const fmugen_model_def *m = inst->model;
+    const double tc = currentCommunicationPoint, H = communicationStepSize;
+    const double t = inst->s.time;
+    if (!isfinite(tc) || !isfinite(H) || H < 0) {
+        fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                   "fmi2DoStep: communication point %g and step size %g must be finite, the step size >= 0", tc, H);
+        return fmi2Error;
+    }
+    /* importers compute communication points by their own arithmetic:
+     * accept a difference of rounding size and take the importer's time */
+    const double slack = 1e-9 * fmax(fmax(fabs(t), fabs(H)), 1e-3);
+    if (fabs(tc - t) > slack) {
+        fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                   "fmi2DoStep: currentCommunicationPoint %.17g is not the FMU's time %.17g", tc, t);
+        return fmi2Error;
+    }
+    if (inst->s.stop_time_defined && tc + H > inst->s.stop_time + 1e-9 * fmax(fabs(inst->s.stop_time), 1.0)) {
+        fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                   "fmi2DoStep: the step to %.17g goes past the stop time %.17g given to fmi2SetupExperiment",
+                   tc + H, inst->s.stop_time);
+        return fmi2Error;
+    }
+    if (tc != t) {
+        inst->s.time = tc;
+        inst->s.fsal_valid = 0;
+        fmugen_invalidate(inst);
+    }
+    if (H == 0) return fmi2OK;
+
+    const size_t off = fmugen_solver_work_doubles(m->nx);
+    double *u0 = inst->work + off, *u_work = u0 + m->nu;
+    if (m->nu) memcpy(u0, inst->u, (size_t)m->nu * sizeof(double));
+    fmugen_ode ode = {inst, tc, u0, u_work, FMUGEN_OK};
+    const double t_end = tc + H;
+    char msg[512] = "";
+    const long long steps0 = inst->s.n_steps, rej0 = inst->s.n_rejected, rhs0 = inst->s.n_rhs;
+    int rc;
+    switch (inst->s.solver) {
+    case FMUGEN_SOLVER_IMPLICIT: rc = fmugen_solve_rodas3(&ode, t_end, msg, sizeof msg); break;
+    case FMUGEN_SOLVER_RK4: rc = fmugen_solve_rk4(&ode, t_end, msg, sizeof msg); break;
+    default: rc = fmugen_solve_dopri5(&ode, t_end, msg, sizeof msg); break;
+    }
+    /* inputs at the time reached, so that outputs and the next step see a
+     * continuous input */
+    fmugen_inputs_at(inst, tc, u0, inst->s.time, inst->u);
+    fmugen_invalidate(inst);
+    inst->s.last_successful_time = inst->s.time;
+    if (rc != FMUGEN_SOLVER_OK) {
+        inst->s.fmi_state = FMUGEN_STEP_FAILED;
+        inst->s.last_do_step_status = fmi2Discard;
+        inst->s.fsal_valid = 0;
+        fmugen_log(inst, fmi2Discard, FMUGEN_LOG_STATUS_ERROR,
+                   "fmi2DoStep from t = %.17g to %.17g discarded: %s; the state is kept at the last good point "
+                   "t = %.17g (fmi2GetRealStatus(fmi2LastSuccessfulTime))",
+                   tc, t_end, msg, inst->s.time);
+        return fmi2Discard;
+    }
+    inst->s.time = t_end;
+    inst->s.last_successful_time = t_end;
+    inst->s.last_do_step_status = fmi2OK;
+    fmugen_log(inst, fmi2OK, FMUGEN_LOG_ALL, "fmi2DoStep to t = %.17g with %s: %lld steps, %lld rejected, %lld f",
+               t_end, solver_name(inst->s.solver), inst->s.n_steps - steps0, inst->s.n_rejected - rej0,
+               inst->s.n_rhs - rhs0);
+    return fmi2OK;
+}
+
+fmi2Status fmi2CancelStep(fmi2Component c)
+{
+    /* fmi2DoStep is synchronous (never fmi2Pending): there is never a step in
+     * progress to cancel */
+    if (!c) return fmi2Error;
+    fmugen_log(INST, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+               "fmi2CancelStep: not allowed in state %s (no asynchronous step in progress)",
+               fmugen_state_name(INST->s.fmi_state));
+    return fmi2Error;
+}
+
+static fmi2Status bad_status_kind(fmugen_instance *inst, const char *fn, fmi2StatusKind s)
+{
+    fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "%s: status kind %d not provided by this function", fn,
+               (int)s);
+    return fmi2Error;
+}
+
+fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value)
+{
+    CS_CHECK(MASK_STATUS, "fmi2GetStatus");
+    if (!value) return bad_status_kind(INST, "fmi2GetStatus (value is NULL)", s);
+    if (s != fmi2DoStepStatus) return bad_status_kind(INST, "fmi2GetStatus", s);
+    *value = (fmi2Status)INST->s.last_do_step_status;
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value)
+{
+    CS_CHECK(MASK_STATUS, "fmi2GetRealStatus");
+    if (!value) return bad_status_kind(INST, "fmi2GetRealStatus (value is NULL)", s);
+    if (s != fmi2LastSuccessfulTime) return bad_status_kind(INST, "fmi2GetRealStatus", s);
+    *value = INST->s.last_successful_time;
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value)
+{
+    CS_CHECK(MASK_STATUS, "fmi2GetIntegerStatus");
+    (void)value;
+    return bad_status_kind(INST, "fmi2GetIntegerStatus", s);
+}
+
+fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value)
+{
+    CS_CHECK(MASK_STATUS, "fmi2GetBooleanStatus");
+    if (!value) return bad_status_kind(INST, "fmi2GetBooleanStatus (value is NULL)", s);
+    if (s != fmi2Terminated) return bad_status_kind(INST, "fmi2GetBooleanStatus", s);
+    *value = fmi2False; /* the slave never asks to end the simulation */
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value)
+{
+    CS_CHECK(MASK_STATUS, "fmi2GetStringStatus");
+    (void)value;
+    return bad_status_kind(INST, "fmi2GetStringStatus", s);
+}

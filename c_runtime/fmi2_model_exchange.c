@@ -1,0 +1,161 @@
+/* fmi2_model_exchange.c -- the FMI 2.0 Model Exchange functions.  The
+ * importer integrates dx/dt = f(t, x, u, p); the model has no event
+ * indicators and no discrete states, so event mode only passes through.
+ * The states allowed for each function are listed in fmi2_functions.c. */
+#include <math.h>
+#include <string.h>
+#include "fmugen_runtime.h"
+
+#define INST ((fmugen_instance *)c)
+#define ME_CHECK(mask, fn)                                   \
+    if (!fmugen_check_state(INST, (mask), (fn))) return fmi2Error; \
+    if (!is_me(INST, (fn))) return fmi2Error
+
+static int is_me(fmugen_instance *inst, const char *fn)
+{
+    if (inst->type == fmi2ModelExchange) return 1;
+    fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+               "%s: a Model Exchange function called on a Co-Simulation instance", fn);
+    return 0;
+}
+
+static int bad_length(fmugen_instance *inst, const char *fn, const char *what, size_t n, int expected,
+                      const void *array)
+{
+    if (n != (size_t)expected) {
+        fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "%s: %s = %zu, but the model has %d", fn, what, n,
+                   expected);
+        return 1;
+    }
+    if (n > 0 && !array) {
+        fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "%s: the array is NULL with %s = %zu", fn, what, n);
+        return 1;
+    }
+    return 0;
+}
+
+fmi2Status fmi2EnterEventMode(fmi2Component c)
+{
+    ME_CHECK(FMUGEN_EVENT_MODE | FMUGEN_CONTINUOUS_TIME_MODE, "fmi2EnterEventMode");
+    INST->s.fmi_state = FMUGEN_EVENT_MODE;
+    fmugen_log(INST, fmi2OK, FMUGEN_LOG_EVENTS, "fmi2EnterEventMode at t = %g", INST->s.time);
+    return fmi2OK;
+}
+
+fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo)
+{
+    ME_CHECK(FMUGEN_EVENT_MODE, "fmi2NewDiscreteStates");
+    if (!eventInfo) {
+        fmugen_log(INST, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "fmi2NewDiscreteStates: eventInfo is NULL");
+        return fmi2Error;
+    }
+    /* no discrete states, no time events: the event iteration ends at once */
+    eventInfo->newDiscreteStatesNeeded = fmi2False;
+    eventInfo->terminateSimulation = fmi2False;
+    eventInfo->nominalsOfContinuousStatesChanged = fmi2False;
+    eventInfo->valuesOfContinuousStatesChanged = fmi2False;
+    eventInfo->nextEventTimeDefined = fmi2False;
+    eventInfo->nextEventTime = 0.0;
+    return fmi2OK;
+}
+
+fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c)
+{
+    ME_CHECK(FMUGEN_EVENT_MODE, "fmi2EnterContinuousTimeMode");
+    INST->s.fmi_state = FMUGEN_CONTINUOUS_TIME_MODE;
+    return fmi2OK;
+}
+
+fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noSetFMUStatePriorToCurrentPoint,
+                                       fmi2Boolean *enterEventMode, fmi2Boolean *terminateSimulation)
+{
+    (void)noSetFMUStatePriorToCurrentPoint;
+    ME_CHECK(FMUGEN_CONTINUOUS_TIME_MODE, "fmi2CompletedIntegratorStep");
+    if (!enterEventMode || !terminateSimulation) {
+        fmugen_log(INST, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                   "fmi2CompletedIntegratorStep: enterEventMode or terminateSimulation is NULL");
+        return fmi2Error;
+    }
+    *enterEventMode = fmi2False;
+    *terminateSimulation = fmi2False;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time)
+{
+    ME_CHECK(FMUGEN_EVENT_MODE | FMUGEN_CONTINUOUS_TIME_MODE, "fmi2SetTime");
+    if (!isfinite(time)) {
+        fmugen_log(INST, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "fmi2SetTime: time %g is not finite", time);
+        return fmi2Error;
+    }
+    if (time != INST->s.time) {
+        INST->s.time = time;
+        fmugen_invalidate(INST);
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t nx)
+{
+    ME_CHECK(FMUGEN_CONTINUOUS_TIME_MODE, "fmi2SetContinuousStates");
+    fmugen_instance *inst = INST;
+    const fmugen_model_def *m = inst->model;
+    if (bad_length(inst, "fmi2SetContinuousStates", "nx", nx, m->nx, x)) return fmi2Error;
+    for (int i = 0; i < m->nx; i++) {
+        if (!isfinite(x[i])) {
+            fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                       "fmi2SetContinuousStates: value %g for state %s (x[%d]) is not finite; rejected", x[i],
+                       m->x_names[i], i);
+            return fmi2Error;
+        }
+    }
+    if (m->nx && memcmp(inst->x, x, (size_t)m->nx * sizeof(double)) != 0) {
+        memcpy(inst->x, x, (size_t)m->nx * sizeof(double));
+        fmugen_invalidate(inst);
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx)
+{
+    ME_CHECK(FMUGEN_EVENT_MODE | FMUGEN_CONTINUOUS_TIME_MODE | FMUGEN_TERMINATED | FMUGEN_ERROR,
+             "fmi2GetDerivatives");
+    fmugen_instance *inst = INST;
+    if (bad_length(inst, "fmi2GetDerivatives", "nx", nx, inst->model->nx, derivatives)) return fmi2Error;
+    if (fmugen_evaluate_cached(inst, "fmi2GetDerivatives") != FMUGEN_OK)
+        /* the integrator may retry with a smaller step (FMI 2.0 sec. 2.1.3) */
+        return (inst->s.fmi_state & (FMUGEN_EVENT_MODE | FMUGEN_CONTINUOUS_TIME_MODE)) ? fmi2Discard : fmi2Error;
+    if (nx) memcpy(derivatives, inst->dx_cache, nx * sizeof(double));
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni)
+{
+    ME_CHECK(FMUGEN_INITIALIZATION_MODE | FMUGEN_EVENT_MODE | FMUGEN_CONTINUOUS_TIME_MODE | FMUGEN_TERMINATED |
+                 FMUGEN_ERROR,
+             "fmi2GetEventIndicators");
+    return bad_length(INST, "fmi2GetEventIndicators", "ni", ni, 0, eventIndicators) ? fmi2Error : fmi2OK;
+}
+
+fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx)
+{
+    ME_CHECK(FMUGEN_INITIALIZATION_MODE | FMUGEN_EVENT_MODE | FMUGEN_CONTINUOUS_TIME_MODE | FMUGEN_TERMINATED |
+                 FMUGEN_ERROR,
+             "fmi2GetContinuousStates");
+    fmugen_instance *inst = INST;
+    if (bad_length(inst, "fmi2GetContinuousStates", "nx", nx, inst->model->nx, x)) return fmi2Error;
+    if (nx) memcpy(x, inst->x, nx * sizeof(double));
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal[], size_t nx)
+{
+    ME_CHECK(FMUGEN_INSTANTIATED | FMUGEN_EVENT_MODE | FMUGEN_CONTINUOUS_TIME_MODE | FMUGEN_TERMINATED |
+                 FMUGEN_ERROR,
+             "fmi2GetNominalsOfContinuousStates");
+    fmugen_instance *inst = INST;
+    if (bad_length(inst, "fmi2GetNominalsOfContinuousStates", "nx", nx, inst->model->nx, x_nominal))
+        return fmi2Error;
+    if (nx) memcpy(x_nominal, inst->model->x_nominal, nx * sizeof(double));
+    return fmi2OK;
+}

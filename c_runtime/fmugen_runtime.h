@@ -1,0 +1,127 @@
+/*
+ * fmugen_runtime.h -- internal declarations shared by the files of the
+ * hand-written FMI 2.0 runtime (not part of the model contract; generated
+ * code only sees fmugen_model.h).
+ *
+ * An instance keeps everything in one struct: no global mutable state, so
+ * any number of instances may live in one process and run in parallel
+ * threads.
+ */
+#ifndef FMUGEN_RUNTIME_H
+#define FMUGEN_RUNTIME_H
+
+#include <stddef.h>
+#include "fmi2Functions.h"
+#include "fmugen_model.h"
+
+#if defined(__GNUC__)
+#define FMUGEN_INTERNAL __attribute__((visibility("hidden")))
+#define FMUGEN_PRINTF(a, b) __attribute__((format(printf, a, b)))
+#else
+#define FMUGEN_INTERNAL
+#define FMUGEN_PRINTF(a, b)
+#endif
+
+/* FMI 2.0 states of an instance (bit masks, so that the allowed states of a
+ * function are one OR-ed constant). */
+typedef enum {
+    FMUGEN_INSTANTIATED = 1 << 0,
+    FMUGEN_INITIALIZATION_MODE = 1 << 1,
+    FMUGEN_EVENT_MODE = 1 << 2,           /* ME */
+    FMUGEN_CONTINUOUS_TIME_MODE = 1 << 3, /* ME */
+    FMUGEN_STEP_COMPLETE = 1 << 4,        /* CS */
+    FMUGEN_STEP_FAILED = 1 << 5,          /* CS: fmi2DoStep returned fmi2Discard */
+    FMUGEN_TERMINATED = 1 << 6,
+    FMUGEN_ERROR = 1 << 7
+} fmugen_fmi_state;
+
+/* Log categories, in the order the modelDescription.xml declares them. */
+typedef enum {
+    FMUGEN_LOG_EVENTS = 0,
+    FMUGEN_LOG_STATUS_WARNING = 1,
+    FMUGEN_LOG_STATUS_ERROR = 2,
+    FMUGEN_LOG_ALL = 3,
+    FMUGEN_LOG_COUNT = 4
+} fmugen_log_category;
+
+FMUGEN_INTERNAL extern const char *const fmugen_log_category_names[FMUGEN_LOG_COUNT];
+
+/* Everything that determines how a simulation continues, apart from the
+ * arrays (x, u, du, p, fsal).  Copied as a whole by fmi2GetFMUstate, written
+ * field by field by fmi2SerializeFMUstate. */
+typedef struct fmugen_scalars {
+    int fmi_state;             /* fmugen_fmi_state */
+    double time;
+    double start_time;
+    int stop_time_defined;
+    double stop_time;
+    int rtol_set;              /* rtol given by fmi2SetReal: fmi2SetupExperiment's tolerance does not override it */
+    double rt[FMUGEN_RT_COUNT];/* runtime Real parameters (rtol, atol, max_step, fixed_step) */
+    int solver;                /* FMUGEN_SOLVER_* */
+    long long n_steps, n_rejected, n_rhs, n_jac; /* solver counters */
+    double h_next;             /* step size proposed for the next internal step, 0 = none yet */
+    double facold;             /* previous error ratio of the Dormand-Prince controller */
+    int fsal_valid;            /* fsal holds f(time, x, u) (Dormand-Prince first-same-as-last) */
+    double last_successful_time;
+    int last_do_step_status;   /* fmi2Status of the last fmi2DoStep */
+} fmugen_scalars;
+
+typedef struct fmugen_instance {
+    const fmugen_model_def *model;
+    char *instance_name;
+    fmi2Type type;
+    fmi2CallbackFunctions cb;  /* copy: the importer's struct need not outlive the call */
+    int logging_on;
+    int log_category_on[FMUGEN_LOG_COUNT];
+
+    fmugen_scalars s;
+
+    /* one block: x[nx], u[nu], du[nu], p[np], fsal[nx] */
+    double *vec;
+    size_t n_vec;
+    double *x, *u, *du, *p, *fsal;
+
+    /* cache of one model evaluation at (cache_time, x, u, p) */
+    int cache_valid;
+    int cache_status;
+    double *dx_cache;          /* nx */
+    double *y_cache;           /* ny */
+
+    /* solver workspace, sized for the largest method */
+    double *work;
+    int *ipiv;
+} fmugen_instance;
+
+/* ---- support (runtime_support.c) ---- */
+FMUGEN_INTERNAL void fmugen_log(fmugen_instance *inst, fmi2Status status, fmugen_log_category cat,
+                                const char *fmt, ...) FMUGEN_PRINTF(4, 5);
+/* Returns 1 when inst is non-NULL and in one of the states of mask; else
+ * logs "fn: not allowed in state S" and returns 0. */
+FMUGEN_INTERNAL int fmugen_check_state(fmugen_instance *inst, int mask, const char *fn);
+FMUGEN_INTERNAL const char *fmugen_state_name(int state);
+/* Human-readable name of a Real value reference into buf, e.g. "der(x)". */
+FMUGEN_INTERNAL const char *fmugen_real_name(const fmugen_instance *inst, fmi2ValueReference vr,
+                                             char *buf, size_t n);
+FMUGEN_INTERNAL void fmugen_invalidate(fmugen_instance *inst);
+/* Evaluates the model at the current (time, x, u, p) unless cached; logs the
+ * reason and returns a non-zero FMUGEN_* code when the model fails or gives a
+ * non-finite result. */
+FMUGEN_INTERNAL int fmugen_evaluate_cached(fmugen_instance *inst, const char *fn);
+FMUGEN_INTERNAL const char *fmugen_model_status_text(int code);
+FMUGEN_INTERNAL int fmugen_all_finite(const double *v, int n);
+FMUGEN_INTERNAL void fmugen_set_defaults(fmugen_instance *inst);
+
+/* value-reference layout */
+static inline fmi2ValueReference fmugen_vr_der(const fmugen_model_def *m) { return (fmi2ValueReference)m->nx; }
+static inline fmi2ValueReference fmugen_vr_u(const fmugen_model_def *m) { return (fmi2ValueReference)(2 * m->nx); }
+static inline fmi2ValueReference fmugen_vr_y(const fmugen_model_def *m) { return (fmi2ValueReference)(2 * m->nx + m->nu); }
+static inline fmi2ValueReference fmugen_vr_p(const fmugen_model_def *m) { return (fmi2ValueReference)(2 * m->nx + m->nu + m->ny); }
+static inline fmi2ValueReference fmugen_vr_rt(const fmugen_model_def *m) { return (fmi2ValueReference)(2 * m->nx + m->nu + m->ny + m->np); }
+static inline fmi2ValueReference fmugen_vr_end(const fmugen_model_def *m) { return fmugen_vr_rt(m) + FMUGEN_RT_COUNT; }
+
+/* solver workspace: 10 nx + 2 nx^2 doubles for the methods (the implicit one
+ * needs the most), then u0 and u(t) for the input extrapolation (2 nu) */
+static inline size_t fmugen_solver_work_doubles(int nx) { return 10 * (size_t)nx + 2 * (size_t)nx * (size_t)nx; }
+static inline size_t fmugen_workspace_doubles(int nx, int nu) { return fmugen_solver_work_doubles(nx) + 2 * (size_t)nu + 1; }
+
+#endif

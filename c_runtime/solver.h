@@ -1,0 +1,55 @@
+/*
+ * solver.h -- the common interface of the Co-Simulation solvers.
+ *
+ * A solver advances the instance's state x from inst->s.time to t_end for
+ *     dx/dt = f(t, x, u(t), p),   u(t) = u0 + du (t - t0),
+ * (inputs held constant over a communication step, or extrapolated linearly
+ * when fmi2SetRealInputDerivatives gave du).  It changes inst->s.time and
+ * inst->x only on accepted steps, so after a failure they hold the last good
+ * point.  It returns FMUGEN_SOLVER_OK or a failure code and writes the reason
+ * into msg.
+ */
+#ifndef FMUGEN_SOLVER_H
+#define FMUGEN_SOLVER_H
+
+#include "fmugen_runtime.h"
+
+#define FMUGEN_SOLVER_OK 0
+#define FMUGEN_SOLVER_FAILED 1
+
+/* internal steps allowed in one communication step */
+#define FMUGEN_SOLVER_MAX_STEPS 100000
+
+typedef struct fmugen_ode {
+    fmugen_instance *inst;
+    double t0;          /* communication point the inputs refer to */
+    const double *u0;   /* nu: inputs at t0 */
+    double *u_work;     /* nu: u(t) */
+    int model_code;     /* FMUGEN_* code of the last failed model call */
+} fmugen_ode;
+
+/* u(t) = u0 + du (t - t0) into out (nu) */
+FMUGEN_INTERNAL void fmugen_inputs_at(const fmugen_instance *inst, double t0, const double *u0, double t,
+                                      double *out);
+/* dx = f(t, x, u(t), p); counts n_rhs.  Returns FMUGEN_OK, a model error or
+ * FMUGEN_NOT_FINITE. */
+FMUGEN_INTERNAL int fmugen_ode_rhs(fmugen_ode *ode, double t, const double *x, double *dx);
+/* J = df/dx (nx*nx row-major) at (t, x) with fx = f(t, x): the model's exact
+ * Jacobian when it has one, else forward differences (tmp: 2*nx doubles).
+ * Counts n_jac. */
+FMUGEN_INTERNAL int fmugen_ode_jacobian(fmugen_ode *ode, double t, const double *x, const double *fx,
+                                        double *J, double *tmp);
+/* Weighted RMS norm sqrt(1/n sum (e_i / sk_i)^2),
+ * sk_i = atol x_nominal_i + rtol max(|a_i|, |b_i|). */
+FMUGEN_INTERNAL double fmugen_error_norm(const fmugen_instance *inst, const double *e, const double *a,
+                                         const double *b);
+/* LU factorisation with partial pivoting of A (n x n, row-major), in place.
+ * Returns 0, or 1 when a pivot is zero or not finite. */
+FMUGEN_INTERNAL int fmugen_lu_factor(int n, double *A, int *ipiv);
+FMUGEN_INTERNAL void fmugen_lu_solve(int n, const double *LU, const int *ipiv, double *b);
+
+FMUGEN_INTERNAL int fmugen_solve_dopri5(fmugen_ode *ode, double t_end, char *msg, size_t n);
+FMUGEN_INTERNAL int fmugen_solve_rodas3(fmugen_ode *ode, double t_end, char *msg, size_t n);
+FMUGEN_INTERNAL int fmugen_solve_rk4(fmugen_ode *ode, double t_end, char *msg, size_t n);
+
+#endif

@@ -1,0 +1,186 @@
+/*
+ * solver_dopri5.c -- Dormand-Prince 5(4) explicit Runge-Kutta method with
+ * adaptive step size (Dormand & Prince 1980; step-size control as in Hairer,
+ * Norsett & Wanner, "Solving ODEs I", sec. II.4 and their code DOPRI5).
+ *
+ * Order 5 solution, embedded order 4 error estimate, 7 stages of which the
+ * last is f at the new point, reused as the first stage of the next step
+ * (FSAL, kept in inst->fsal across communication steps while time, x, u and
+ * p are unchanged).
+ *
+ * Error control: err = || e ||, the RMS norm of the local error estimate
+ * weighted by sk_i = atol x_nominal_i + rtol max(|x_i|, |x_new_i|); a step is
+ * accepted when err <= 1.  The next step is h / fac with the Lund-stabilised
+ * (PI) factor fac = err^(0.2 - 0.75 beta) / facold^beta / 0.9, beta = 0.04,
+ * bounded to 1/10 <= fac <= 5.  The initial step follows Hairer's hinit.
+ * The step is shortened to land exactly on the communication point.
+ */
+#include <float.h>
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+#include "solver.h"
+
+/* Butcher tableau (Dormand & Prince 1980, RK5(4)7M) */
+static const double c2 = 1.0 / 5, c3 = 3.0 / 10, c4 = 4.0 / 5, c5 = 8.0 / 9;
+static const double a21 = 1.0 / 5;
+static const double a31 = 3.0 / 40, a32 = 9.0 / 40;
+static const double a41 = 44.0 / 45, a42 = -56.0 / 15, a43 = 32.0 / 9;
+static const double a51 = 19372.0 / 6561, a52 = -25360.0 / 2187, a53 = 64448.0 / 6561, a54 = -212.0 / 729;
+static const double a61 = 9017.0 / 3168, a62 = -355.0 / 33, a63 = 46732.0 / 5247, a64 = 49.0 / 176,
+                    a65 = -5103.0 / 18656;
+static const double a71 = 35.0 / 384, a73 = 500.0 / 1113, a74 = 125.0 / 192, a75 = -2187.0 / 6784,
+                    a76 = 11.0 / 84;
+/* error coefficients: 5th minus 4th order weights */
+static const double e1 = 71.0 / 57600, e3 = -71.0 / 16695, e4 = 71.0 / 1920, e5 = -17253.0 / 339200,
+                    e6 = 22.0 / 525, e7 = -1.0 / 40;
+
+/* Hairer's initial step guess for a method of order iord. */
+static int initial_step(fmugen_ode *ode, double t, const double *x, const double *f0, double hmax, double *y1,
+                        double *f1, double *h_out)
+{
+    const fmugen_instance *inst = ode->inst;
+    const fmugen_model_def *m = inst->model;
+    const int n = m->nx;
+    const double rtol = inst->s.rt[FMUGEN_RT_RTOL], atol = inst->s.rt[FMUGEN_RT_ATOL];
+    double dnf = 0, dny = 0;
+    for (int i = 0; i < n; i++) {
+        double sk = atol * m->x_nominal[i] + rtol * fabs(x[i]);
+        dnf += (f0[i] / sk) * (f0[i] / sk);
+        dny += (x[i] / sk) * (x[i] / sk);
+    }
+    double h = (dnf <= 1e-10 || dny <= 1e-10) ? 1e-6 : 0.01 * sqrt(dny / dnf);
+    if (h > hmax) h = hmax;
+    for (int i = 0; i < n; i++) y1[i] = x[i] + h * f0[i];
+    int rc = fmugen_ode_rhs(ode, t + h, y1, f1);
+    if (rc != FMUGEN_OK) { *h_out = 0.1 * h; return FMUGEN_OK; } /* let the step control sort it out */
+    double der2 = 0;
+    for (int i = 0; i < n; i++) {
+        double sk = atol * m->x_nominal[i] + rtol * fabs(x[i]);
+        der2 += ((f1[i] - f0[i]) / sk) * ((f1[i] - f0[i]) / sk);
+    }
+    der2 = sqrt(der2) / h;
+    double der12 = fmax(der2, sqrt(dnf));
+    double h1 = der12 <= 1e-15 ? fmax(1e-6, h * 1e-3) : pow(0.01 / der12, 1.0 / 5.0);
+    h = fmin(100 * h, h1);
+    *h_out = fmin(h, hmax);
+    return FMUGEN_OK;
+}
+
+int fmugen_solve_dopri5(fmugen_ode *ode, double t_end, char *msg, size_t msgn)
+{
+    fmugen_instance *inst = ode->inst;
+    const int n = inst->model->nx;
+    double *x = inst->x;
+    if (n == 0) { inst->s.time = t_end; return FMUGEN_SOLVER_OK; }
+    double *k1 = inst->fsal, *w = inst->work;
+    double *k2 = w, *k3 = w + n, *k4 = w + 2 * n, *k5 = w + 3 * n, *k6 = w + 4 * n, *k7 = w + 5 * n;
+    double *ys = w + 6 * n, *ynew = w + 7 * n, *err = w + 8 * n;
+    const double hmax = inst->s.rt[FMUGEN_RT_MAX_STEP] > 0 ? inst->s.rt[FMUGEN_RT_MAX_STEP] : INFINITY;
+    const double beta = 0.04, expo1 = 0.2 - beta * 0.75, safe = 0.9, facc1 = 5.0, facc2 = 0.1;
+    double t = inst->s.time;
+
+    if (!inst->s.fsal_valid) {
+        int rc = fmugen_ode_rhs(ode, t, x, k1);
+        if (rc != FMUGEN_OK) {
+            snprintf(msg, msgn, "Dormand-Prince: model evaluation failed at t = %.17g: %s", t,
+                     fmugen_model_status_text(rc));
+            return FMUGEN_SOLVER_FAILED;
+        }
+        inst->s.fsal_valid = 1;
+    }
+    double h = inst->s.h_next;
+    if (!(h > 0)) {
+        initial_step(ode, t, x, k1, hmax, k2, k3, &h);
+        inst->s.h_next = h;
+    }
+    int reject = 0, steps = 0;
+    int last_model_fail = FMUGEN_OK;
+    while (t < t_end) {
+        if (steps++ >= FMUGEN_SOLVER_MAX_STEPS) {
+            snprintf(msg, msgn, "Dormand-Prince: more than %d internal steps in one communication step (t = %.17g, "
+                     "h = %.3g); the model may be stiff: try the implicit solver",
+                     FMUGEN_SOLVER_MAX_STEPS, t, h);
+            return FMUGEN_SOLVER_FAILED;
+        }
+        if (h > hmax) h = hmax;
+        double h_prop = h;
+        int last = 0;
+        if (t + 1.01 * h >= t_end) { h = t_end - t; last = 1; }
+        if (!last && h < 16 * DBL_EPSILON * fmax(fabs(t), 1e-300)) {
+            if (last_model_fail != FMUGEN_OK)
+                snprintf(msg, msgn, "Dormand-Prince: step size underflow at t = %.17g after model evaluation "
+                         "failures (%s)", t, fmugen_model_status_text(last_model_fail));
+            else
+                snprintf(msg, msgn, "Dormand-Prince: step size underflow (h = %.3g) at t = %.17g", h, t);
+            return FMUGEN_SOLVER_FAILED;
+        }
+        int rc;
+        for (int i = 0; i < n; i++) ys[i] = x[i] + h * a21 * k1[i];
+        rc = fmugen_ode_rhs(ode, t + c2 * h, ys, k2);
+        if (rc == FMUGEN_OK) {
+            for (int i = 0; i < n; i++) ys[i] = x[i] + h * (a31 * k1[i] + a32 * k2[i]);
+            rc = fmugen_ode_rhs(ode, t + c3 * h, ys, k3);
+        }
+        if (rc == FMUGEN_OK) {
+            for (int i = 0; i < n; i++) ys[i] = x[i] + h * (a41 * k1[i] + a42 * k2[i] + a43 * k3[i]);
+            rc = fmugen_ode_rhs(ode, t + c4 * h, ys, k4);
+        }
+        if (rc == FMUGEN_OK) {
+            for (int i = 0; i < n; i++)
+                ys[i] = x[i] + h * (a51 * k1[i] + a52 * k2[i] + a53 * k3[i] + a54 * k4[i]);
+            rc = fmugen_ode_rhs(ode, t + c5 * h, ys, k5);
+        }
+        if (rc == FMUGEN_OK) {
+            for (int i = 0; i < n; i++)
+                ys[i] = x[i] + h * (a61 * k1[i] + a62 * k2[i] + a63 * k3[i] + a64 * k4[i] + a65 * k5[i]);
+            rc = fmugen_ode_rhs(ode, last ? t_end : t + h, ys, k6);
+        }
+        if (rc == FMUGEN_OK) {
+            for (int i = 0; i < n; i++)
+                ynew[i] = x[i] + h * (a71 * k1[i] + a73 * k3[i] + a74 * k4[i] + a75 * k5[i] + a76 * k6[i]);
+            rc = fmugen_ode_rhs(ode, last ? t_end : t + h, ynew, k7);
+        }
+        if (rc != FMUGEN_OK) {
+            /* a trial point outside the model's domain: retry with a smaller step */
+            last_model_fail = rc;
+            inst->s.n_rejected++;
+            h *= 0.25;
+            reject = 1;
+            continue;
+        }
+        for (int i = 0; i < n; i++)
+            err[i] = h * (e1 * k1[i] + e3 * k3[i] + e4 * k4[i] + e5 * k5[i] + e6 * k6[i] + e7 * k7[i]);
+        double e = fmugen_error_norm(inst, err, x, ynew);
+        if (!isfinite(e)) {
+            inst->s.n_rejected++;
+            h *= 0.25;
+            reject = 1;
+            continue;
+        }
+        double fac11 = pow(e, expo1);
+        if (e <= 1.0) {
+            double fac = fac11 / pow(inst->s.facold, beta);
+            fac = fmax(facc2, fmin(facc1, fac / safe));
+            double hnew = h / fac;
+            inst->s.facold = fmax(e, 1e-4);
+            if (reject) hnew = fmin(hnew, h);
+            memcpy(x, ynew, (size_t)n * sizeof(double));
+            memcpy(k1, k7, (size_t)n * sizeof(double));
+            t = last ? t_end : t + h;
+            inst->s.time = t;
+            inst->s.n_steps++;
+            reject = 0;
+            last_model_fail = FMUGEN_OK;
+            /* a step shortened to hit the communication point says nothing
+             * against the step the controller wanted */
+            h = last ? fmax(hnew, h_prop) : hnew;
+            inst->s.h_next = h;
+        } else {
+            inst->s.n_rejected++;
+            h = h / fmin(facc1, fac11 / safe);
+            reject = 1;
+        }
+    }
+    return FMUGEN_SOLVER_OK;
+}
