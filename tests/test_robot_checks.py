@@ -171,7 +171,10 @@ def test_invalid_expressions_and_symbol_names(tmp_path, expr, fragment):
 
 
 @pytest.mark.parametrize("name, fragment", [('"2x"', "not a valid identifier"), ("sin", "reserved"),
-                                            ("lambda", "keyword"), ("__x", "reserved")])
+                                            ("lambda", "keyword"), ("__x", "reserved"),
+                                            ("_t0", "reserved for generated code"),
+                                            ("q_1", "variable of the model"),
+                                            ("f_ext_2_x", "variable of the model")])
 def test_invalid_parameter_names(tmp_path, name, fragment):
     p = write_robot(tmp_path, parameters=f"{name} = 1.0")
     expect_error(p, "[parameters]", "invalid parameter name", fragment)

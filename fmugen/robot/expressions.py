@@ -56,6 +56,11 @@ _C_KEYWORDS = frozenset(
 )
 _BUILTINS = frozenset(n for n in dir(builtins) if not n.startswith("_")) | {"__import__"}
 
+# Names of the model's own variables (joint coordinates, inputs, outputs in
+# fmugen.dynamics.manipulator): a parameter of that name would silently become
+# the same sympy symbol.
+_MODEL_VARIABLE = re.compile(r"(q|qd|qdd|tau|qdd_out|p_ee)_[0-9]+\Z|(f_ext|t_ext)_[0-9]+_[xyz]\Z")
+
 MAX_TEXT_LENGTH = 2000  # a robot quantity longer than this is not a quantity
 MAX_EXPONENT = 64  # refuse 10**10**10 and friends before sympy tries them
 ANGLE_SNAP_TOLERANCE = 1e-12  # rad
@@ -69,8 +74,10 @@ def symbol_name_problem(name: str) -> str | None:
     """Why ``name`` cannot be a symbol name, or None when it can."""
     if not isinstance(name, str) or not NAME_PATTERN.match(name):
         return f"{name!r} is not a valid identifier ([A-Za-z_][A-Za-z0-9_]*)"
-    if name.startswith("__"):
-        return f"{name!r}: names starting with '__' are reserved"
+    if name.startswith("_"):
+        return f"{name!r}: names starting with '_' are reserved for generated code"
+    if _MODEL_VARIABLE.match(name):
+        return f"{name!r} is reserved for a variable of the model (joint coordinates, torques, outputs)"
     if keyword.iskeyword(name) or keyword.issoftkeyword(name):
         return f"{name!r} is a Python keyword"
     if name in FUNCTIONS or name in CONSTANTS:
