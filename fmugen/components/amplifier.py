@@ -16,6 +16,8 @@ state v and no A0/GBW parameters; the P amplifier has no z and no T_I.
 """
 from __future__ import annotations
 
+import math
+
 import sympy as sp
 
 from ..codegen.model import SymbolicModel
@@ -61,7 +63,8 @@ def amplifier(kind: str = "ideal", control: str = "P", rails: bool = False,
     if kind == "real":
         v = var("v", "V", "op-amp output voltage", start=0.0, nominal=1.0)
         states.append(v)
-        omega_p = 2 * sp.pi * s["GBW"] / s["A0"]
+        # 2*pi as a number: strict C99 has no M_PI (sympy prints pi as M_PI)
+        omega_p = sp.Float(2 * math.pi) * s["GBW"] / s["A0"]
         ders.append(omega_p * (s["A0"] * (e_in - v.symbol / s["K_a"]) - v.symbol))
         u = v.symbol
     else:
