@@ -1,0 +1,210 @@
+"""Build an FMI 2.0 FMU from a :class:`SymbolicModel`.
+
+    model --generate_c--> model.c ─┐
+    model --model_description_xml--> modelDescription.xml
+    c_runtime/*.c, *.h + FMI 2.0 headers (from fmpy) + model.c
+        --cc -O2 -fPIC -shared--> binaries/<platform>/<modelIdentifier>.so
+    zip --> <name>.fmu
+
+The FMU is self-contained: ``sources/`` holds every C file and header needed
+to compile it on another platform (listed in ``<SourceFiles>`` and in
+``sources/README.txt`` with the command used here).
+
+>>> # build_fmu(model, "out/Pendulum.fmu", fmi_type="both")  # doctest: +SKIP
+"""
+from __future__ import annotations
+
+import os
+import shlex
+import shutil
+import subprocess
+import tempfile
+import time
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Optional, Sequence, Union
+
+from .. import __version__
+from ..codegen.c_code import GUID_PLACEHOLDER, c_identifier, deterministic_guid, generate_c
+from ..codegen.model import SymbolicModel
+from .model_description import model_description_xml
+
+FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+CFLAGS = ("-O2", "-fPIC", "-shared", "-Wall", "-Wextra", "-std=c99")
+# zip entries get a fixed date so that identical inputs give identical FMUs
+_ZIP_DATE = (2020, 1, 1, 0, 0, 0)
+
+
+class BuildError(RuntimeError):
+    """The FMU could not be built; the message holds the failing command and its output."""
+
+
+@dataclass
+class BuildResult:
+    path: Path
+    model_identifier: str
+    guid: str
+    op_counts: dict  # function name -> FunctionOps
+    timings: dict = field(default_factory=dict)  # generate / compile / zip, seconds
+    command: str = ""  # the compiler command
+
+    def __str__(self) -> str:
+        t = ", ".join(f"{k} {v:.2f} s" for k, v in self.timings.items())
+        ops = "; ".join(f"{k}: {v}" for k, v in self.op_counts.items())
+        return f"{self.path} ({t}); {ops}"
+
+
+def runtime_dir() -> Path:
+    """``c_runtime/`` of the fmugen source tree."""
+    d = Path(__file__).resolve().parents[2] / "c_runtime"
+    if not d.is_dir() or not (d / "fmugen_model.h").is_file():
+        raise BuildError(f"C runtime not found at {d} (expected c_runtime/fmugen_model.h next to the "
+                         f"fmugen package; fmugen must be installed from its source tree)")
+    return d
+
+
+def fmi_headers_dir() -> Path:
+    """The FMI 2.0 standard headers shipped with fmpy."""
+    import fmpy
+
+    d = Path(fmpy.__file__).resolve().parent / "c-code"
+    missing = [h for h in FMI_HEADERS if not (d / h).is_file()]
+    if missing:
+        raise BuildError(f"FMI 2.0 headers {', '.join(missing)} not found in {d}")
+    return d
+
+
+def platform_binary() -> tuple:
+    """``(platform folder, shared library suffix)`` of this machine, as FMI 2.0 names them."""
+    from fmpy import platform, sharedLibraryExtension
+
+    return platform, sharedLibraryExtension
+
+
+def _fold(model: SymbolicModel, fold_parameters) -> SymbolicModel:
+    if fold_parameters is None:
+        return model
+    if fold_parameters == "all":
+        return model.with_parameters_folded()
+    if isinstance(fold_parameters, str):
+        raise ValueError(f"fold_parameters must be None, 'all' or a list of parameter names, "
+                         f"got {fold_parameters!r}")
+    names = list(fold_parameters)
+    known = {v.name for v in model.parameters}
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise ValueError(f"fold_parameters: {', '.join(unknown)} not parameters of {model.name!r} "
+                         f"(parameters: {', '.join(sorted(known))})")
+    return model.with_parameters_folded(names)
+
+
+def _fmi_types(fmi_type: str) -> tuple:
+    try:
+        return {"both": ("me", "cs"), "me": ("me",), "cs": ("cs",)}[fmi_type]
+    except KeyError:
+        raise ValueError(f"fmi_type must be 'me', 'cs' or 'both', got {fmi_type!r}") from None
+
+
+def build_fmu(
+    model: SymbolicModel,
+    output_path: Union[str, os.PathLike],
+    fmi_type: str = "both",
+    fold_parameters: Union[None, str, Sequence[str]] = None,
+    cc: str = "cc",
+    extra_cflags: Sequence[str] = (),
+    keep_sources: bool = True,
+    model_identifier: Optional[str] = None,
+) -> BuildResult:
+    """Generate, compile and zip ``model`` into an FMI 2.0 FMU.
+
+    Parameters:
+        model            the symbolic model (states, inputs, parameters, outputs)
+        output_path      the .fmu file, or an existing directory to put
+                         ``<modelIdentifier>.fmu`` in
+        fmi_type         "me", "cs" or "both" (one binary serves both)
+        fold_parameters  None (all parameters settable), "all", or names of
+                         parameters to replace by their values
+        cc, extra_cflags the C compiler and flags appended to
+                         ``-O2 -fPIC -shared -Wall -Wextra -std=c99``
+        keep_sources     put ``sources/`` into the FMU
+        model_identifier defaults to a C identifier made from the model name
+
+    Returns a :class:`BuildResult` with the path, GUID, operation counts and
+    timings.  Raises :class:`BuildError` (compiler command and its stderr in
+    the message) when compilation fails.
+    """
+    types = _fmi_types(fmi_type)
+    t0 = time.perf_counter()
+    model = _fold(model, fold_parameters)
+    ident = model_identifier or c_identifier(model.name)
+    rt, fmi_h = runtime_dir(), fmi_headers_dir()
+    platform, suffix = platform_binary()
+
+    runtime_c = sorted(p.name for p in rt.glob("*.c"))
+    runtime_h = sorted(p.name for p in rt.glob("*.h"))
+    if "model.c" in runtime_c:
+        raise BuildError(f"{rt}/model.c exists: the runtime must not contain a generated model")
+    sources = runtime_c + ["model.c"]
+
+    # generate with a placeholder GUID, hash C and XML together, substitute
+    gen = generate_c(model, model_identifier=ident, guid=GUID_PLACEHOLDER)
+    xml = model_description_xml(model, GUID_PLACEHOLDER, ident, types, sources if keep_sources else ())
+    guid = deterministic_guid(gen.source, xml)
+    c_src, xml = gen.source.replace(GUID_PLACEHOLDER, guid), xml.replace(GUID_PLACEHOLDER, guid)
+    t_gen = time.perf_counter() - t0
+
+    out = Path(output_path)
+    if out.is_dir():
+        out = out / f"{ident}.fmu"
+    out.parent.mkdir(parents=True, exist_ok=True)
+
+    with tempfile.TemporaryDirectory(prefix=f"fmugen_{ident}_") as tmp:
+        root = Path(tmp)
+        src = root / "sources"
+        src.mkdir()
+        for name in runtime_c + runtime_h:
+            shutil.copy2(rt / name, src / name)
+        for name in FMI_HEADERS:
+            shutil.copy2(fmi_h / name, src / name)
+        (src / "model.c").write_text(c_src)
+        (root / "modelDescription.xml").write_text(xml, encoding="utf-8")
+        bindir = root / "binaries" / platform
+        bindir.mkdir(parents=True)
+        lib = bindir / f"{ident}{suffix}"
+
+        cmd = [cc, *CFLAGS, *extra_cflags, "-I.", "-o", str(lib), *sources, "-lm"]
+        t1 = time.perf_counter()
+        try:
+            r = subprocess.run(cmd, cwd=src, capture_output=True, text=True)
+        except OSError as e:
+            raise BuildError(f"cannot run the C compiler: {shlex.join(cmd)}\n(in {src})\n{e}") from None
+        t_cc = time.perf_counter() - t1
+        if r.returncode != 0:
+            raise BuildError(f"C compiler failed (exit {r.returncode}) building {model.name!r}:\n"
+                             f"  cd {src} && {shlex.join(cmd)}\n{r.stderr.strip()}")
+        portable = shlex.join([cc, *CFLAGS, "-I.", "-o", f"{ident}{suffix}", *sources, "-lm"])
+        (src / "README.txt").write_text(
+            f"Sources of the FMU {ident} ({model.name}), generated by fmugen {__version__}.\n"
+            f"model.c holds the model (generated); the other .c/.h files are the generic fmugen FMI 2.0\n"
+            f"runtime and the FMI 2.0 standard headers.  Compile all .c files into one shared library\n"
+            f"named after the modelIdentifier, e.g. on Linux:\n\n    {portable}\n\n"
+            f"and place it in binaries/<platform>/ (linux64, darwin64, win64).\n")
+
+        t2 = time.perf_counter()
+        files = [root / "modelDescription.xml", lib]
+        if keep_sources:
+            files += sorted(src.iterdir())
+        tmp_zip = out.with_name(out.name + ".part")
+        with zipfile.ZipFile(tmp_zip, "w", zipfile.ZIP_DEFLATED) as zf:
+            for f in files:
+                info = zipfile.ZipInfo(f.relative_to(root).as_posix(), date_time=_ZIP_DATE)
+                info.compress_type = zipfile.ZIP_DEFLATED
+                info.external_attr = (0o755 if f == lib else 0o644) << 16
+                zf.writestr(info, f.read_bytes())
+        os.replace(tmp_zip, out)
+        t_zip = time.perf_counter() - t2
+
+    return BuildResult(path=out, model_identifier=ident, guid=guid, op_counts=gen.op_counts,
+                       timings={"generate": t_gen, "compile": t_cc, "zip": t_zip},
+                       command=shlex.join(cmd))

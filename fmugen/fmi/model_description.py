@@ -1,0 +1,385 @@
+"""``modelDescription.xml`` (FMI 2.0) of a :class:`SymbolicModel`.
+
+The variables follow the value-reference layout of
+``c_runtime/fmugen_model.h`` (:func:`variable_layout` returns it, so no other
+part of fmugen writes value references by hand):
+
+=========================  =================  ==========  ============  ==========
+block                      value references   causality   variability   initial
+=========================  =================  ==========  ============  ==========
+states x                   [0, nx)            local or    continuous    exact
+                                              output
+derivatives der(x)         [nx, 2nx)          local       continuous    calculated
+inputs u                   [2nx, +nu)         input       continuous    (exact)
+computed outputs y         [2nx+nu, +ny)      output      continuous    calculated
+parameters p               [.., +np)          parameter   fixed         exact
+runtime Real parameters    [.., +4)           parameter   fixed         exact
+runtime Integers           Integer vr 0..4    parameter / fixed /
+                                              local       discrete
+=========================  =================  ==========  ============  ==========
+
+``<ModelStructure>`` holds the exact dependencies taken from the program
+(:func:`dependencies`): Outputs and Derivatives on states and inputs, the
+InitialUnknowns on the knowns of Initialization Mode (inputs, and variables
+with initial="exact": states and parameters), as the FMI 2.0 schema
+documentation of ``InitialUnknowns/Unknown`` defines them.
+"""
+from __future__ import annotations
+
+import re
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Optional, Sequence
+
+import sympy as sp
+
+from .. import __version__
+from ..codegen.model import SymbolicModel
+from ..codegen.program import Assign
+from .units import base_units
+
+FMI_VERSION = "2.0"
+GENERATION_TOOL = f"fmugen {__version__}"
+
+#: Log categories of the runtime, in its order (c_runtime/runtime_support.c).
+LOG_CATEGORIES = (
+    ("logEvents", "mode changes and other events of the FMI state machine"),
+    ("logStatusWarning", "messages of status fmi2Warning"),
+    ("logStatusError", "messages of status fmi2Error, fmi2Discard and fmi2Fatal"),
+    ("logAll", "all messages"),
+)
+
+
+@dataclass(frozen=True)
+class RuntimeParameter:
+    """A variable the runtime adds to every FMU (offset: from its block start)."""
+
+    name: str
+    offset: int
+    type: str  # "Real" or "Integer"
+    causality: str
+    variability: str
+    initial: Optional[str]
+    start: Optional[float]
+    unit: str
+    description: str
+    min: Optional[float] = None
+    max: Optional[float] = None
+
+
+def _header_defines() -> dict:
+    """``#define FMUGEN_* <int>`` of c_runtime/fmugen_model.h (the contract)."""
+    path = Path(__file__).resolve().parents[2] / "c_runtime" / "fmugen_model.h"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: the C model interface is missing (fmugen must be used from its "
+                                f"source tree)")
+    defs = {}
+    for m in re.finditer(r"^#define\s+(FMUGEN_\w+)\s+(-?\d+)\b", path.read_text(), re.M):
+        defs[m.group(1)] = int(m.group(2))
+    return defs
+
+
+def runtime_parameters() -> tuple:
+    """The runtime's own variables, offsets read from fmugen_model.h.
+
+    Start values are the defaults of ``fmugen_set_defaults``
+    (c_runtime/runtime_support.c); tests/test_fmi_build.py checks both.
+    """
+    d = _header_defines()
+    solvers = (f"{d['FMUGEN_SOLVER_DOPRI5']} Dormand-Prince 5(4) adaptive, "
+               f"{d['FMUGEN_SOLVER_IMPLICIT']} implicit (stiff, uses the Jacobian), "
+               f"{d['FMUGEN_SOLVER_RK4']} classical Runge-Kutta 4 fixed step")
+    return (
+        RuntimeParameter("solver.rtol", d["FMUGEN_RT_RTOL"], "Real", "parameter", "fixed", "exact", 1e-6, "",
+                         "relative tolerance of the Co-Simulation solver", min=0.0),
+        RuntimeParameter("solver.atol", d["FMUGEN_RT_ATOL"], "Real", "parameter", "fixed", "exact", 1e-6, "",
+                         "absolute tolerance of the Co-Simulation solver, relative to each state's nominal value",
+                         min=0.0),
+        RuntimeParameter("solver.max_step", d["FMUGEN_RT_MAX_STEP"], "Real", "parameter", "fixed", "exact", 0.0,
+                         "s", "largest internal step of the Co-Simulation solver, 0 = no limit", min=0.0),
+        RuntimeParameter("solver.fixed_step", d["FMUGEN_RT_FIXED_STEP"], "Real", "parameter", "fixed", "exact",
+                         0.0, "s", "step of the fixed-step method, 0 = one step per communication step", min=0.0),
+        RuntimeParameter("solver.method", d["FMUGEN_INT_SOLVER"], "Integer", "parameter", "fixed", "exact",
+                         d["FMUGEN_SOLVER_DOPRI5"], "", f"Co-Simulation solver: {solvers}",
+                         min=min(d["FMUGEN_SOLVER_DOPRI5"], d["FMUGEN_SOLVER_IMPLICIT"], d["FMUGEN_SOLVER_RK4"]),
+                         max=max(d["FMUGEN_SOLVER_DOPRI5"], d["FMUGEN_SOLVER_IMPLICIT"], d["FMUGEN_SOLVER_RK4"])),
+        RuntimeParameter("solver.n_steps", d["FMUGEN_INT_N_STEPS"], "Integer", "local", "discrete", "calculated",
+                         None, "", "accepted internal steps of the Co-Simulation solver so far"),
+        RuntimeParameter("solver.n_rejected", d["FMUGEN_INT_N_REJECTED"], "Integer", "local", "discrete",
+                         "calculated", None, "", "rejected internal steps so far"),
+        RuntimeParameter("solver.n_rhs", d["FMUGEN_INT_N_RHS"], "Integer", "local", "discrete", "calculated",
+                         None, "", "evaluations of the derivatives by the solver so far"),
+        RuntimeParameter("solver.n_jac", d["FMUGEN_INT_N_JAC"], "Integer", "local", "discrete", "calculated",
+                         None, "", "evaluations of the Jacobian by the solver so far"),
+    )
+
+
+@dataclass
+class ScalarVariable:
+    """One ``<ScalarVariable>``; ``index`` is its 1-based position in the list."""
+
+    index: int
+    name: str
+    value_reference: int
+    type: str
+    causality: str
+    variability: str
+    initial: Optional[str]
+    start: Optional[float] = None
+    unit: str = ""
+    description: str = ""
+    nominal: Optional[float] = None
+    min: Optional[float] = None
+    max: Optional[float] = None
+    derivative: Optional[int] = None  # index of the state, for der(x)
+    kind: str = ""  # state, derivative, input, output, parameter, runtime
+    symbol: Optional[sp.Symbol] = None
+
+
+@dataclass
+class VariableLayout:
+    """Variables in ``<ModelVariables>`` order with their value references.
+
+    ``real``/``integer``: FMI name -> value reference (for fmpy's
+    ``start_values``, ``fmi2GetReal``...); ``variables``: all of them.
+    """
+
+    variables: list = field(default_factory=list)
+    real: dict = field(default_factory=dict)
+    integer: dict = field(default_factory=dict)
+
+    def by_kind(self, kind: str) -> list:
+        return [v for v in self.variables if v.kind == kind]
+
+    def index_of(self, name: str) -> int:
+        for v in self.variables:
+            if v.name == name:
+                return v.index
+        raise KeyError(name)
+
+
+def variable_layout(model: SymbolicModel) -> VariableLayout:
+    """Every variable of the FMU in value-reference order (see module doc)."""
+    nx, nu, ny, np_ = model.nx, model.nu, model.ny, model.np
+    out = VariableLayout()
+
+    def add(**kw):
+        v = ScalarVariable(index=len(out.variables) + 1, **kw)
+        out.variables.append(v)
+        (out.real if v.type == "Real" else out.integer)[v.name] = v.value_reference
+        return v
+
+    for i, v in enumerate(model.states):
+        if v.start is None:
+            raise ValueError(f"model {model.name!r}: state {v.name!r} has no start value")
+        add(name=v.name, value_reference=i, type="Real",
+            causality="output" if v.output else "local", variability="continuous", initial="exact",
+            start=v.start, unit=v.unit, description=v.description, nominal=v.nominal, min=v.min, max=v.max,
+            kind="state", symbol=v.symbol)
+    for i, v in enumerate(model.states):
+        add(name=f"der({v.name})", value_reference=nx + i, type="Real", causality="local",
+            variability="continuous", initial="calculated", unit=_derivative_unit(v.unit),
+            description=f"time derivative of {v.name}", derivative=i + 1, kind="derivative")
+    for i, v in enumerate(model.inputs):
+        add(name=v.name, value_reference=2 * nx + i, type="Real", causality="input", variability="continuous",
+            initial=None, start=v.start if v.start is not None else 0.0, unit=v.unit,
+            description=v.description, nominal=v.nominal, min=v.min, max=v.max, kind="input", symbol=v.symbol)
+    for i, v in enumerate(model.outputs):
+        add(name=v.name, value_reference=2 * nx + nu + i, type="Real", causality="output",
+            variability="continuous", initial="calculated", unit=v.unit, description=v.description,
+            nominal=v.nominal, min=v.min, max=v.max, kind="output", symbol=v.symbol)
+    for i, v in enumerate(model.parameters):
+        if v.start is None:
+            raise ValueError(f"model {model.name!r}: parameter {v.name!r} has no start value")
+        add(name=v.name, value_reference=2 * nx + nu + ny + i, type="Real", causality="parameter",
+            variability="fixed", initial="exact", start=v.start, unit=v.unit, description=v.description,
+            nominal=v.nominal, min=v.min, max=v.max, kind="parameter", symbol=v.symbol)
+    first_rt = 2 * nx + nu + ny + np_
+    for r in runtime_parameters():
+        add(name=r.name, value_reference=(first_rt + r.offset) if r.type == "Real" else r.offset, type=r.type,
+            causality=r.causality, variability=r.variability, initial=r.initial, start=r.start, unit=r.unit,
+            description=r.description, min=r.min, max=r.max, kind="runtime")
+    names = [v.name for v in out.variables]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise ValueError(f"model {model.name!r}: variable names used twice: {', '.join(dup)}")
+    return out
+
+
+def _derivative_unit(unit: str) -> str:
+    """Unit of dx/dt: ``rad`` -> ``rad/s``, ``m/s`` -> ``m/s2``, ``1`` -> ``1/s``."""
+    if not unit:
+        return ""
+    if unit == "1":
+        return "1/s"
+    m = re.fullmatch(r"(.+)/s(\d*)", unit)
+    if m and "(" not in unit and "/" not in m.group(1):
+        return f"{m.group(1)}/s{int(m.group(2) or 1) + 1}"
+    if "/" in unit:
+        num, den = unit.split("/", 1)
+        den = den[1:-1] if den.startswith("(") and den.endswith(")") else den
+        return f"{num}/({den}.s)"
+    return f"{unit}/s"
+
+
+def dependencies(model: SymbolicModel, knowns: Sequence[sp.Symbol]) -> dict:
+    """Which of ``knowns`` each derivative and output depends on.
+
+    Propagated through the program (a linear solve couples all its unknowns
+    with everything in A and B).  Returns ``{"derivatives": [set, ...],
+    "outputs": [set, ...]}``.  With knowns = states and inputs this equals
+    :meth:`SymbolicModel.dependencies`; adding parameters gives the
+    dependencies of the InitialUnknowns.
+    """
+    knowns = set(knowns)
+    deps: dict = {}
+
+    def of(expr) -> set:
+        out = set()
+        for s in sp.sympify(expr).free_symbols:
+            if s in knowns:
+                out.add(s)
+            elif s in deps:
+                out |= deps[s]
+        return out
+
+    for st in model.program.steps:
+        if isinstance(st, Assign):
+            deps[st.symbol] = of(st.expr)
+        else:
+            d = set()
+            for e in list(st.A) + list(st.B):
+                d |= of(e)
+            for x in st.X:
+                deps[x] = d
+    return {"derivatives": [of(e) for e in model.derivatives],
+            "outputs": [of(e) for e in model.output_exprs]}
+
+
+def _fmt(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    return repr(float(v))
+
+
+def _set(el, **attrs):
+    for k, v in attrs.items():
+        if v is None or v == "":
+            continue
+        el.set(k, v if isinstance(v, str) else _fmt(v))
+
+
+def model_description_xml(
+    model: SymbolicModel,
+    guid: str,
+    model_identifier: str,
+    fmi_types: Sequence[str] = ("me", "cs"),
+    source_files: Sequence[str] = (),
+) -> str:
+    """The text of modelDescription.xml.
+
+    ``fmi_types``: "me" and/or "cs"; ``source_files``: the C files of the
+    FMU's ``sources/`` to list under ``<SourceFiles>`` (FMI 2.0 sec. 2.2.6).
+    """
+    fmi_types = tuple(fmi_types)
+    if not fmi_types or any(t not in ("me", "cs") for t in fmi_types):
+        raise ValueError(f"fmi_types must be a non-empty subset of ('me', 'cs'), got {fmi_types!r}")
+    layout = variable_layout(model)
+    has_jac = model.jacobian is not None
+
+    root = ET.Element("fmiModelDescription")
+    _set(root, fmiVersion=FMI_VERSION, modelName=model.name, guid=guid,
+         description=model.description, generationTool=GENERATION_TOOL,
+         variableNamingConvention="structured", numberOfEventIndicators="0")
+
+    def interface(tag, **flags):
+        el = ET.SubElement(root, tag)
+        _set(el, modelIdentifier=model_identifier, needsExecutionTool=False, **flags,
+             canBeInstantiatedOnlyOncePerProcess=False, canNotUseMemoryManagementFunctions=False,
+             canGetAndSetFMUstate=True, canSerializeFMUstate=True, providesDirectionalDerivative=has_jac)
+        if source_files:
+            files = ET.SubElement(el, "SourceFiles")
+            for f in source_files:
+                ET.SubElement(files, "File", name=f)
+
+    if "me" in fmi_types:
+        interface("ModelExchange", completedIntegratorStepNotNeeded=True)
+    if "cs" in fmi_types:
+        interface("CoSimulation", canHandleVariableCommunicationStepSize=True, canInterpolateInputs=True,
+                  maxOutputDerivativeOrder=0, canRunAsynchronuously=False)
+
+    units = []
+    for v in layout.variables:
+        if v.unit and v.unit not in units:
+            units.append(v.unit)
+    if units:
+        ud = ET.SubElement(root, "UnitDefinitions")
+        for u in units:
+            try:
+                b = base_units(u)
+            except ValueError as e:
+                owners = [v.name for v in layout.variables if v.unit == u]
+                raise ValueError(f"model {model.name!r}, variable {owners[0]}: {e}") from None
+            uel = ET.SubElement(ud, "Unit", name=u)
+            bel = ET.SubElement(uel, "BaseUnit")
+            _set(bel, **{k: int(x) for k, x in b.exponents().items()})
+            if b.factor != 1.0:
+                _set(bel, factor=b.factor)
+
+    cats = ET.SubElement(root, "LogCategories")
+    for name, desc in LOG_CATEGORIES:
+        ET.SubElement(cats, "Category", name=name, description=desc)
+
+    mv = ET.SubElement(root, "ModelVariables")
+    for v in layout.variables:
+        el = ET.SubElement(mv, "ScalarVariable")
+        _set(el, name=v.name, valueReference=v.value_reference, description=v.description,
+             causality=v.causality, variability=v.variability, initial=v.initial)
+        t = ET.SubElement(el, v.type)
+        if v.type == "Real":
+            _set(t, unit=v.unit, min=v.min, max=v.max, nominal=v.nominal, start=v.start, derivative=v.derivative)
+        else:
+            _set(t, min=None if v.min is None else int(v.min), max=None if v.max is None else int(v.max),
+                 start=None if v.start is None else int(v.start))
+
+    # ---- ModelStructure
+    idx = {v.symbol: v.index for v in layout.variables if v.symbol is not None}
+    states = layout.by_kind("state")
+    ders = layout.by_kind("derivative")
+    outs = layout.by_kind("output")
+    x_u = [v.symbol for v in model.states + model.inputs]
+    d_run = dependencies(model, x_u)
+    d_init = dependencies(model, x_u + [v.symbol for v in model.parameters])
+
+    def unknown(parent, var_index, dep_syms, expr=None):
+        el = ET.SubElement(parent, "Unknown", index=str(var_index))
+        ids = sorted(idx[s] for s in dep_syms)
+        el.set("dependencies", " ".join(map(str, ids)))
+        if expr is not None and ids and sp.sympify(expr) in idx and len(ids) == 1:
+            el.set("dependenciesKind", "constant")  # the unknown is the known itself
+        return el
+
+    ms = ET.SubElement(root, "ModelStructure")
+    output_entries = [(v.index, {v.symbol}, v.symbol) for v in states if v.causality == "output"]
+    output_entries += [(v.index, d_run["outputs"][i], model.output_exprs[i]) for i, v in enumerate(outs)]
+    output_entries.sort(key=lambda e: e[0])
+    if output_entries:
+        o = ET.SubElement(ms, "Outputs")
+        for i, deps_, expr in output_entries:
+            unknown(o, i, deps_, expr)
+    if ders:
+        d = ET.SubElement(ms, "Derivatives")
+        for i, v in enumerate(ders):
+            unknown(d, v.index, d_run["derivatives"][i], model.derivatives[i])
+    init = [(v.index, d_init["derivatives"][i]) for i, v in enumerate(ders)]
+    init += [(v.index, d_init["outputs"][i]) for i, v in enumerate(outs)]
+    if init:
+        iu = ET.SubElement(ms, "InitialUnknowns")
+        for i, deps_ in sorted(init, key=lambda e: e[0]):
+            unknown(iu, i, deps_)
+
+    ET.indent(root, space="  ")
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
