@@ -241,6 +241,7 @@ com = [0, 0, 0.05]
 """
     robot = load_robot_description(write(tmp_path, text))
     assert robot.convention == "modified"
+    assert "modified DH: a_{i-1}" in robot.parameter("a_2").description
     base, fore = robot.links
     s = lambda n: sp.Symbol(n, real=True)
     assert (base.a, base.alpha, base.d, base.theta) == (0, 0, s("d_1"), -sp.pi / 2)

@@ -15,8 +15,10 @@ Accepted grammar
 * the constant ``pi`` and the functions ``sqrt sin cos tan exp log abs``
   (one argument each; ``abs`` is ``sympy.Abs``);
 * symbol names matching ``[A-Za-z_][A-Za-z0-9_]*`` that are not reserved
-  (see :func:`symbol_name_problem`); each becomes
-  ``sympy.Symbol(name, real=True)``.
+  (:func:`symbol_name_problem`: Python keywords and builtins, C keywords, the
+  function names and ``pi``, names starting with ``_`` -- kept for generated
+  code -- and the model's own variables ``q_i``, ``qd_i``, ``qdd_i``,
+  ``tau_i``, ``f_ext_i_x`` ...); each becomes ``sympy.Symbol(name, real=True)``.
 
 TOML floats (already binary numbers when the file is read) become
 ``sympy.Float``; an *angle* that lies within 1e-12 rad of a multiple of pi/2

@@ -126,6 +126,7 @@ class _Reader:
                 "(it becomes the FMU model identifier)"
             )
         convention = self._choice(head.get("convention", STANDARD), CONVENTIONS, "[robot]: convention")
+        self.convention = convention
         allow_all = self._bool(head.get("allow_unrealisable_inertia", False), "[robot]: allow_unrealisable_inertia")
         text = self._string(head.get("description", ""), "[robot]: description")
         provenance = self._string(head.get("source", ""), "[robot]: source")
@@ -249,7 +250,8 @@ class _Reader:
                 check_nonnegative(expr, self.values, loc(field), what.split(" of ")[0], unit)
             return self._auto_parameter(expr, auto, unit, f"{what} of {label}", loc(field))
 
-        a = number("a", f"a_{i}", "m", "DH link length a")
+        preceding = " (modified DH: a_{i-1}, before joint i)" if self.convention == MODIFIED else ""
+        a = number("a", f"a_{i}", "m", "DH link length a" + preceding)
         alpha = number("alpha", None, "rad", "", angle=True)
         d_what = "constant offset added to the joint displacement" if prismatic else "DH link offset d"
         d = number("d", f"d_{i}", "m", d_what)
