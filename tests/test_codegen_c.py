@@ -290,8 +290,6 @@ def test_folded_parameters_match_unfolded_pendulum(pend):
             assert_close(a, b)
 
 
-@pytest.mark.xfail(strict=True, reason="SymbolicModel.with_parameters_folded does not carry program "
-                   "symbols folded to numbers (here 2*a) into the jacobian program")
 def test_folded_parameters_match_unfolded(spd):
     model, parts, gen, cm = spd
     folded = model.with_parameters_folded()

@@ -85,10 +85,10 @@ class SymbolicModel:
             raise ValueError(f"{name}: {len(g)} output expressions for {len(outputs)} outputs")
         xs = [v.symbol for v in states]
         us = [v.symbol for v in inputs]
-        prog = Program("w")
+        prog = Program("_w")
         fd = tuple(prog.let(e, "f") for e in f)
         gd = tuple(prog.let(e, "g") for e in g)
-        jac = Program("j")
+        jac = Program("_j")
 
         def jm(exprs, wrt):
             if not wrt or len(exprs) == 0:
@@ -181,10 +181,10 @@ class SymbolicModel:
         values = {v.symbol: sp.Float(v.start) if not float(v.start).is_integer() else sp.Integer(int(v.start))
                   for v in chosen}
 
-        def fold_program(prog: Optional[Program]) -> tuple:
+        def fold_program(prog: Optional[Program], env: dict) -> tuple:
             if prog is None:
-                return None, {}
-            env = dict(values)
+                return None, env
+            env = dict(env)
             out = Program(prog.prefix)
             out._count = prog._count
             for st in prog.steps:
@@ -198,9 +198,9 @@ class SymbolicModel:
                     out.steps.append(SolveSPD(st.X, st.A.xreplace(env), st.B.xreplace(env)))
             return out, env
 
-        prog, env = fold_program(self.program)
-        jprog, jenv = fold_program(self.jacobian)
-        full = {**env, **jenv}
+        # the Jacobian program runs after the main one and sees its folded constants
+        prog, env = fold_program(self.program, values)
+        jprog, full = fold_program(self.jacobian, env)
         sub = lambda e: sp.sympify(e).xreplace(full)  # noqa: E731
         subm = lambda m: None if m is None else m.xreplace(full)  # noqa: E731
         kept = tuple(v for v in self.parameters if v not in chosen)

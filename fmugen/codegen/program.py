@@ -56,15 +56,19 @@ def is_trivial(expr: sp.Expr) -> bool:
 class Program:
     """A growing straight-line program with fresh-symbol naming.
 
+    Prefixes start with an underscore: robot files may not name parameters
+    so (the loader reserves them), hence intermediates never alias a user's
+    symbol.
+
     >>> import sympy as sp
     >>> x, y = sp.symbols("x y")
-    >>> p = Program("t")
+    >>> p = Program("_t")
     >>> s = p.let(sp.sin(x) * y)
     >>> s, p.let(s + 0), len(p.steps)
-    (t0, t0, 1)
+    (_t0, _t0, 1)
     """
 
-    def __init__(self, prefix: str = "t"):
+    def __init__(self, prefix: str = "_t"):
         self.prefix = prefix
         self.steps: list = []
         self._count = 0

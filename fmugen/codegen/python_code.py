@@ -47,6 +47,7 @@ def compile_program(
     back as numpy arrays, scalars as floats.
     """
     pr = _Printer({"fully_qualified_modules": True, "standard": "python3"})
+    program = program.pruned([e for r in results for e in (r if isinstance(r, sp.MatrixBase) else [r])])
     lines = [f"def {name}({', '.join(f'_a{k}' for k in range(len(arguments)))}):"]
     for k, group in enumerate(arguments):
         for j, s in enumerate(group):

@@ -93,7 +93,7 @@ class Manipulator:
 
     # ------------------------------------------------------------------
     # symbolic derivations
-    def derivation(self, formulation: Optional[str] = None, prefix: str = "w") -> Derivation:
+    def derivation(self, formulation: Optional[str] = None, prefix: str = "_w") -> Derivation:
         formulation = formulation or self.formulation
         P = Program(prefix)
         trig = TrigCache(P)
@@ -137,7 +137,7 @@ class Manipulator:
 
     def kinematics_program(self) -> tuple:
         """(Program, T_N as 4x4 Matrix, J as 6 x n Matrix)."""
-        P = Program("k")
+        P = Program("_k")
         Ts = kinematics.link_frames(P, self.robot, self.q)
         J = kinematics.geometric_jacobian(P, self.robot, Ts)
         return P, sp.Matrix(Ts[-1]), J
@@ -186,7 +186,7 @@ class Manipulator:
                 out_exprs.append(qdd[i])
 
         # exact Jacobians: ID(q, qd, qdd*) = tau  =>  dqdd/dz = -M^{-1} dID/dz
-        Jp = Program("j")
+        Jp = Program("_j")
         d.engine.P = Jp  # keep the shared constants and sin/cos, write new steps to Jp
         d.trig.program = Jp
         idx = d.engine.torques(self.q, self.qd, qdd, gravity=robot.gravity, external=self.ext or None)
@@ -360,7 +360,7 @@ class Manipulator:
         if k not in self._compiled:
             from ..robot.description import combined_last_link
 
-            P = Program("e")
+            P = Program("_e")
             Ts = kinematics.link_frames(P, self.robot, self.q)
             g = [sp.sympify(x) for x in self.robot.gravity]
             pe = 0

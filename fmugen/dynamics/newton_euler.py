@@ -24,11 +24,13 @@ expression is ever expanded: every vector component is a named intermediate.
 Per link, the inertial parameters are taken about the joint-frame origin
 (first moment m*c and inertia I_o), so that a link's contribution is
 
-    F_i = m a_i + w'_i x (m c_i) + w_i x (w_i x (m c_i))
+    F_i = m a_i + w'_i x (m c_i) + w_i x (w_i x (m c_i))  =  m a_i + U_i (m c_i)
     N_i = I_o w'_i + w_i x (I_o w_i) + (m c_i) x a_i
 
 with a_i the acceleration of the frame origin (gravity enters as a base
-acceleration -g, which is exact for a uniform field).
+acceleration -g, which is exact for a uniform field) and U_i = skew(w'_i) +
+skew(w_i)^2 (Khalil & Kleinfinger, 1987), which also carries the acceleration
+to the next frame: a_{i+1} = R^T (a_i + U_i p_{i+1}).
 """
 from __future__ import annotations
 
@@ -96,6 +98,22 @@ class NestedBodyInverseDynamics:
         self._frames[key] = (R, p)
         return R, p
 
+    def u_matrix(self, w, dw):
+        """U = skew(w') + skew(w) skew(w), so that w' x r + w x (w x r) = U r.
+
+        Khalil and Kleinfinger's device: six products of w shared by the
+        link's own force (U m c) and the next frame's acceleration (U p).
+        Entries a program never reads are dropped by the code generator.
+        """
+        P = self.P
+        xx, yy, zz = P.let(w[0] * w[0]), P.let(w[1] * w[1]), P.let(w[2] * w[2])
+        xy, xz, yz = P.let(w[0] * w[1]), P.let(w[0] * w[2]), P.let(w[1] * w[2])
+        return [
+            [P.let(-yy - zz, "U"), P.let(xy - dw[2], "U"), P.let(xz + dw[1], "U")],
+            [P.let(xy + dw[2], "U"), P.let(-xx - zz, "U"), P.let(yz - dw[0], "U")],
+            [P.let(xz - dw[1], "U"), P.let(yz + dw[0], "U"), P.let(-xx - yy, "U")],
+        ]
+
     # --- the recursion ----------------------------------------------------
     def torques(
         self,
@@ -121,11 +139,12 @@ class NestedBodyInverseDynamics:
         acc = [-sp.sympify(g) for g in gravity] if gravity is not None else list(V.ZERO3)
         R0 = [[sp.Integer(int(r == k)) for k in range(3)] for r in range(3)]
         frames, Fs, Ns = [], [], []
+        U = None  # Khalil's U = skew(w') + skew(w)^2 of the previous link
         for i, L in enumerate(self.chain):
             R, p = self.rotation_translation(i, q[i])
             frames.append((R, p))
-            # acceleration of this frame's origin, in the previous frame
-            a_prev = V.add(P, acc, V.add(P, V.cross(P, dw, p), V.cross(P, w, V.cross(P, w, p))))
+            # acceleration of this frame's origin: a_{i-1} + U_{i-1} p, then into frame i
+            a_prev = V.add(P, acc, V.matvec(P, U, p)) if U is not None else acc
             acc = V.matTvec(P, R, a_prev, "a")
             w_in = V.matTvec(P, R, w, "w")
             dw_in = V.matTvec(P, R, dw, "dw")
@@ -144,8 +163,10 @@ class NestedBodyInverseDynamics:
                     P.let(acc[1] - 2 * w[0] * qd[i], "a"),
                     P.let(acc[2] + qdd[i], "a"),
                 ]
+            U = self.u_matrix(w, dw)
             m, mc, Io = self.inertial(i)
-            F = V.add(P, V.scale(P, m, acc), V.add(P, V.cross(P, dw, mc), V.cross(P, w, V.cross(P, w, mc))), "F")
+            # F = m a + w' x mc + w x (w x mc) = m a + U mc
+            F = V.add(P, V.scale(P, m, acc), V.matvec(P, U, mc), "F")
             N = V.add(P, V.add(P, V.matvec(P, Io, dw), V.cross(P, w, V.matvec(P, Io, w))), V.cross(P, mc, acc), "N")
             if external:
                 R0 = V.matmul(P, R0, R, "R0")
