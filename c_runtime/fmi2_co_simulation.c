@@ -12,8 +12,8 @@
 
 #define INST ((fmugen_instance *)c)
 #define CS_CHECK(mask, fn)                                   \
-    if (!fmugen_check_state(INST, (mask), (fn))) return fmi2Error; \
-    if (!is_cs(INST, (fn))) return fmi2Error
+    if (!INST || !is_cs(INST, (fn))) return fmi2Error;       \
+    if (!fmugen_check_state(INST, (mask), (fn))) return fmi2Error
 #define MASK_STATUS (FMUGEN_STEP_COMPLETE | FMUGEN_STEP_FAILED | FMUGEN_TERMINATED)
 
 static int is_cs(fmugen_instance *inst, const char *fn)

@@ -8,8 +8,8 @@
 
 #define INST ((fmugen_instance *)c)
 #define ME_CHECK(mask, fn)                                   \
-    if (!fmugen_check_state(INST, (mask), (fn))) return fmi2Error; \
-    if (!is_me(INST, (fn))) return fmi2Error
+    if (!INST || !is_me(INST, (fn))) return fmi2Error;       \
+    if (!fmugen_check_state(INST, (mask), (fn))) return fmi2Error
 
 static int is_me(fmugen_instance *inst, const char *fn)
 {

@@ -50,6 +50,11 @@ int fmugen_solve_rk4(fmugen_ode *ode, double t_end, char *msg, size_t msgn)
             for (int i = 0; i < n; i++) ys[i] = x[i] + h * k3[i];
             rc = fmugen_ode_rhs(ode, tn, ys, k4);
         }
+        if (rc == FMUGEN_NOT_FINITE) {
+            snprintf(msg, msgn, "RK4: the solution became non-finite in the step from t = %.17g with h = %.3g "
+                     "(the fixed step probably exceeds the stability limit)", t, h);
+            return FMUGEN_SOLVER_FAILED;
+        }
         if (rc != FMUGEN_OK) {
             snprintf(msg, msgn, "RK4: model evaluation failed in the step from t = %.17g with h = %.3g: %s "
                      "(the fixed step may exceed the stability limit)", t, h, fmugen_model_status_text(rc));
