@@ -408,13 +408,14 @@ def test_state_without_start_is_an_error():
 
 def test_symbol_names_clashing_with_c_are_renamed():
     # states named like C keywords and the function's own arguments
-    xs = [sp.Symbol(n, real=True) for n in ("int", "x", "dx", "sin")]
+    # and "_s"/"s", which lose their leading underscore in C
+    xs = [sp.Symbol(n, real=True) for n in ("int", "x", "dx", "sin", "_s", "s")]
     m = SymbolicModel.from_equations(
         "clash", [Variable(f"s[{i+1}]", s, start=0.1 * (i + 1)) for i, s in enumerate(xs)], [], [],
-        [xs[1] * xs[2], -xs[0], xs[3] + xs[0] ** 2, sp.sin(xs[3])])
+        [xs[1] * xs[2], -xs[0], xs[3] + xs[0] ** 2, sp.sin(xs[3]), xs[5], 2 * xs[4]])
     with CompiledModel.build(generate_c(m).source) as cm:
-        x = np.array([0.1, 0.2, 0.3, 0.4])
-        assert_close(cm.evaluate([], 0, x, [])[0], [0.2 * 0.3, -0.1, 0.4 + 0.01, np.sin(0.4)])
+        x = np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
+        assert_close(cm.evaluate([], 0, x, [])[0], [0.2 * 0.3, -0.1, 0.4 + 0.01, np.sin(0.4), 0.6, 1.0])
 
 
 def test_c_identifier():

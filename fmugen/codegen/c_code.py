@@ -345,10 +345,11 @@ class _Names:
         if sym in self.map:
             return self.map[sym]
         base = preferred or re.sub(r"[^A-Za-z0-9_]", "_", sym.name) or "v"
+        # leading underscores are reserved in C (program symbols use them to
+        # stay apart from parameter names; uniqueness is kept below)
+        base = base.lstrip("_") or "v"
         if base[0].isdigit():
             base = "v_" + base
-        if base.startswith("_"):  # leading underscores are reserved in C
-            base = "v" + base
         name, k = base, 2
         while name in self.used:
             name = f"{base}_{k}"
