@@ -6,6 +6,7 @@ fmpy.validation.validate_fmu, simulated as Model Exchange (fmpy's CVode) and
 Co-Simulation (the runtime's solvers), and compared with scipy's solve_ivp
 at rtol 1e-11 on the closed-form equations.
 """
+import ctypes
 import os
 import re
 import zipfile
@@ -326,3 +327,72 @@ def test_fold_parameters_by_name(tmp_path):
     assert params[:2] == ["L", "m"]
     with pytest.raises(ValueError, match="not parameters of 'Pendulum'"):
         build_fmu(model, tmp_path / "q.fmu", fold_parameters=["gee"])
+
+
+def test_directional_derivatives_are_the_generated_jacobian(spd_fmu, tmp_path):
+    """fmi2GetDirectionalDerivative (value references from the XML) against central
+    differences of fmi2GetDerivatives, through fmpy's ME API."""
+    from fmpy import extract
+    from fmpy.fmi2 import FMU2Model
+
+    model, _, res = spd_fmu
+    md = read_model_description(str(res.path))
+    assert md.modelExchange.providesDirectionalDerivative
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    fmu = FMU2Model(guid=md.guid, unzipDirectory=extract(str(res.path), str(tmp_path / "x")),
+                    modelIdentifier=md.modelExchange.modelIdentifier, instanceName="dd")
+    fmu.instantiate()
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    fmu.enterContinuousTimeMode()
+    x0 = np.array([0.4, -0.3, 0.8, 0.2, 0.1, -0.5])
+    u0 = np.array([1.0, -0.5, 0.3])
+    tau_vr = [vr[v.name] for v in model.inputs]
+    fmu.setReal(tau_vr, list(u0))
+    ders = [vr[f"der({v.name})"] for v in model.states]
+    outs = [vr[v.name] for v in model.outputs]
+
+    def f(x, u):
+        x = np.ascontiguousarray(x, float)
+        fmu.setContinuousStates(x.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), len(x))
+        fmu.setReal(tau_vr, list(u))
+        dx = np.zeros(len(x))
+        fmu.getDerivatives(dx.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), len(x))
+        return dx, np.array(fmu.getReal(outs))
+
+    h = 1e-6
+    knowns = [(v.name, k) for k, v in enumerate(model.states)] + [(v.name, 6 + k) for k, v in
+                                                                  enumerate(model.inputs)]
+    for name, k in knowns:
+        z = np.concatenate([x0, u0])
+        zp, zm = z.copy(), z.copy()
+        zp[k] += h
+        zm[k] -= h
+        fp, yp = f(zp[:6], zp[6:])
+        fm, ym = f(zm[:6], zm[6:])
+        f(x0, u0)
+        dd = fmu.getDirectionalDerivative(ders + outs, [vr[name]], [1.0])
+        np.testing.assert_allclose(dd[:6], (fp - fm) / (2 * h), rtol=1e-6, atol=1e-7, err_msg=name)
+        np.testing.assert_allclose(dd[6:], (yp - ym) / (2 * h), rtol=1e-6, atol=1e-7, err_msg=name)
+    fmu.terminate()
+    fmu.freeInstance()
+
+
+def test_model_without_jacobian(tmp_path):
+    """No jacobian program: has_jacobian 0, no directional derivatives declared."""
+    from dataclasses import replace
+
+    model, parts = pendulum()
+    nojac = replace(model, jacobian=None, dfdx=None, dfdu=None, dgdx=None, dgdu=None, name="PendulumNoJac")
+    res = build_fmu(nojac, tmp_path, fmi_type="both")
+    assert "jacobian" not in res.op_counts
+    assert validate_fmu(str(res.path)) == []
+    md = read_model_description(str(res.path))
+    assert not md.modelExchange.providesDirectionalDerivative
+    assert not md.coSimulation.providesDirectionalDerivative
+    x_ref, _ = _pend_case(parts)
+    r = simulate_fmu(str(res.path), fmi_type="CoSimulation", stop_time=2.0, output_interval=0.05,
+                     start_values={k: v for k, v in PEND_START.items()} | {"solver.rtol": 1e-9,
+                                                                             "solver.atol": 1e-11})
+    np.testing.assert_allclose(r["phi"], x_ref[:, 0], atol=1e-6)
