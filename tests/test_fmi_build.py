@@ -10,7 +10,6 @@ import ctypes
 import os
 import re
 import zipfile
-from pathlib import Path
 
 import numpy as np
 import pytest
