@@ -13,7 +13,7 @@
  * estimate is x_new - x_embedded = k_4.  No Newton iteration: the exact
  * Jacobian (the model's, or forward differences when it has none) makes the
  * method L-stable, so steps far beyond the explicit stability limit stay
- * stable.  f_t is a central difference in t (zero, exactly, when f does not
+ * stable.  f_t is a forward difference in t (zero, exactly, when f does not
  * depend on t and no input derivatives are set).
  *
  * Step control: err = RMS of k_4 weighted by atol x_nominal_i + rtol max(|x|,
@@ -59,13 +59,14 @@ int fmugen_solve_rodas3(fmugen_ode *ode, double t_end, char *msg, size_t msgn)
             int rc = fmugen_ode_rhs(ode, t, x, f0);
             if (rc == FMUGEN_OK) rc = fmugen_ode_jacobian(ode, t, x, f0, J, tmp);
             if (rc == FMUGEN_OK) {
-                /* central difference in t with x fixed */
-                double dt = sqrt(DBL_EPSILON) * fmax(fabs(t), 1.0);
-                rc = fmugen_ode_rhs(ode, t + dt, x, tmp);
-                if (rc == FMUGEN_OK) rc = fmugen_ode_rhs(ode, t - dt, x, tmp + n);
+                /* forward difference in t with x fixed (one evaluation; it
+                 * only corrects the O(h^2) time-dependence term) */
+                volatile double tp = t + sqrt(DBL_EPSILON) * fmax(fabs(t), 1.0);
+                const double dt = tp - t;
+                rc = fmugen_ode_rhs(ode, tp, x, tmp);
                 if (rc == FMUGEN_OK)
-                    for (int i = 0; i < n; i++) ft[i] = (tmp[i] - tmp[n + i]) / (2 * dt);
-                else { /* the model is only defined forward in time here: assume autonomous */
+                    for (int i = 0; i < n; i++) ft[i] = (tmp[i] - f0[i]) / dt;
+                else { /* the model is not defined at t + dt: treat it as autonomous */
                     for (int i = 0; i < n; i++) ft[i] = 0.0;
                     rc = FMUGEN_OK;
                 }

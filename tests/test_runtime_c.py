@@ -262,6 +262,19 @@ def test_implicit_solver_with_macro_steps_far_beyond_stability_limit(fmus, tmp_p
     fmu.freeInstance()
 
 
+def test_implicit_solver_is_l_stable(fmus, tmp_path):
+    """L = 1e12, one communication step of 1 s: an L-stable method damps the
+    fast mode completely (y_fast = w) and the slow mode follows the closed
+    form y_slow = 1 - exp(-t) (within the tolerance)."""
+    fmu = open_fmu(fmus["stiff"], FMU2Slave, tmp_path, name="lstab")
+    start_cs(fmu, IMPLICIT, {STIFF["L"]: 1e12})
+    fmu.doStep(0.0, 1.0)
+    y_slow, y_fast = fmu.getReal([0, 1])
+    assert abs(y_fast - 1.0) < 1e-9
+    assert abs(y_slow - (1 - np.exp(-1.0))) < 1e-5
+    fmu.freeInstance()
+
+
 def test_dopri5_on_stiff_model_stays_accurate(fmus, tmp_path):
     """The explicit adaptive method stays stable (its step control keeps h L
     near its stability limit ~3.3) and accurate, at many steps."""
@@ -369,6 +382,9 @@ def test_bad_value_references_null_arrays_and_nan(fmus, tmp_path):
     expect_error(cs, lambda: cs.doStep(0.0, -0.1), "step size")
     expect_error(cs, lambda: cs.setRealInputDerivatives([VDP["x"]], [1], [1.0]), "not an input")
     expect_error(cs, lambda: cs.setRealInputDerivatives([VDP["F"]], [1], [float("nan")]), "not finite")
+    n = len(cs.log.messages)
+    cs.setRealInputDerivatives([VDP["F"]], [2], [1.0])  # fmi2Warning: second derivatives are ignored
+    assert len(cs.log.messages) == n + 1 and cs.log.messages[-1][0] == 1 and "ignored" in cs.log.last()
     cs.freeInstance()
 
 
