@@ -4,6 +4,7 @@ and the stiff set's explicit-versus-implicit solver behaviour.
 FMUs are built once per module (each build compiles C, ~2 s).
 """
 from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,6 +17,8 @@ from fmugen.components import (NumericModel, amplifier, controller, current_driv
                                joint_inertia, linearise, load_assembly, ptp_trajectory, servo_valve, single_joint,
                                stable_step)
 from fmugen.fmi.build import build_fmu
+
+ROOT = Path(__file__).resolve().parents[1]
 
 pytestmark = pytest.mark.slow
 
@@ -82,7 +85,7 @@ def test_component_fmu_matches_scipy(fmus, key, fmi_type):
 
 @pytest.fixture(scope="module")
 def stiff_rig(tmp_path_factory):
-    model = load_assembly("examples/single_joint_stiff.toml")
+    model = load_assembly(ROOT / "examples" / "single_joint_stiff.toml")
     path = build_fmu(model, tmp_path_factory.mktemp("rig") / "single_joint_stiff.fmu", fmi_type="both").path
     return model, path
 
@@ -134,7 +137,7 @@ def test_stiff_rk4_diverges_above_predicted_step_implicit_does_not(stiff_rig):
 
 
 def test_default_example_builds_me_and_cs(tmp_path):
-    model = load_assembly("examples/single_joint_default.toml")
+    model = load_assembly(ROOT / "examples" / "single_joint_default.toml")
     for t in ("me", "cs"):
         path = build_fmu(model, tmp_path / f"sj_{t}.fmu", fmi_type=t).path
         assert validate_fmu(str(path)) == []
@@ -144,7 +147,7 @@ def test_custom_component_example_runs(tmp_path):
     """examples/custom_component.py: a user-written component, its FMU and the rig with it."""
     import importlib.util
 
-    spec = importlib.util.spec_from_file_location("custom_component", "examples/custom_component.py")
+    spec = importlib.util.spec_from_file_location("custom_component", ROOT / "examples" / "custom_component.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     r = mod.main(tmp_path)
