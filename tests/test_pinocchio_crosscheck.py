@@ -9,6 +9,8 @@ from the DH parameters, inertias moved into the joint frames).  The recursive
 Lagrange formulation works in the DH frames directly, so agreement with it
 also checks that conversion.  Skipped when Pinocchio (PyPI ``pin``) is absent.
 """
+import importlib.util
+import sys
 import warnings
 from dataclasses import replace
 from pathlib import Path
@@ -124,21 +126,19 @@ def test_damping_and_missing_values_are_refused():
                                                       for q in sym.parameters)))
 
 
-@pytest.mark.parametrize("folded", [False, True])
-def test_generated_c_equals_pinocchio(folded):
-    """The C the benchmark times: ID, lower triangle of M, forward dynamics."""
+def test_generated_c_equals_pinocchio_with_parameters_set():
+    """The C the benchmark times (ID, lower triangle of M, forward dynamics)
+    with run-time parameters set away from the file values.  (The folded
+    variants are checked by the benchmark itself, see the last test.)"""
     robot = load("puma_thesis_com")
     arm = Manipulator(robot)
-    values = {} if folded else {"m_2": 70.0, "d_4": 0.4}  # run-time parameters, changed
+    values = {"m_2": 70.0, "d_4": 0.4, "k2_3_xx": 0.05}
     model = pinocchio_model(robot, values)
     data = model.createData()
     n = arm.n
     lower = [(i, j) for i in range(n) for j in range(i + 1)]
     for make in (inverse_dynamics_model, mass_matrix_model, forward_dynamics_model):
         sm = make(arm, "newton_euler")
-        if folded:
-            sm = sm.with_parameters_folded()
-            assert sm.np == 0
         p = [values.get(v.name, v.start) for v in sm.parameters]
         with CompiledModel.build(generate_c(sm).source) as cm:
             for q, qd, qdd, tau in states(n, 3, seed=5):
@@ -153,3 +153,19 @@ def test_generated_c_equals_pinocchio(folded):
                     dx, _ = cm.evaluate(p, 0.0, np.concatenate([q, qd]), tau, want_y=False)
                     assert rel(dx[:n], qd) == 0.0
                     assert rel(dx[n:], pin.aba(model, data, q, qd, tau)) < RTOL
+
+
+def test_benchmark_example_runs(capsys, monkeypatch):
+    """examples/bench_generated_code.py, cut down: one robot, NE only, one round."""
+    spec = importlib.util.spec_from_file_location("bench_generated_code",
+                                                  ROOT / "examples" / "bench_generated_code.py")
+    bench = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, spec.name, bench)  # its dataclasses look their module up
+    spec.loader.exec_module(bench)
+    rc = bench.main(["--robots", "robots/puma_thesis_com.toml", "--formulations", "newton_euler",
+                     "--repeat", "1", "--calls", "10", "--states", "2", "--build-repeat", "0"])
+    out = capsys.readouterr().out
+    assert rc == 0
+    assert "difference" in out and "(ok, tolerance 1e-10)" in out
+    for fn in ("pin.rnea", "pin.crba", "pin.aba"):
+        assert fn in out
