@@ -12,10 +12,11 @@ both formulations (Newton-Euler, recursive Lagrange) this
 2. compiles each, checks its results against Pinocchio (``pin.rnea``,
    ``pin.crba``, ``pin.aba`` on a ``pin.Model`` built from the same robot
    description, see :mod:`fmugen.codegen.benchmarks`) at random states, and
-   times it in a compiled C loop (median of ``--repeat`` runs);
+   times it in a compiled C loop;
 3. times ``pin.rnea``, ``pin.crba`` and ``pin.aba`` from Python in the same
-   run, with Pinocchio's Python call overhead measured as the same call on a
-   0-DOF model and subtracted, and prints the ratios;
+   run, in ``--repeat`` rounds alternating with the C loops, with Pinocchio's
+   Python call overhead measured as the same call on a 0-DOF model and
+   subtracted, and prints the ratios (median of the per-round ratios);
 4. times ``fmugen build`` of the PUMA (ME and CS, median of ``--build-repeat``
    runs of the command in a fresh process).
 
