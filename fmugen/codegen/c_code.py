@@ -267,6 +267,10 @@ class _Printer(C99CodePrinter):
     def _print_Float(self, expr):
         return repr(float(expr))
 
+    def _print_NumberSymbol(self, expr):
+        # pi, E, ... as double literals: strict C99 <math.h> has no M_PI
+        return repr(float(expr))
+
     def parenthesize(self, item, level, strict=False):
         # A small integer power is printed as a product or a quotient, so it
         # binds like a Mul, not like a power: a/L**2 must become a/(L*L).
