@@ -34,4 +34,6 @@ def build_fmu(model, output_path, fmi_type: str = "both", **options):
     return _build(model, output_path, fmi_type=fmi_type, **options)
 
 
-__all__ = ["load_robot", "build_fmu", "Manipulator", "FORMULATIONS", "__version__"]
+from .codegen.evaluate import ModelEvaluator, linearize  # noqa: E402
+
+__all__ = ["load_robot", "build_fmu", "linearize", "ModelEvaluator", "Manipulator", "FORMULATIONS", "__version__"]

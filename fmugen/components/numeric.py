@@ -1,8 +1,7 @@
-"""Numeric evaluation of a (small, closed-form) SymbolicModel with numpy.
+"""Numeric evaluation of a SymbolicModel with numpy, and stable explicit steps.
 
-For tests, linearisation and benchmarks at the Python level: the model's
-programs are inlined to closed forms and lambdified once.  Parameters take
-their start values unless given.
+For tests, linearisation and benchmarks at the Python level.  Parameters
+take their start values unless given.
 
 >>> from fmugen.components import joint_inertia
 >>> ev = NumericModel(joint_inertia())
@@ -16,59 +15,23 @@ from typing import Mapping, Optional
 import numpy as np
 import sympy as sp
 
+from ..codegen.evaluate import ModelEvaluator
 from ..codegen.model import SymbolicModel
-from .base import TIME
 
 
-class NumericModel:
-    """f(t, x, u), g(t, x, u) and the exact Jacobians dfdx, dfdu as numpy arrays."""
+class NumericModel(ModelEvaluator):
+    """f(t, x, u), g(t, x, u) and the exact Jacobians dfdx, dfdu as numpy arrays.
 
-    def __init__(self, model: SymbolicModel, parameter_values: Optional[Mapping[str, float]] = None):
-        self.model = model
-        pv = {v.name: v.start for v in model.parameters}
-        pv.update(parameter_values or {})
-        missing = [k for k, v in pv.items() if v is None]
-        if missing:
-            raise ValueError(f"{model.name}: no value for parameter(s) {', '.join(missing)}")
-        psub = {v.symbol: sp.Float(pv[v.name]) for v in model.parameters}
-        xs = [v.symbol for v in model.states]
-        us = [v.symbol for v in model.inputs]
-        closed = model.program.inline(list(model.derivatives) + list(model.output_exprs))
-        env = {}
-        for st in model.program.steps:
-            env[st.symbol] = st.expr.xreplace(env)
-        jac_exprs = []
-        if model.jacobian is not None:
-            jenv = dict(env)
-            for st in model.jacobian.steps:
-                jenv[st.symbol] = st.expr.xreplace(jenv)
-            jac_exprs = [model.dfdx.xreplace(jenv), model.dfdu.xreplace(jenv)]
-        args = [TIME] + xs + us
-        sub = lambda e: sp.sympify(e).xreplace(psub)  # noqa: E731
-        nx, ny = model.nx, model.ny
-        self._f = sp.lambdify(args, [sub(e) for e in closed[:nx]], "numpy")
-        self._g = sp.lambdify(args, [sub(e) for e in closed[nx:]], "numpy")
-        self._A = sp.lambdify(args, sub(jac_exprs[0]), "numpy") if jac_exprs else None
-        self._B = sp.lambdify(args, sub(jac_exprs[1]), "numpy") if jac_exprs else None
-        self.x0 = np.array([v.start or 0.0 for v in model.states], dtype=float)
-        self.u0 = np.array([v.start or 0.0 for v in model.inputs], dtype=float)
-
-    def _args(self, t, x, u):
-        x = np.asarray(x, dtype=float).ravel()
-        u = self.u0 if u is None else np.asarray(u, dtype=float).ravel()
-        return (t, *x, *u)
-
-    def f(self, t, x, u=None) -> np.ndarray:
-        return np.array(self._f(*self._args(t, x, u)), dtype=float).reshape(self.model.nx)
-
-    def g(self, t, x, u=None) -> np.ndarray:
-        return np.array(self._g(*self._args(t, x, u)), dtype=float).reshape(self.model.ny)
+    The shared :class:`~fmugen.codegen.evaluate.ModelEvaluator` (compiled
+    straight-line programs, any model size) with the two Jacobian blocks the
+    component tests read.
+    """
 
     def dfdx(self, t, x, u=None) -> np.ndarray:
-        return np.array(self._A(*self._args(t, x, u)), dtype=float).reshape(self.model.nx, self.model.nx)
+        return self.jacobians(t, x, u)[0]
 
     def dfdu(self, t, x, u=None) -> np.ndarray:
-        return np.array(self._B(*self._args(t, x, u)), dtype=float).reshape(self.model.nx, self.model.nu)
+        return self.jacobians(t, x, u)[1]
 
 
 def stable_step(eigenvalues, method: str = "rk4") -> float:
