@@ -130,15 +130,18 @@ class SymbolicModel:
     def np(self) -> int:
         return len(self.parameters)
 
-    def dependencies(self) -> dict:
+    def dependencies(self, knowns: Optional[Sequence[sp.Symbol]] = None) -> dict:
         """Exact structural dependencies of derivatives and outputs.
 
         Returns ``{"derivatives": [set, ...], "outputs": [set, ...]}`` where
-        each set holds the state/input *symbols* the quantity depends on,
-        propagated through the program (a linear solve couples all its
-        unknowns).
+        each set holds the symbols among ``knowns`` (default: states and
+        inputs; add parameters for the InitialUnknowns) the quantity depends
+        on, propagated through the program (a linear solve couples all its
+        unknowns with everything in A and B).
         """
-        knowns = {v.symbol for v in self.states} | {v.symbol for v in self.inputs}
+        if knowns is None:
+            knowns = [v.symbol for v in self.states] + [v.symbol for v in self.inputs]
+        knowns = set(knowns)
         deps: dict = {}
 
         def of(expr) -> set:

@@ -223,40 +223,6 @@ def _derivative_unit(unit: str) -> str:
     return f"{unit}/s"
 
 
-def dependencies(model: SymbolicModel, knowns: Sequence[sp.Symbol]) -> dict:
-    """Which of ``knowns`` each derivative and output depends on.
-
-    Propagated through the program (a linear solve couples all its unknowns
-    with everything in A and B).  Returns ``{"derivatives": [set, ...],
-    "outputs": [set, ...]}``.  With knowns = states and inputs this equals
-    :meth:`SymbolicModel.dependencies`; adding parameters gives the
-    dependencies of the InitialUnknowns.
-    """
-    knowns = set(knowns)
-    deps: dict = {}
-
-    def of(expr) -> set:
-        out = set()
-        for s in sp.sympify(expr).free_symbols:
-            if s in knowns:
-                out.add(s)
-            elif s in deps:
-                out |= deps[s]
-        return out
-
-    for st in model.program.steps:
-        if isinstance(st, Assign):
-            deps[st.symbol] = of(st.expr)
-        else:
-            d = set()
-            for e in list(st.A) + list(st.B):
-                d |= of(e)
-            for x in st.X:
-                deps[x] = d
-    return {"derivatives": [of(e) for e in model.derivatives],
-            "outputs": [of(e) for e in model.output_exprs]}
-
-
 def _fmt(v) -> str:
     if isinstance(v, bool):
         return "true" if v else "false"
@@ -351,8 +317,8 @@ def model_description_xml(
     ders = layout.by_kind("derivative")
     outs = layout.by_kind("output")
     x_u = [v.symbol for v in model.states + model.inputs]
-    d_run = dependencies(model, x_u)
-    d_init = dependencies(model, x_u + [v.symbol for v in model.parameters])
+    d_run = model.dependencies(x_u)
+    d_init = model.dependencies(x_u + [v.symbol for v in model.parameters])
 
     def unknown(parent, var_index, dep_syms, expr=None):
         el = ET.SubElement(parent, "Unknown", index=str(var_index))
