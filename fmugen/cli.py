@@ -2,6 +2,7 @@
 
     fmugen equations ROBOT.toml [--latex] [--formulation lagrange] [--form closed|program]
     fmugen build FILE.toml --fmi-type me|cs|both -o OUT.fmu [--outputs p_ee,qdd] [--fold all]
+                           [--model inverse_dynamics]
     fmugen info FILE.toml
 
 FILE is a robot file (a ``[robot]`` table) or an assembly of actuator-chain
@@ -31,12 +32,19 @@ def _kind(path: Path) -> str:
     raise SystemExit(f"fmugen: {path}: neither a robot file ([robot] table) nor an assembly ([assembly] table)")
 
 
-def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler"):
-    """The SymbolicModel a file describes (robot or component assembly)."""
+def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler", model="forward_dynamics"):
+    """The SymbolicModel a file describes (robot or component assembly).
+
+    For a robot, ``model`` chooses the forward dynamics (states q, qd; input
+    tau) or the inverse dynamics (inputs q, qd, qdd; output tau).
+    """
     if _kind(path) == "robot":
         import fmugen
 
-        return fmugen.load_robot(path, formulation).state_space_model(outputs=outputs)
+        arm = fmugen.load_robot(path, formulation)
+        if model == "inverse_dynamics":
+            return arm.inverse_dynamics_model()
+        return arm.state_space_model(outputs=outputs)
     from .components.assembly import load_assembly
 
     return load_assembly(path)
@@ -57,7 +65,7 @@ def _cmd_build(args) -> int:
     path = Path(args.file)
     t0 = time.perf_counter()
     outputs = tuple(o for o in args.outputs.split(",") if o)
-    model = symbolic_model(path, outputs, args.formulation)
+    model = symbolic_model(path, outputs, args.formulation, args.model)
     t1 = time.perf_counter()
     fold = None if args.fold == "none" else ("all" if args.fold == "all" else args.fold.split(","))
     out = Path(args.output) if args.output else Path(f"{model.name}.fmu")
@@ -101,6 +109,8 @@ def main(argv=None) -> int:
     p.add_argument("-o", "--output", help="path of the .fmu (default: <model name>.fmu)")
     p.add_argument("--outputs", default="p_ee", help="robot outputs besides q, qd: p_ee, qdd (comma separated)")
     p.add_argument("--formulation", default="newton_euler", choices=["newton_euler", "lagrange"])
+    p.add_argument("--model", default="forward_dynamics", choices=["forward_dynamics", "inverse_dynamics"],
+                   help="robot files: the arm as a dynamic system (default) or its inverse dynamics tau(q, qd, qdd)")
     p.add_argument("--fold", default="none",
                    help="fold parameters into constants: none (default), all, or comma-separated names")
     p.add_argument("--ops", action="store_true", help="print operation counts of the generated functions")

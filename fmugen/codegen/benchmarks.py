@@ -62,19 +62,9 @@ def _inputs(symbols, stem: str) -> list:
 
 
 def inverse_dynamics_model(arm, formulation: Optional[str] = None) -> SymbolicModel:
-    """tau = ID(q, qd, qdd, w_ext) of ``arm`` (a Manipulator) as a state-free model."""
-    formulation = formulation or arm.formulation
-    P, tau = arm.inverse_dynamics_program(formulation)
-    inputs = (_inputs(arm.q, "q") + _inputs(arm.qd, "qd") + _inputs(arm.qdd, "qdd")
-              + _inputs(arm.ext_symbols, "w_ext"))
-    outputs = [Variable(f"tau[{i + 1}]", sp.Symbol(f"tau_out_{i + 1}", real=True)) for i in range(arm.n)]
-    return SymbolicModel(
-        name=f"{arm.robot.name}_inverse_dynamics",
-        description=f"{arm.robot.name}: tau = ID(q, qd, qdd) ({formulation})",
-        states=(), inputs=tuple(inputs), parameters=_parameters(arm), outputs=tuple(outputs),
-        program=P, derivatives=(), output_exprs=tuple(tau),
-        provenance=f"{arm.robot.source or arm.robot.name}; {formulation} formulation",
-    )
+    """tau = ID(q, qd, qdd, w_ext) of ``arm`` as a state-free model, without its Jacobian."""
+    m = arm.inverse_dynamics_model(formulation)
+    return replace(m, jacobian=None, dfdx=None, dfdu=None, dgdx=None, dgdu=None)
 
 
 def mass_matrix_model(arm, formulation: Optional[str] = None) -> SymbolicModel:

@@ -259,6 +259,46 @@ class Manipulator:
             provenance=f"{robot.source or robot.name}; {formulation or self.formulation} formulation",
         )
 
+    def inverse_dynamics_model(self, formulation=None, name=None) -> SymbolicModel:
+        """tau = ID(q, qd, qdd, w_ext) as a state-free model (e.g. for computed-torque control).
+
+        Inputs q[i], qd[i], qdd[i] (and external wrenches), outputs tau[i]
+        (direct feedthrough), with the exact Jacobian d tau / d inputs.
+        """
+        robot = self.robot
+        P, tau = self.inverse_dynamics_program(formulation)
+        inputs = []
+        for group, stem, units, what in ((self.q, "q", ("rad", "m"), "position"),
+                                         (self.qd, "qd", ("rad/s", "m/s"), "velocity"),
+                                         (self.qdd, "qdd", ("rad/s2", "m/s2"), "acceleration")):
+            for i, L in enumerate(robot.links):
+                unit = units[0] if L.joint == REVOLUTE else units[1]
+                inputs.append(Variable(f"{stem}[{i + 1}]", group[i], unit, f"{what} of joint {i + 1} ({L.name})",
+                                       start=0.0))
+        for k in self.external_links:
+            for c in range(3):
+                inputs.append(Variable(f"f_ext_{k + 1}[{c + 1}]", self.ext[k][0][c], "N",
+                                       f"external force on link {k + 1} at its centre of mass, base {'xyz'[c]}",
+                                       start=0.0))
+            for c in range(3):
+                inputs.append(Variable(f"t_ext_{k + 1}[{c + 1}]", self.ext[k][1][c], "N.m",
+                                       f"external torque on link {k + 1}, base {'xyz'[c]}", start=0.0))
+        outputs = tuple(
+            Variable(f"tau[{i + 1}]", _real(f"tau_out_{i + 1}"), "N.m" if L.joint == REVOLUTE else "N",
+                     f"{'torque' if L.joint == REVOLUTE else 'force'} that joint {i + 1} needs")
+            for i, L in enumerate(robot.links))
+        Jp = Program("_j")
+        D = differentiate([P], tau, [v.symbol for v in inputs], Jp)
+        params = tuple(Variable(p.name, p.symbol, p.unit, p.description, start=p.value) for p in robot.parameters)
+        return SymbolicModel(
+            name=name or f"{robot.name}_inverse_dynamics",
+            description=f"{robot.name}: tau = M(q) qdd + h(q, qd), inverse dynamics",
+            states=(), inputs=tuple(inputs), parameters=params, outputs=outputs,
+            program=P, derivatives=(), output_exprs=tuple(tau),
+            jacobian=Jp, dfdx=sp.zeros(0, 0), dfdu=sp.zeros(0, len(inputs)), dgdx=sp.zeros(len(tau), 0), dgdu=D,
+            provenance=f"{robot.source or robot.name}; {formulation or self.formulation} formulation",
+        )
+
     # ------------------------------------------------------------------
     # numeric evaluators
     def parameter_vector(self, values: Optional[dict] = None) -> np.ndarray:
