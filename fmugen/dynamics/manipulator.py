@@ -33,7 +33,7 @@ from ..codegen.model import SymbolicModel, Variable
 from ..codegen.program import Program
 from ..codegen.python_code import compile_program
 from ..robot.description import REVOLUTE, Robot
-from . import kinematics
+from . import crba, kinematics
 from .joint_frames import joint_frame_chain
 from .lagrange import RecursiveLagrange
 from .newton_euler import NestedBodyInverseDynamics
@@ -106,7 +106,14 @@ class Manipulator:
         return Derivation(P, engine, trig)
 
     def _mass_matrix_into(self, d: Derivation) -> sp.Matrix:
-        """Lower triangle by unit accelerations; the upper mirrors it (symmetry)."""
+        """M(q): composite rigid bodies (Newton-Euler) or unit accelerations (Lagrange).
+
+        The Lagrange formulation keeps the thesis's own method (ARM2, eqs.
+        41-42): column j is the inverse dynamics with qd = 0, g = 0 and
+        qdd = e_j; only the lower triangle is computed, the upper mirrors it.
+        """
+        if isinstance(d.engine, NestedBodyInverseDynamics):
+            return crba.mass_matrix(d.engine, self.q)
         n = self.n
         zeros = [sp.Integer(0)] * n
         M = sp.zeros(n, n)
