@@ -15,7 +15,7 @@ from typing import Sequence
 
 import sympy as sp
 
-from .program import Assign, Program
+from .program import Assign, Program, SolveSPD
 
 
 def differentiate(
@@ -23,24 +23,32 @@ def differentiate(
     exprs: Sequence[sp.Expr],
     wrt: Sequence[sp.Symbol],
     out: Program,
+    through_solves: bool = False,
 ) -> sp.Matrix:
     """Jacobian d exprs / d wrt (len(exprs) x len(wrt)), with steps appended to ``out``.
 
     ``sources`` are the programs that define the symbols in ``exprs`` (in
-    execution order).  Solution symbols of linear solves are treated as
-    independent quantities (the caller wants partial derivatives at fixed
-    solution, e.g. d ID / d q at fixed qdd).
+    execution order).  By default the solution symbols of linear solves are
+    treated as independent quantities (the caller wants partial derivatives
+    at fixed solution, e.g. d ID / d q at fixed qdd).  With
+    ``through_solves`` the chain rule goes through them as well:
+    X = A^{-1} B gives dX/dw = A^{-1} (dB/dw - dA/dw X), one more solve with
+    the same A and one right-hand side per (column of B, w).
     """
     wrt = list(wrt)
     wset = set(wrt)
-    steps = [st for P in sources for st in P.steps if isinstance(st, Assign)]
-    # which steps are needed by the outputs (walking back through assignments only)
+    steps = [st for P in sources for st in P.steps if through_solves or isinstance(st, Assign)]
+    # which steps are needed by the outputs (walking back through the steps)
     needed = set()
     for e in exprs:
         needed |= sp.sympify(e).free_symbols
     for st in reversed(steps):
-        if st.symbol in needed:
-            needed |= st.expr.free_symbols
+        if isinstance(st, Assign):
+            if st.symbol in needed:
+                needed |= st.expr.free_symbols
+        elif any(x in needed for x in st.X):
+            for e in list(st.A) + list(st.B):
+                needed |= sp.sympify(e).free_symbols
     deriv: dict = {}  # symbol -> {w: derivative expression}
 
     def grad(expr) -> dict:
@@ -63,10 +71,13 @@ def differentiate(
         return {w: out.let(v, "d") for w, v in total.items() if v != 0}
 
     for st in steps:
-        if st.symbol in needed:
-            g = grad(st.expr)
-            if g:
-                deriv[st.symbol] = g
+        if isinstance(st, Assign):
+            if st.symbol in needed:
+                g = grad(st.expr)
+                if g:
+                    deriv[st.symbol] = g
+        elif any(x in needed for x in st.X):
+            _through_solve(st, grad, deriv, out)
     J = sp.zeros(len(exprs), len(wrt))
     for i, e in enumerate(exprs):
         g = grad(e)
@@ -74,3 +85,30 @@ def differentiate(
             if w in g:
                 J[i, j] = g[w]
     return J
+
+
+def _through_solve(st: SolveSPD, grad, deriv: dict, out: Program) -> None:
+    """Derivatives of X = A^{-1} B: one solve with A for every (w, column of B)."""
+    n, k = st.B.shape
+    gA = {(i, j): grad(st.A[i, j]) for i in range(n) for j in range(i + 1)}  # lower triangle is read
+    gB = {(i, c): grad(st.B[i, c]) for i in range(n) for c in range(k)}
+    ws = []
+    for g in list(gA.values()) + list(gB.values()):
+        ws += [w for w in g if w not in ws]
+    if not ws:
+        return
+
+    def a(i, j, w):  # dA/dw, symmetric
+        return gA[(i, j) if j <= i else (j, i)].get(w, 0)
+
+    rhs = sp.zeros(n, k * len(ws))
+    for m, w in enumerate(ws):
+        for c in range(k):
+            for i in range(n):
+                e = gB[(i, c)].get(w, 0) - sum(a(i, j, w) * st.X[j, c] for j in range(n))
+                rhs[i, m * k + c] = out.let(e, "r")
+    Y = out.solve_spd(st.A, rhs, "dx")
+    for m, w in enumerate(ws):
+        for c in range(k):
+            for i in range(n):
+                deriv.setdefault(st.X[i, c], {})[w] = Y[i, m * k + c]

@@ -19,18 +19,25 @@ returns one model:
   :meth:`SymbolicModel.from_equations` (symbolic differentiation of the
   assembled closed forms -- the components are small).
 
-Components whose program contains a linear solve (the arm) cannot be inlined
-into closed form; they are rejected here with a clear message.
+Components whose program contains a linear solve (the arm: M qdd = tau - h)
+cannot be inlined into closed form; they are composed at the program level
+instead (:func:`_assemble_programs`): the programs are renamed and merged,
+each connected input becomes an assignment from its source, the steps are
+ordered by their dependencies (a cycle is an algebraic loop), and the exact
+Jacobians are obtained by differentiating the merged program, through the
+linear solves.
 """
 from __future__ import annotations
 
+import heapq
 from dataclasses import replace
 from typing import Mapping, Optional, Sequence
 
 import sympy as sp
 
+from ..codegen.differentiate import differentiate
 from ..codegen.model import SymbolicModel, Variable
-from ..codegen.program import Assign
+from ..codegen.program import Assign, Program, SolveSPD
 
 SEP = "__"  # C-safe separator of instance and variable in symbols
 
@@ -47,44 +54,8 @@ def _split(endpoint, where: str):
     return inst, var
 
 
-def assemble(name: str, components: Mapping[str, SymbolicModel], connections: Sequence,
-             inputs: Optional[Sequence[str]] = None, outputs: Optional[Sequence[str]] = None,
-             description: str = "", provenance: str = "", where: str = "assemble") -> SymbolicModel:
-    """One SymbolicModel from connected components (see module docstring).
-
-    ``inputs`` (optional) orders the unconnected inputs and must list all of
-    them; ``outputs`` (optional) lists the exposed variables (states or
-    outputs, ``"inst.var"``).  ``where`` prefixes error messages (a file name).
-
-    >>> from fmugen.components import joint_inertia, hydraulic_actuator
-    >>> m = assemble("a", {"act": hydraulic_actuator(), "joint": joint_inertia()},
-    ...              [("act.tau", "joint.tau"), ("joint.w", "act.w")])
-    >>> [v.name for v in m.states], [v.name for v in m.inputs]
-    (['act.P_L', 'joint.theta', 'joint.w'], ['act.Q_L', 'joint.tau_load'])
-    """
-    for inst in components:
-        if not inst.isidentifier() or SEP in inst:
-            raise ValueError(f"{where}: instance name {inst!r} must be an identifier without '{SEP}'")
-    # --- closed forms of every component, renamed ----------------------------
-    info = {}
-    for inst, m in components.items():
-        if any(not isinstance(st, Assign) for st in m.program.steps):
-            raise NotImplementedError(f"{where}: component {inst!r} ({m.name}) contains a linear solve; "
-                                      "only closed-form components can be assembled symbolically")
-        ren = {}
-        for group in (m.states, m.inputs, m.parameters, m.outputs):
-            for v in group:
-                ren[v.symbol] = sp.Symbol(f"{inst}{SEP}{v.symbol.name}", real=True)
-        closed = m.program.inline(list(m.derivatives) + list(m.output_exprs))
-        closed = [sp.sympify(e).xreplace(ren) for e in closed]
-        info[inst] = dict(
-            model=m, ren=ren,
-            f=closed[:m.nx], g=closed[m.nx:],
-            states={v.name: v for v in m.states}, inputs={v.name: v for v in m.inputs},
-            outputs={v.name: k for k, v in enumerate(m.outputs)},
-        )
-
-    # --- validate connections --------------------------------------------------
+def _validated_connections(info: dict, connections: Sequence, where: str) -> dict:
+    """(target instance, input name) -> (source instance, variable name, "state"|"output")."""
     source_of = {}  # (inst, input name) -> (inst, var name, "state"|"output")
     for k, conn in enumerate(connections):
         if not (isinstance(conn, (list, tuple)) and len(conn) == 2):
@@ -109,6 +80,46 @@ def assemble(name: str, components: Mapping[str, SymbolicModel], connections: Se
             a = source_of[(ti, tv)]
             raise ValueError(f"{where}: input {conn[1]} is connected twice (from {a[0]}.{a[1]} and {conn[0]})")
         source_of[(ti, tv)] = (si, sv, kind)
+    return source_of
+
+
+def assemble(name: str, components: Mapping[str, SymbolicModel], connections: Sequence,
+             inputs: Optional[Sequence[str]] = None, outputs: Optional[Sequence[str]] = None,
+             description: str = "", provenance: str = "", where: str = "assemble") -> SymbolicModel:
+    """One SymbolicModel from connected components (see module docstring).
+
+    ``inputs`` (optional) orders the unconnected inputs and must list all of
+    them; ``outputs`` (optional) lists the exposed variables (states or
+    outputs, ``"inst.var"``).  ``where`` prefixes error messages (a file name).
+
+    >>> from fmugen.components import joint_inertia, hydraulic_actuator
+    >>> m = assemble("a", {"act": hydraulic_actuator(), "joint": joint_inertia()},
+    ...              [("act.tau", "joint.tau"), ("joint.w", "act.w")])
+    >>> [v.name for v in m.states], [v.name for v in m.inputs]
+    (['act.P_L', 'joint.theta', 'joint.w'], ['act.Q_L', 'joint.tau_load'])
+    """
+    for inst in components:
+        if not inst.isidentifier() or SEP in inst:
+            raise ValueError(f"{where}: instance name {inst!r} must be an identifier without '{SEP}'")
+    if any(not isinstance(st, Assign) for m in components.values() for st in m.program.steps):
+        return _assemble_programs(name, components, connections, inputs, outputs, description, provenance, where)
+    # --- closed forms of every component, renamed ----------------------------
+    info = {}
+    for inst, m in components.items():
+        ren = {}
+        for group in (m.states, m.inputs, m.parameters, m.outputs):
+            for v in group:
+                ren[v.symbol] = sp.Symbol(f"{inst}{SEP}{v.symbol.name}", real=True)
+        closed = m.program.inline(list(m.derivatives) + list(m.output_exprs))
+        closed = [sp.sympify(e).xreplace(ren) for e in closed]
+        info[inst] = dict(
+            model=m, ren=ren,
+            f=closed[:m.nx], g=closed[m.nx:],
+            states={v.name: v for v in m.states}, inputs={v.name: v for v in m.inputs},
+            outputs={v.name: k for k, v in enumerate(m.outputs)},
+        )
+
+    source_of = _validated_connections(info, connections, where)
 
     # --- resolve connected inputs (depth first, detecting algebraic loops) --------
     resolved = {}  # renamed input symbol -> expression in states / free inputs / parameters / t
@@ -184,3 +195,126 @@ def assemble(name: str, components: Mapping[str, SymbolicModel], connections: Se
     prov = provenance or "; ".join(f"{i}: {d['model'].provenance}" for i, d in info.items() if d["model"].provenance)
     return SymbolicModel.from_equations(name, states, free, params, ders, outs, out_exprs,
                                         description=desc, provenance=prov)
+
+
+def _assemble_programs(name, components, connections, inputs, outputs, description, provenance, where):
+    """Program-level composition (see the module docstring)."""
+    info, steps = {}, []
+    for inst, m in components.items():
+        ren = {}
+        for group in (m.states, m.inputs, m.parameters, m.outputs):
+            for v in group:
+                ren[v.symbol] = sp.Symbol(f"{inst}{SEP}{v.symbol.name}", real=True)
+        for prog in (m.program,):
+            for sym in prog.assigned_symbols():
+                ren[sym] = sp.Symbol(f"_{inst}{SEP}{sym.name.lstrip('_')}", real=True)
+        for st in m.program.steps:
+            if isinstance(st, Assign):
+                steps.append(Assign(ren[st.symbol], st.expr.xreplace(ren)))
+            else:
+                steps.append(SolveSPD(st.X.xreplace(ren), st.A.xreplace(ren), st.B.xreplace(ren)))
+        info[inst] = dict(
+            model=m, ren=ren,
+            f=[sp.sympify(e).xreplace(ren) for e in m.derivatives],
+            g=[sp.sympify(e).xreplace(ren) for e in m.output_exprs],
+            states={v.name: v for v in m.states}, inputs={v.name: v for v in m.inputs},
+            outputs={v.name: k for k, v in enumerate(m.outputs)},
+        )
+    source_of = _validated_connections(info, connections, where)
+    for (ti, tv), (si, sv, kind) in source_of.items():
+        target = info[ti]["ren"][info[ti]["inputs"][tv].symbol]
+        src = (info[si]["ren"][info[si]["states"][sv].symbol] if kind == "state"
+               else info[si]["g"][info[si]["outputs"][sv]])
+        steps.append(Assign(target, src))
+    program = Program("_a")
+    program.steps = _ordered(steps, source_of, info, where)
+
+    chosen = None if outputs is None else list(outputs)
+    chosen_set = set(chosen or [])
+    states, ders, free, params, outs, out_exprs = [], [], [], [], [], []
+    for inst, d in info.items():
+        m = d["model"]
+        for v, f in zip(m.states, d["f"]):
+            flag = v.output if chosen is None else f"{inst}.{v.name}" in chosen_set
+            states.append(_renamed(inst, v, output=flag))
+            ders.append(f)
+        for v in m.inputs:
+            if (inst, v.name) not in source_of:
+                free.append(_renamed(inst, v))
+        params += [_renamed(inst, v) for v in m.parameters]
+    order = chosen if chosen is not None else [f"{i}.{v.name}" for i, d in info.items() for v in d["model"].outputs]
+    for o in order:
+        oi, ov = _split(o, f"{where}: outputs")
+        if oi not in info or (ov not in info[oi]["outputs"] and ov not in info[oi]["states"]):
+            raise ValueError(f"{where}: outputs: {o} is neither a state nor an output of a component")
+        if ov in info[oi]["outputs"]:
+            k = info[oi]["outputs"][ov]
+            outs.append(_renamed(oi, info[oi]["model"].outputs[k]))
+            out_exprs.append(info[oi]["g"][k])
+    if inputs is not None:
+        by_name = {v.name: v for v in free}
+        missing = sorted(set(by_name) - set(inputs))
+        extra = sorted(set(inputs) - set(by_name))
+        if missing or extra:
+            raise ValueError(f"{where}: inputs must list every unconnected input exactly; "
+                             f"missing: {', '.join(missing) or '-'}; not unconnected inputs: {', '.join(extra) or '-'}")
+        free = [by_name[n] for n in inputs]
+    xs, us = [v.symbol for v in states], [v.symbol for v in free]
+    jac = Program("_b")
+    F = differentiate([program], ders, xs + us, jac, through_solves=True)
+    G = differentiate([program], out_exprs, xs + us, jac, through_solves=True) if out_exprs else sp.zeros(0, len(xs + us))
+    nx = len(xs)
+    desc = description or "assembly of " + ", ".join(f"{i} ({d['model'].description})" for i, d in info.items())
+    prov = provenance or "; ".join(f"{i}: {d['model'].provenance}" for i, d in info.items() if d["model"].provenance)
+    return SymbolicModel(
+        name=name, description=desc, states=tuple(states), inputs=tuple(free), parameters=tuple(params),
+        outputs=tuple(outs), program=program, derivatives=tuple(ders), output_exprs=tuple(out_exprs),
+        jacobian=jac, dfdx=F[:, :nx], dfdu=F[:, nx:], dgdx=G[:, :nx], dgdu=G[:, nx:], provenance=prov,
+    )
+
+
+def _ordered(steps, source_of, info, where) -> list:
+    """Steps in an order where every symbol is assigned before it is read.
+
+    Kahn's algorithm, keeping the given order where it is free; a cycle
+    means an algebraic loop through connected inputs, named in the error.
+    """
+    defines = {}
+    for k, st in enumerate(steps):
+        for s_ in ([st.symbol] if isinstance(st, Assign) else list(st.X)):
+            defines[s_] = k
+
+    def reads(st):
+        if isinstance(st, Assign):
+            return st.expr.free_symbols
+        out = set()
+        for e in list(st.A) + list(st.B):
+            out |= sp.sympify(e).free_symbols
+        return out
+
+    deps = [{defines[s_] for s_ in reads(st) if s_ in defines} for st in steps]
+    users = [[] for _ in steps]
+    for k, ds in enumerate(deps):
+        for d in ds:
+            users[d].append(k)
+    waiting = [len(ds) for ds in deps]
+    ready = [k for k, w in enumerate(waiting) if w == 0]
+    heapq.heapify(ready)
+    order = []
+    while ready:
+        k = heapq.heappop(ready)
+        order.append(k)
+        for u in users[k]:
+            waiting[u] -= 1
+            if waiting[u] == 0:
+                heapq.heappush(ready, u)
+    if len(order) < len(steps):
+        stuck = {k for k, w in enumerate(waiting) if w > 0}
+        names = []
+        for (ti, tv) in source_of:
+            sym = info[ti]["ren"][info[ti]["inputs"][tv].symbol]
+            if defines.get(sym) in stuck:
+                names.append(f"{ti}.{tv}")
+        raise ValueError(f"{where}: algebraic loop through inputs {', '.join(sorted(names))} "
+                         "(outputs that depend directly on their inputs form a cycle); break it with a state")
+    return [steps[k] for k in order]
