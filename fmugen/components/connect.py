@@ -157,7 +157,20 @@ def assemble(name: str, components: Mapping[str, SymbolicModel], connections: Se
     for (ti, tv) in source_of:
         resolve(ti, tv)
 
-    # --- assembled variables -----------------------------------------------------
+    v = _assembled_variables(info, source_of, inputs, outputs, description, provenance, where, resolved)
+    states, free, params, ders, outs, out_exprs, desc, prov = v
+    return SymbolicModel.from_equations(name, states, free, params, ders, outs, out_exprs,
+                                        description=desc, provenance=prov)
+
+
+def _assembled_variables(info, source_of, inputs, outputs, description, provenance, where, resolved):
+    """States, free inputs, parameters, derivatives, outputs of an assembly, renamed.
+
+    ``resolved`` substitutes connected inputs in closed forms (empty for the
+    program-level path, where connections are assignments in the program).
+    Returns (states, free inputs, parameters, derivatives, outputs, output
+    expressions, description, provenance).
+    """
     chosen = None if outputs is None else list(outputs)
     chosen_set = set(chosen or [])
     for o in chosen_set:
@@ -193,8 +206,7 @@ def assemble(name: str, components: Mapping[str, SymbolicModel], connections: Se
         free = [by_name[n] for n in inputs]
     desc = description or "assembly of " + ", ".join(f"{i} ({d['model'].description})" for i, d in info.items())
     prov = provenance or "; ".join(f"{i}: {d['model'].provenance}" for i, d in info.items() if d["model"].provenance)
-    return SymbolicModel.from_equations(name, states, free, params, ders, outs, out_exprs,
-                                        description=desc, provenance=prov)
+    return states, free, params, ders, outs, out_exprs, desc, prov
 
 
 def _assemble_programs(name, components, connections, inputs, outputs, description, provenance, where):
@@ -205,9 +217,8 @@ def _assemble_programs(name, components, connections, inputs, outputs, descripti
         for group in (m.states, m.inputs, m.parameters, m.outputs):
             for v in group:
                 ren[v.symbol] = sp.Symbol(f"{inst}{SEP}{v.symbol.name}", real=True)
-        for prog in (m.program,):
-            for sym in prog.assigned_symbols():
-                ren[sym] = sp.Symbol(f"_{inst}{SEP}{sym.name.lstrip('_')}", real=True)
+        for sym in m.program.assigned_symbols():
+            ren[sym] = sp.Symbol(f"_{inst}{SEP}{sym.name.lstrip('_')}", real=True)
         for st in m.program.steps:
             if isinstance(st, Assign):
                 steps.append(Assign(ren[st.symbol], st.expr.xreplace(ren)))
@@ -229,43 +240,13 @@ def _assemble_programs(name, components, connections, inputs, outputs, descripti
     program = Program("_a")
     program.steps = _ordered(steps, source_of, info, where)
 
-    chosen = None if outputs is None else list(outputs)
-    chosen_set = set(chosen or [])
-    states, ders, free, params, outs, out_exprs = [], [], [], [], [], []
-    for inst, d in info.items():
-        m = d["model"]
-        for v, f in zip(m.states, d["f"]):
-            flag = v.output if chosen is None else f"{inst}.{v.name}" in chosen_set
-            states.append(_renamed(inst, v, output=flag))
-            ders.append(f)
-        for v in m.inputs:
-            if (inst, v.name) not in source_of:
-                free.append(_renamed(inst, v))
-        params += [_renamed(inst, v) for v in m.parameters]
-    order = chosen if chosen is not None else [f"{i}.{v.name}" for i, d in info.items() for v in d["model"].outputs]
-    for o in order:
-        oi, ov = _split(o, f"{where}: outputs")
-        if oi not in info or (ov not in info[oi]["outputs"] and ov not in info[oi]["states"]):
-            raise ValueError(f"{where}: outputs: {o} is neither a state nor an output of a component")
-        if ov in info[oi]["outputs"]:
-            k = info[oi]["outputs"][ov]
-            outs.append(_renamed(oi, info[oi]["model"].outputs[k]))
-            out_exprs.append(info[oi]["g"][k])
-    if inputs is not None:
-        by_name = {v.name: v for v in free}
-        missing = sorted(set(by_name) - set(inputs))
-        extra = sorted(set(inputs) - set(by_name))
-        if missing or extra:
-            raise ValueError(f"{where}: inputs must list every unconnected input exactly; "
-                             f"missing: {', '.join(missing) or '-'}; not unconnected inputs: {', '.join(extra) or '-'}")
-        free = [by_name[n] for n in inputs]
+    v = _assembled_variables(info, source_of, inputs, outputs, description, provenance, where, {})
+    states, free, params, ders, outs, out_exprs, desc, prov = v
     xs, us = [v.symbol for v in states], [v.symbol for v in free]
     jac = Program("_b")
     F = differentiate([program], ders, xs + us, jac, through_solves=True)
     G = differentiate([program], out_exprs, xs + us, jac, through_solves=True) if out_exprs else sp.zeros(0, len(xs + us))
     nx = len(xs)
-    desc = description or "assembly of " + ", ".join(f"{i} ({d['model'].description})" for i, d in info.items())
-    prov = provenance or "; ".join(f"{i}: {d['model'].provenance}" for i, d in info.items() if d["model"].provenance)
     return SymbolicModel(
         name=name, description=desc, states=tuple(states), inputs=tuple(free), parameters=tuple(params),
         outputs=tuple(outs), program=program, derivatives=tuple(ders), output_exprs=tuple(out_exprs),
