@@ -1,0 +1,1 @@
+"""Co-simulation of scenes: the master, reference solutions, reports."""
