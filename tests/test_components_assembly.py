@@ -56,10 +56,10 @@ def test_names_symbols_inputs_outputs():
 def test_algebraic_loop_is_reported():
     comps = {"amp": amplifier(), "drv": current_driver(kind="static")}
     with pytest.raises(ValueError, match=r"algebraic loop through inputs .*amp\.theta.*drv\.u|algebraic loop"):
-        assemble("loop", comps, [("amp.u", "drv.u"), ("drv.i", "amp.theta")])
+        assemble("loop", comps, [("amp.u", "drv.u"), ("drv.i", "amp.theta", 1.0)])
     # the same loop through a state is fine
     ok = assemble("ok", {"amp": amplifier(), "drv": current_driver(kind="lag")},
-                  [("amp.u", "drv.u"), ("drv.i", "amp.theta")])
+                  [("amp.u", "drv.u"), ("drv.i", "amp.theta", 1.0)])
     assert ok.nx == 1
 
 

@@ -12,6 +12,10 @@ returns one model:
   an output that depends on inputs which are themselves connected is resolved
   recursively, and a cycle of such direct feedthroughs (an algebraic loop)
   is an error that names the loop;
+* both ends of a connection must have the same unit (compared in SI base
+  units, so ``N.m`` meets ``J`` but ``m3/s`` never meets ``rad``) unless the
+  connection states a conversion as a third element ``(source, target,
+  factor)``: the target then receives ``factor * source``;
 * unconnected inputs become the assembly's inputs;
 * states keep their ``output`` flag unless ``outputs`` says otherwise; all
   component outputs become assembly outputs unless ``outputs`` chooses;
@@ -30,6 +34,7 @@ linear solves.
 from __future__ import annotations
 
 import heapq
+import math
 from dataclasses import replace
 from typing import Mapping, Optional, Sequence
 
@@ -38,6 +43,7 @@ import sympy as sp
 from ..codegen.differentiate import differentiate
 from ..codegen.model import SymbolicModel, Variable
 from ..codegen.program import Assign, Program, SolveSPD
+from ..fmi.units import base_units
 
 SEP = "__"  # C-safe separator of instance and variable in symbols
 
@@ -54,12 +60,41 @@ def _split(endpoint, where: str):
     return inst, var
 
 
+def connection_parts(conn, k: int, where: str) -> tuple:
+    """``(source, target, factor)`` of a connection given as a pair or a triple.
+
+    The optional third element is a stated unit conversion: the target
+    receives ``factor * source``.  Without it, source and target must have
+    the same unit.
+    """
+    if not (isinstance(conn, (list, tuple)) and len(conn) in (2, 3)):
+        raise ValueError(f"{where}: connection {k} must be a pair [source, target] (or [source, target, factor]), "
+                         f"got {conn!r}")
+    factor = conn[2] if len(conn) == 3 else None
+    if factor is not None and (isinstance(factor, bool) or not isinstance(factor, (int, float))
+                               or not math.isfinite(factor) or factor == 0):
+        raise ValueError(f"{where}: connection {k} ({conn[0]} -> {conn[1]}): factor must be a finite non-zero "
+                         f"number, got {factor!r}")
+    return conn[0], conn[1], factor
+
+
+def same_unit(a: str, b: str) -> bool:
+    """True when two unit strings denote the same quantity (``N.m`` and ``J``, not ``m3/s`` and ``rad``)."""
+    if a == b:
+        return True
+    try:
+        ua, ub = base_units(a or "1"), base_units(b or "1")
+    except ValueError:
+        return False
+    return ua.exponents() == ub.exponents() and math.isclose(ua.factor, ub.factor) and ua.offset == ub.offset
+
+
 def _validated_connections(info: dict, connections: Sequence, where: str) -> dict:
-    """(target instance, input name) -> (source instance, variable name, "state"|"output")."""
-    source_of = {}  # (inst, input name) -> (inst, var name, "state"|"output")
+    """(target instance, input name) -> (source instance, variable name, "state"|"output", factor or None)."""
+    source_of = {}
     for k, conn in enumerate(connections):
-        if not (isinstance(conn, (list, tuple)) and len(conn) == 2):
-            raise ValueError(f"{where}: connection {k} must be a pair [source, target], got {conn!r}")
+        src, dst, factor = connection_parts(conn, k, where)
+        conn = (src, dst)
         (si, sv), (ti, tv) = _split(conn[0], f"{where}: connection {k}"), _split(conn[1], f"{where}: connection {k}")
         for i_, end in ((si, conn[0]), (ti, conn[1])):
             if i_ not in info:
@@ -79,7 +114,13 @@ def _validated_connections(info: dict, connections: Sequence, where: str) -> dic
         if (ti, tv) in source_of:
             a = source_of[(ti, tv)]
             raise ValueError(f"{where}: input {conn[1]} is connected twice (from {a[0]}.{a[1]} and {conn[0]})")
-        source_of[(ti, tv)] = (si, sv, kind)
+        src_var = info[si]["states"][sv] if kind == "state" else info[si]["model"].outputs[info[si]["outputs"][sv]]
+        dst_var = info[ti]["inputs"][tv]
+        if factor is None and not same_unit(src_var.unit, dst_var.unit):
+            raise ValueError(f"{where}: connection {k}: unit mismatch: {conn[0]} is in [{src_var.unit or '1'}] but "
+                             f"{conn[1]} expects [{dst_var.unit or '1'}]; connect variables of the same unit, or "
+                             f"state the conversion as a third element (factor: target = factor * source)")
+        source_of[(ti, tv)] = (si, sv, kind, factor)
     return source_of
 
 
@@ -139,7 +180,7 @@ def assemble(name: str, components: Mapping[str, SymbolicModel], connections: Se
             raise ValueError(f"{where}: algebraic loop through inputs {' -> '.join(f'{a}.{b}' for a, b in loop)} "
                              "(every output on it depends directly on its input); break it with a state")
         in_progress.append((inst, vname))
-        si, sv, kind = source_of[(inst, vname)]
+        si, sv, kind, factor = source_of[(inst, vname)]
         if kind == "state":
             expr = info[si]["ren"][info[si]["states"][sv].symbol]
         else:
@@ -150,6 +191,8 @@ def assemble(name: str, components: Mapping[str, SymbolicModel], connections: Se
                 if isym in expr.free_symbols:
                     sub[isym] = resolve(si, iv.name)
             expr = expr.xreplace(sub)
+        if factor is not None:
+            expr = sp.Float(factor) * expr
         in_progress.pop()
         resolved[sym] = expr
         return expr
@@ -232,11 +275,11 @@ def _assemble_programs(name, components, connections, inputs, outputs, descripti
             outputs={v.name: k for k, v in enumerate(m.outputs)},
         )
     source_of = _validated_connections(info, connections, where)
-    for (ti, tv), (si, sv, kind) in source_of.items():
+    for (ti, tv), (si, sv, kind, factor) in source_of.items():
         target = info[ti]["ren"][info[ti]["inputs"][tv].symbol]
         src = (info[si]["ren"][info[si]["states"][sv].symbol] if kind == "state"
                else info[si]["g"][info[si]["outputs"][sv]])
-        steps.append(Assign(target, src))
+        steps.append(Assign(target, src if factor is None else sp.Float(factor) * src))
     program = Program("_a")
     program.steps = _ordered(steps, source_of, info, where)
 
