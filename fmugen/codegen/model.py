@@ -181,9 +181,16 @@ class SymbolicModel:
         missing = [v.name for v in chosen if v.start is None]
         if missing:
             raise ValueError(f"{self.name}: cannot fold parameters without a value: {', '.join(missing)}")
-        values = {v.symbol: sp.Float(v.start) if not float(v.start).is_integer() else sp.Integer(int(v.start))
-                  for v in chosen}
+        values = {v.symbol: _number(v.start) for v in chosen}
+        kept = tuple(v for v in self.parameters if v not in chosen)
+        return replace(self._with_constants(values), parameters=kept)
 
+    def _with_constants(self, values: dict) -> "SymbolicModel":
+        """Every symbol of ``values`` replaced by its number, constants propagated.
+
+        A step whose expression becomes a number disappears into the
+        environment, so zeros vanish from everything downstream.
+        """
         def fold_program(prog: Optional[Program], env: dict) -> tuple:
             if prog is None:
                 return None, env
@@ -206,10 +213,8 @@ class SymbolicModel:
         jprog, full = fold_program(self.jacobian, env)
         sub = lambda e: sp.sympify(e).xreplace(full)  # noqa: E731
         subm = lambda m: None if m is None else m.xreplace(full)  # noqa: E731
-        kept = tuple(v for v in self.parameters if v not in chosen)
         return replace(
             self,
-            parameters=kept,
             program=prog,
             derivatives=tuple(sub(e) for e in self.derivatives),
             output_exprs=tuple(sub(e) for e in self.output_exprs),
@@ -219,3 +224,94 @@ class SymbolicModel:
             dgdx=subm(self.dgdx),
             dgdu=subm(self.dgdu),
         )
+
+    # -- scene-driven reductions ---------------------------------------------
+    def with_inputs_fixed(self, values: dict) -> "SymbolicModel":
+        """A copy in which the inputs named in ``values`` are constants.
+
+        An input nothing drives is a constant of the scene: folding it (most
+        often to zero, e.g. external wrenches) removes the terms it feeds.
+        The Jacobian columns of those inputs are dropped.
+        """
+        by_name = {v.name: v for v in self.inputs}
+        unknown = sorted(set(values) - set(by_name))
+        if unknown:
+            raise ValueError(f"{self.name}: {', '.join(unknown)} not inputs (inputs: {', '.join(by_name) or '-'})")
+        consts = {by_name[n].symbol: _number(x) for n, x in values.items()}
+        keep = [k for k, v in enumerate(self.inputs) if v.name not in values]
+        m = self._with_constants(consts)
+        cols = lambda M: None if M is None else M.extract(list(range(M.rows)), keep)  # noqa: E731
+        return replace(m, inputs=tuple(self.inputs[k] for k in keep), dfdu=cols(m.dfdu), dgdu=cols(m.dgdu))
+
+    def with_outputs(self, names: Sequence[str]) -> "SymbolicModel":
+        """A copy with only the outputs named (in that order), programs pruned.
+
+        States stay; a state named in ``names`` is flagged as an output.
+        """
+        outs = {v.name: k for k, v in enumerate(self.outputs)}
+        states = {v.name for v in self.states}
+        unknown = [n for n in names if n not in outs and n not in states]
+        if unknown:
+            raise ValueError(f"{self.name}: {', '.join(unknown)} neither outputs nor states "
+                             f"(outputs: {', '.join(outs) or '-'})")
+        rows = [outs[n] for n in names if n in outs]
+        st = tuple(replace(v, output=True) if v.name in names else v for v in self.states)
+        pick = lambda M: None if M is None else M.extract(rows, list(range(M.cols)))  # noqa: E731
+        m = replace(self, states=st, outputs=tuple(self.outputs[k] for k in rows),
+                    output_exprs=tuple(self.output_exprs[k] for k in rows),
+                    dgdx=pick(self.dgdx), dgdu=pick(self.dgdu))
+        return m.pruned()
+
+    def without_jacobian(self) -> "SymbolicModel":
+        """A copy without the Jacobian program (FMU: providesDirectionalDerivative=false)."""
+        return replace(self, jacobian=None, dfdx=None, dfdu=None, dgdx=None, dgdu=None).pruned()
+
+    def with_starts(self, values: dict) -> "SymbolicModel":
+        """A copy whose states, inputs or parameters named in ``values`` have new start values."""
+        groups = {}
+        for g in ("states", "inputs", "parameters"):
+            groups[g] = tuple(replace(v, start=float(values[v.name])) if v.name in values else v
+                              for v in getattr(self, g))
+        known = {v.name for g in groups.values() for v in g}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(f"{self.name}: {', '.join(unknown)} not a state, input or parameter")
+        return replace(self, **groups)
+
+    def pruned(self) -> "SymbolicModel":
+        """A copy whose programs hold only the steps the results need."""
+        jac_needs = []
+        if self.jacobian is not None:
+            mats = [M for M in (self.dfdx, self.dfdu, self.dgdx, self.dgdu) if M is not None]
+            jac_needs = [e for M in mats for e in M]
+            jprog = self.jacobian.pruned(jac_needs)
+            reads = set()
+            for stp in jprog.steps:
+                if isinstance(stp, Assign):
+                    reads |= stp.expr.free_symbols
+                else:
+                    for e in list(stp.A) + list(stp.B):
+                        reads |= sp.sympify(e).free_symbols
+            jac_needs = list(reads) + jac_needs
+        else:
+            jprog = None
+        prog = self.program.pruned(list(self.derivatives) + list(self.output_exprs) + jac_needs)
+        return replace(self, program=prog, jacobian=jprog)
+
+    def operation_count(self) -> int:
+        """Number of operations of the programs (sympy's count_ops), a size measure for reports."""
+        n = 0
+        for prog in (self.program, self.jacobian):
+            if prog is None:
+                continue
+            for stp in prog.steps:
+                if isinstance(stp, Assign):
+                    n += sp.count_ops(stp.expr)
+                else:
+                    n += stp.X.rows ** 3 // 3 + stp.X.rows ** 2 * stp.X.cols
+        return n
+
+
+def _number(x) -> sp.Expr:
+    x = float(x)
+    return sp.Integer(int(x)) if x.is_integer() else sp.Float(x)

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Optional, Sequence
+from typing import Mapping, Optional, Sequence
 
 import numpy as np
 import sympy as sp
@@ -105,21 +105,22 @@ class Manipulator:
             raise ValueError(f"formulation must be one of {FORMULATIONS}, not {formulation!r}")
         return Derivation(P, engine, trig)
 
-    def _mass_matrix_into(self, d: Derivation) -> sp.Matrix:
+    def _mass_matrix_into(self, d: Derivation, q=None) -> sp.Matrix:
         """M(q): composite rigid bodies (Newton-Euler) or unit accelerations (Lagrange).
 
         The Lagrange formulation keeps the thesis's own method (ARM2, eqs.
         41-42): column j is the inverse dynamics with qd = 0, g = 0 and
         qdd = e_j; only the lower triangle is computed, the upper mirrors it.
         """
+        q = self.q if q is None else q
         if isinstance(d.engine, NestedBodyInverseDynamics):
-            return crba.mass_matrix(d.engine, self.q)
+            return crba.mass_matrix(d.engine, q)
         n = self.n
         zeros = [sp.Integer(0)] * n
         M = sp.zeros(n, n)
         for j in range(n):
             e = [sp.Integer(int(k == j)) for k in range(n)]
-            col = d.engine.torques(self.q, zeros, e, gravity=None, external=None, first=j)
+            col = d.engine.torques(q, zeros, e, gravity=None, external=None, first=j)
             for i in range(j, n):
                 M[i, j] = M[j, i] = col[i]
         return M
@@ -160,79 +161,107 @@ class Manipulator:
 
     # ------------------------------------------------------------------
     # the state-space model that becomes an FMU
-    def state_space_model(self, outputs: Sequence[str] = ("p_ee",), formulation=None, name=None) -> SymbolicModel:
+    def state_space_model(self, outputs: Sequence[str] = ("p_ee",), formulation=None, name=None,
+                          locked: Optional[Mapping[int, float]] = None) -> SymbolicModel:
         """x = [q, qd], u = [tau, external wrenches], x' = [qd, M^{-1}(tau - h)].
 
         ``outputs``: any of "p_ee" (end-effector position, frame N origin) and
         "qdd" (joint accelerations, which have direct feedthrough from tau).
         q and qd are outputs as states (no direct feedthrough).
+
+        ``locked`` ({joint number (1-based): position}) holds joints still:
+        their q is the given number and their qd, qdd are zero, so the model
+        keeps only the free joints (names unchanged, e.g. q[1], q[2], q[3])
+        and its equations are exactly the free joints' rows of the full arm,
+        M_ff qdd_f + h_f = tau_f; the locked links' mass and inertia act
+        through the numbers they fold into.
         """
         unknown = set(outputs) - {"p_ee", "qdd"}
         if unknown:
             raise ValueError(f"unknown outputs {sorted(unknown)}; choose from p_ee, qdd")
         n, robot = self.n, self.robot
+        locked = dict(locked or {})
+        bad = [j for j in locked if not (isinstance(j, int) and 1 <= j <= n)]
+        if bad:
+            raise ValueError(f"{robot.name}: locked joint(s) {bad} do not exist (joints 1..{n})")
+        free = [i for i in range(n) if i + 1 not in locked]
+        if not free:
+            raise ValueError(f"{robot.name}: every joint is locked; nothing moves")
+        q = [sp.Float(locked[i + 1]) if i + 1 in locked else self.q[i] for i in range(n)]
+        qd = [sp.Integer(0) if i + 1 in locked else self.qd[i] for i in range(n)]
+        nf = len(free)
         d = self.derivation(formulation)
         P = d.program
-        h = self._bias_into(d)
-        M = self._mass_matrix_into(d)
-        rhs = sp.Matrix([P.let(self.tau[i] - h[i], "r") for i in range(n)])
+        zeros = [sp.Integer(0)] * n
+        h = d.engine.torques(q, qd, zeros, gravity=robot.gravity, external=self.ext or None)
+        M_full = self._mass_matrix_into(d, q)
+        M = M_full.extract(free, free)
+        rhs = sp.Matrix([P.let(self.tau[i] - h[i], "r") for i in free])
         X = P.solve_spd(M, rhs, "qdd")
-        qdd = list(X)
+        qdd_f = list(X)
+        qdd = list(zeros)
+        for k, i in enumerate(free):
+            qdd[i] = qdd_f[k]
         out_vars, out_exprs = [], []
         if "p_ee" in outputs:
-            Ts = kinematics.link_frames(P, robot, self.q, d.trig)
+            Ts = kinematics.link_frames(P, robot, q, d.trig)
             for r in range(3):
                 out_vars.append(Variable(f"p_ee[{r + 1}]", _real(f"p_ee_{r + 1}"), "m",
                                          f"end-effector position (origin of frame {n}), base {'xyz'[r]}"))
                 out_exprs.append(Ts[-1][r][3])
         if "qdd" in outputs:
-            for i, L in enumerate(robot.links):
-                unit = "rad/s2" if L.joint == REVOLUTE else "m/s2"
+            for i in free:
+                unit = "rad/s2" if robot.links[i].joint == REVOLUTE else "m/s2"
                 out_vars.append(Variable(f"qdd[{i + 1}]", _real(f"qdd_out_{i + 1}"), unit,
-                                         f"acceleration of joint {i + 1} ({L.name})"))
+                                         f"acceleration of joint {i + 1} ({robot.links[i].name})"))
                 out_exprs.append(qdd[i])
 
         # exact Jacobians: ID(q, qd, qdd*) = tau  =>  dqdd/dz = -M^{-1} dID/dz
         Jp = Program("_j")
         d.engine.P = Jp  # keep the shared constants and sin/cos, write new steps to Jp
         d.trig.program = Jp
-        idx = d.engine.torques(self.q, self.qd, qdd, gravity=robot.gravity, external=self.ext or None)
+        idx = d.engine.torques(q, qd, qdd, gravity=robot.gravity, external=self.ext or None)
+        idx = [idx[i] for i in free]
         ext = self.ext_symbols
-        D = differentiate([P, Jp], idx, self.q + self.qd + ext, Jp)
-        B = sp.zeros(n, 2 * n + n + len(ext))
-        B[:, : 2 * n] = -D[:, : 2 * n]
-        B[:, 2 * n: 3 * n] = sp.eye(n)
+        qf, qdf = [self.q[i] for i in free], [self.qd[i] for i in free]
+        D = differentiate([P, Jp], idx, qf + qdf + ext, Jp)
+        B = sp.zeros(nf, 3 * nf + len(ext))
+        B[:, : 2 * nf] = -D[:, : 2 * nf]
+        B[:, 2 * nf: 3 * nf] = sp.eye(nf)
         if ext:
-            B[:, 3 * n:] = -D[:, 2 * n:]
+            B[:, 3 * nf:] = -D[:, 2 * nf:]
         Y = Jp.solve_spd(M, B, "y")
-        nx, nu = 2 * n, n + len(ext)
+        nx, nu = 2 * nf, nf + len(ext)
         dfdx = sp.zeros(nx, nx)
-        dfdx[:n, n:] = sp.eye(n)
-        dfdx[n:, :] = Y[:, :nx]
+        dfdx[:nf, nf:] = sp.eye(nf)
+        dfdx[nf:, :] = Y[:, :nx]
         dfdu = sp.zeros(nx, nu)
-        dfdu[n:, :] = Y[:, nx:]
+        dfdu[nf:, :] = Y[:, nx:]
         dgdx = sp.zeros(len(out_vars), nx)
         dgdu = sp.zeros(len(out_vars), nu)
         row = 0
         if "p_ee" in outputs:
-            Jk = differentiate([P], out_exprs[:3], self.q, Jp)
-            dgdx[:3, :n] = Jk
+            Jk = differentiate([P], out_exprs[:3], qf, Jp)
+            dgdx[:3, :nf] = Jk
             row = 3
         if "qdd" in outputs:
-            dgdx[row:row + n, :] = Y[:, :nx]
-            dgdu[row:row + n, :] = Y[:, nx:]
+            dgdx[row:row + nf, :] = Y[:, :nx]
+            dgdu[row:row + nf, :] = Y[:, nx:]
 
         states = []
-        for i, L in enumerate(robot.links):
+        for i in free:
+            L = robot.links[i]
             rev = L.joint == REVOLUTE
             states.append(Variable(f"q[{i + 1}]", self.q[i], "rad" if rev else "m",
                                    f"position of joint {i + 1} ({L.name}, {L.joint})", start=0.0, output=True))
-        for i, L in enumerate(robot.links):
+        for i in free:
+            L = robot.links[i]
             rev = L.joint == REVOLUTE
             states.append(Variable(f"qd[{i + 1}]", self.qd[i], "rad/s" if rev else "m/s",
                                    f"velocity of joint {i + 1} ({L.name})", start=0.0, output=True))
         inputs = []
-        for i, L in enumerate(robot.links):
+        for i in free:
+            L = robot.links[i]
             rev = L.joint == REVOLUTE
             inputs.append(Variable(f"tau[{i + 1}]", self.tau[i], "N.m" if rev else "N",
                                    f"{'torque' if rev else 'force'} applied by actuator {i + 1}", start=0.0))
@@ -256,14 +285,15 @@ class Manipulator:
             parameters=params,
             outputs=tuple(out_vars),
             program=P,
-            derivatives=tuple(self.qd) + tuple(qdd),
+            derivatives=tuple(qdf) + tuple(qdd_f),
             output_exprs=tuple(out_exprs),
             jacobian=Jp,
             dfdx=dfdx,
             dfdu=dfdu,
             dgdx=dgdx,
             dgdu=dgdu,
-            provenance=f"{robot.source or robot.name}; {formulation or self.formulation} formulation",
+            provenance=f"{robot.source or robot.name}; {formulation or self.formulation} formulation"
+                       + (f"; joints {sorted(locked)} locked at {[locked[j] for j in sorted(locked)]}" if locked else ""),
         )
 
     def inverse_dynamics_model(self, formulation=None, name=None) -> SymbolicModel:
