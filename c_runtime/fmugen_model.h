@@ -77,14 +77,24 @@ typedef struct fmugen_model_def {
                     double *dfdx, double *dfdu, double *dgdx, double *dgdu);
 } fmugen_model_def;
 
+/* Symbols shared by the runtime and model.c but not part of the FMU's
+ * interface: hidden, so the shared library exports only the fmi2* functions
+ * (no other library's fmugen_model can be bound in their place, and an
+ * importer sees nothing it may not call). */
+#if defined(__GNUC__) && !defined(_WIN32)
+#define FMUGEN_MODEL_HIDDEN __attribute__((visibility("hidden")))
+#else
+#define FMUGEN_MODEL_HIDDEN
+#endif
+
 /* Defined by the generated model.c */
-extern const fmugen_model_def fmugen_model;
+FMUGEN_MODEL_HIDDEN extern const fmugen_model_def fmugen_model;
 
 /* Provided by the runtime (linalg.c): solves A X = B for symmetric positive
  * definite A (n x n, row-major, only the lower triangle read, overwritten by
  * its Cholesky factor) and B (n x k, row-major, overwritten by X).  Returns
  * FMUGEN_OK or FMUGEN_NOT_POSITIVE_DEFINITE. */
-int fmugen_spd_solve(int n, int k, double *A, double *B);
+FMUGEN_MODEL_HIDDEN int fmugen_spd_solve(int n, int k, double *A, double *B);
 
 #ifdef __cplusplus
 }

@@ -76,6 +76,10 @@ __all__ = [
 #: 'basic'.
 CSE_OPTIMIZATIONS = None
 
+#: longest C name printed for a variable (C99 guarantees 63 significant
+#: characters of an internal identifier; suffixes keep names unique)
+MAX_C_NAME = 48
+
 #: Integer powers up to this exponent are printed as repeated products.
 MAX_PRODUCT_POWER = 6
 
@@ -100,6 +104,13 @@ _ARGS = {"p", "t", "x", "u", "dx", "y", "dfdx", "dfdu", "dgdx", "dgdu", "status"
          "evaluate", "jacobian", "x_start", "x_nominal", "u_start", "p_start",
          "x_names", "u_names", "y_names", "p_names", "fmugen_model"}
 RESERVED_NAMES = frozenset(_C_KEYWORDS | _C_MATH | _ARGS)
+#: prefixes of names the runtime header, the FMI headers and the C library
+#: (math.h, stddef.h, string.h) may define as macros or identifiers: a model
+#: variable called ``FMUGEN_OK`` or ``M_PI2`` would otherwise be expanded by
+#: the preprocessor.  Such names get :data:`SAFE_PREFIX` in front.
+RESERVED_PREFIXES = ("FMUGEN", "fmugen", "fmi2", "FMI2", "FP_", "M_", "HUGE_VAL", "MATH_ERR",
+                     "math_err", "FLT_", "DBL_", "INFINITY", "NAN")
+SAFE_PREFIX = "v_"
 
 
 # --------------------------------------------------------------------------
@@ -338,6 +349,13 @@ def c_identifier(name: str) -> str:
     return s
 
 
+def _reserved(name: str) -> bool:
+    """True for names in the runtime's or the C library's name space
+    (:data:`RESERVED_PREFIXES`); single reserved names are kept apart by
+    :data:`RESERVED_NAMES` in :class:`_Names`."""
+    return name.startswith("_") or name.startswith(RESERVED_PREFIXES)
+
+
 class _Names:
     """Unique C names for sympy symbols."""
 
@@ -348,12 +366,13 @@ class _Names:
     def add(self, sym: sp.Symbol, preferred: Optional[str] = None) -> str:
         if sym in self.map:
             return self.map[sym]
-        base = preferred or re.sub(r"[^A-Za-z0-9_]", "_", sym.name) or "v"
+        # a whitelist: ASCII letters, digits and '_' only; bounded length
+        base = preferred or re.sub(r"[^A-Za-z0-9_]", "_", sym.name)[:MAX_C_NAME] or "v"
         # leading underscores are reserved in C (program symbols use them to
         # stay apart from parameter names; uniqueness is kept below)
         base = base.lstrip("_") or "v"
-        if base[0].isdigit():
-            base = "v_" + base
+        if base[0].isdigit() or _reserved(base):
+            base = SAFE_PREFIX + base
         name, k = base, 2
         while name in self.used:
             name = f"{base}_{k}"
@@ -641,7 +660,22 @@ GUID_PLACEHOLDER = "@FMUGEN_GUID@"
 
 
 def _c_string(s: str) -> str:
-    return '"' + s.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
+    """A C string literal of ``s`` in printable ASCII only.
+
+    ``"`` and ``\\`` are escaped, ``?`` is written ``\\?`` (so ``??/`` can never
+    form a trigraph), and every other character outside 0x20..0x7e is written
+    as octal escapes of its UTF-8 bytes (three digits each: an octal escape
+    cannot swallow the character after it, a hex escape could).
+    """
+    out = []
+    for ch in s:
+        if ch in ('"', "\\", "?"):
+            out.append("\\" + ch)
+        elif " " <= ch <= "~":
+            out.append(ch)
+        else:
+            out.extend(f"\\{b:03o}" for b in ch.encode("utf-8", "surrogatepass"))
+    return '"' + "".join(out) + '"'
 
 
 def _c_double(v: float) -> str:
@@ -651,8 +685,23 @@ def _c_double(v: float) -> str:
     return repr(v)
 
 
-def _comment_safe(s: str) -> str:
-    return s.replace("*/", "* /")
+def _comment_safe(s) -> str:
+    """``s`` reduced to text that cannot leave (or disturb) a C block comment.
+
+    The C preprocessor replaces trigraphs and splices backslash-newlines
+    *before* it looks for the end of a comment, so ``*\\`` + newline + ``/``
+    or ``*??/`` + newline + ``/`` would close the comment and let the rest of
+    a description be compiled.  Hence: every character outside printable
+    ASCII (newlines, tabs, control and non-ASCII characters) becomes ``?``
+    -- except that no two ``?`` may touch (``?_?``), backslashes become
+    ``|``, and ``*/`` and ``/*`` (-Wcomment) are split with a space.
+    """
+    s = "".join(ch if " " <= ch <= "~" else "?" for ch in str(s))
+    s = s.replace("\\", "|")
+    s = re.sub(r"\?(?=\?)", "?_", s)
+    while "*/" in s or "/*" in s:
+        s = s.replace("*/", "* /").replace("/*", "/ *")
+    return s
 
 
 def _time_symbol(model: SymbolicModel, known: set) -> Optional[sp.Symbol]:
@@ -755,7 +804,7 @@ def _variable_table(model: SymbolicModel) -> list:
     vr = 0
 
     def row(kind, i, v: Variable, vref):
-        unit = v.unit or "-"
+        unit = _comment_safe(v.unit or "-")
         desc = _comment_safe(v.description)
         return f" *   {vref:4d}  {kind:<10s} {i:3d}  {_comment_safe(v.name):<22s} {unit:<10s} {desc}"
 

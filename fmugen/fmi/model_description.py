@@ -35,6 +35,7 @@ from typing import Optional, Sequence
 import sympy as sp
 
 from .. import __version__
+from ..errors import FmugenError
 from ..codegen.model import SymbolicModel
 from ..codegen.program import Assign
 from .units import base_units
@@ -231,6 +232,34 @@ def _fmt(v) -> str:
     return repr(float(v))
 
 
+#: characters XML 1.0 forbids anywhere (sec. 2.2): C0 controls except tab,
+#: newline and carriage return, lone surrogates, U+FFFE and U+FFFF
+_XML_INVALID = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
+
+
+def xml_text(s: str) -> str:
+    """``s`` with every character XML 1.0 cannot carry replaced by ``?``
+    (ElementTree escapes ``& < > "`` but writes control characters as they
+    are, which no XML parser reads back)."""
+    return _XML_INVALID.sub("?", s)
+
+
+def _xml_safe_tree(root, model_name: str) -> None:
+    """Make every attribute of the tree valid XML 1.0 text.
+
+    Free text (descriptions, units, the model name) is cleaned with
+    :func:`xml_text`; a variable *name* with such a character is refused,
+    because cleaning could make two names equal.
+    """
+    for el in root.iter():
+        for k, v in el.attrib.items():
+            if _XML_INVALID.search(v):
+                if el.tag == "ScalarVariable" and k == "name":
+                    raise FmugenError(f"model {xml_text(model_name)!r}: variable name {v!r} contains a "
+                                      f"character that XML 1.0 cannot carry")
+                el.set(k, xml_text(v))
+
+
 def _set(el, **attrs):
     for k, v in attrs.items():
         if v is None or v == "":
@@ -347,5 +376,6 @@ def model_description_xml(
         for i, deps_ in sorted(init, key=lambda e: e[0]):
             unknown(iu, i, deps_)
 
+    _xml_safe_tree(root, model.name)
     ET.indent(root, space="  ")
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"

@@ -1,0 +1,85 @@
+"""The errors fmugen raises for bad input.
+
+Every problem with what a user gives -- a file, a field in it, an override, an
+API argument -- is a :class:`FmugenError`.  It subclasses :class:`ValueError`
+so that code written against the earlier ``ValueError`` keeps working.  The
+command line prints the message on one line and exits with status 2.
+
+* :class:`FmugenError`     -- any user error (bad value, bad name, bad option);
+* :class:`InputFileError`  -- a problem in a file; the message starts with the
+  file and, where there is one, the entry and field:
+  ``"robots/arm.toml: link 2 (upper_arm): mass: non-finite value inf"``.
+"""
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+__all__ = ["FmugenError", "InputFileError", "read_text_file", "check_finite", "check_identifier",
+           "MAX_IDENTIFIER_LENGTH", "IDENTIFIER_PATTERN"]
+
+#: names that become C identifiers, FMU model identifiers and file names: ASCII
+#: only (a C compiler and every file system accept them), bounded so that
+#: ``<identifier>.so`` and the temporary build directory stay far below the
+#: 255-byte file-name limit of common file systems.
+IDENTIFIER_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
+MAX_IDENTIFIER_LENGTH = 64
+
+
+class FmugenError(ValueError):
+    """Bad input given to fmugen (the message says what and where)."""
+
+
+class InputFileError(FmugenError):
+    """A file (or an entry or field of it) that fmugen cannot accept."""
+
+
+def read_text_file(path, what: str = "file") -> str:
+    """The UTF-8 text of ``path``; a missing, unreadable or binary file is an
+    :class:`InputFileError` naming the file (never a bare ``UnicodeDecodeError``)."""
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except FileNotFoundError:
+        raise InputFileError(f"{p}: no such {what}") from None
+    except IsADirectoryError:
+        raise InputFileError(f"{p}: is a directory, not a {what}") from None
+    except OSError as exc:
+        raise InputFileError(f"{p}: cannot read the {what}: {exc.strerror or exc}") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputFileError(f"{p}: not a UTF-8 text file (byte 0x{data[exc.start]:02x} at offset "
+                             f"{exc.start}); a {what} must be UTF-8 TOML") from None
+    if "\x00" in text:
+        raise InputFileError(f"{p}: contains a NUL byte; a {what} must be a text file")
+    return text
+
+
+def check_finite(value: float, where: str) -> float:
+    """``value`` as a float, or an :class:`InputFileError` at ``where`` if NaN or infinite."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError, OverflowError):
+        raise InputFileError(f"{where}: {value!r} is not a number") from None
+    if not math.isfinite(v):
+        raise InputFileError(f"{where}: non-finite value {v!r}")
+    return v
+
+
+def check_identifier(name, where: str, what: str = "name") -> str:
+    """``name`` if it is an ASCII identifier of at most :data:`MAX_IDENTIFIER_LENGTH`
+    characters, else an :class:`InputFileError` at ``where`` saying why."""
+    if not isinstance(name, str):
+        raise InputFileError(f"{where}: {what} must be a string, got {name!r}")
+    if len(name) > MAX_IDENTIFIER_LENGTH:
+        raise InputFileError(f"{where}: {what} is {len(name)} characters long; at most "
+                             f"{MAX_IDENTIFIER_LENGTH} are allowed (it becomes a C identifier and a file name)")
+    if not IDENTIFIER_PATTERN.match(name):
+        bad = sorted({c for c in name if not (c.isascii() and (c.isalnum() or c == "_"))})
+        why = (f"characters {''.join(bad)!r} are not allowed" if bad
+               else "it must start with a letter")
+        raise InputFileError(f"{where}: {what} {name!r} is not an identifier: {why} "
+                             f"(ASCII letters, digits and '_', starting with a letter)")
+    return name
