@@ -454,7 +454,8 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
     return fmi2OK;
 }
 
-static const char *const int_names[FMUGEN_INT_COUNT] = {"solver", "n_steps", "n_rejected", "n_rhs", "n_jac"};
+static const char *const int_names[FMUGEN_INT_COUNT] = {"solver", "n_steps", "n_rejected", "n_rhs", "n_jac",
+                                                         "stiffness_detected"};
 
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[])
 {
@@ -476,7 +477,8 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
         case FMUGEN_INT_N_STEPS: v = inst->s.n_steps; break;
         case FMUGEN_INT_N_REJECTED: v = inst->s.n_rejected; break;
         case FMUGEN_INT_N_RHS: v = inst->s.n_rhs; break;
-        default: v = inst->s.n_jac; break;
+        case FMUGEN_INT_N_JAC: v = inst->s.n_jac; break;
+        default: v = inst->s.n_stiff; break;
         }
         value[i] = v > 2147483647LL ? 2147483647 : (fmi2Integer)v; /* counters saturate */
     }

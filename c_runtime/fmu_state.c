@@ -11,7 +11,7 @@
  *
  * Serialised form (native byte order, for the same platform):
  *   8 bytes  magic "FMUGENST"
- *   u32      format version (1)
+ *   u32      format version (2: with the stiffness and stability monitors)
  *   u32      fmuType
  *   u32 x 4  nx, nu, ny, np
  *   u32      length of the GUID, then the GUID bytes (no terminator)
@@ -28,7 +28,7 @@
 #include "fmugen_runtime.h"
 
 #define SNAPSHOT_MAGIC 0x464D5547u /* "FMUG" */
-#define FORMAT_VERSION 1u
+#define FORMAT_VERSION 2u
 static const char blob_magic[8] = {'F', 'M', 'U', 'G', 'E', 'N', 'S', 'T'};
 
 typedef struct fmugen_snapshot {
@@ -168,6 +168,16 @@ static void put_scalars(writer *w, const fmugen_scalars *s)
     put_i64(w, s->fsal_valid);
     put_f64(w, s->last_successful_time);
     put_i64(w, s->last_do_step_status);
+    put_i64(w, s->stiff_run);
+    put_i64(w, s->nonstiff_run);
+    put_i64(w, s->n_stiff);
+    put_i64(w, s->stiff_logged);
+    put_f64(w, s->rk4_h_limit);
+    put_f64(w, s->rk4_lambda);
+    put_f64(w, s->rk4_warned_limit);
+    put_f64(w, s->rk4_first_limit);
+    put_f64(w, s->rk4_first_lambda);
+    put_f64(w, s->rk4_first_time);
 }
 
 typedef struct reader {
@@ -206,6 +216,16 @@ static void get_scalars(reader *r, fmugen_scalars *s)
     s->fsal_valid = (int)get_i64(r);
     s->last_successful_time = get_f64(r);
     s->last_do_step_status = (int)get_i64(r);
+    s->stiff_run = (int)get_i64(r);
+    s->nonstiff_run = (int)get_i64(r);
+    s->n_stiff = get_i64(r);
+    s->stiff_logged = (int)get_i64(r);
+    s->rk4_h_limit = get_f64(r);
+    s->rk4_lambda = get_f64(r);
+    s->rk4_warned_limit = get_f64(r);
+    s->rk4_first_limit = get_f64(r);
+    s->rk4_first_lambda = get_f64(r);
+    s->rk4_first_time = get_f64(r);
 }
 
 static uint64_t fnv1a(const unsigned char *p, size_t n)

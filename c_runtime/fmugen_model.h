@@ -44,7 +44,8 @@ extern "C" {
 #define FMUGEN_INT_N_REJECTED 2 /* local: rejected internal steps so far */
 #define FMUGEN_INT_N_RHS 3      /* local: evaluations of f so far */
 #define FMUGEN_INT_N_JAC 4      /* local: evaluations of the Jacobian so far */
-#define FMUGEN_INT_COUNT 5
+#define FMUGEN_INT_STIFFNESS_DETECTED 5 /* local: times Dormand-Prince found the problem stiff so far */
+#define FMUGEN_INT_COUNT 6
 
 #define FMUGEN_SOLVER_DOPRI5 1
 #define FMUGEN_SOLVER_IMPLICIT 2

@@ -64,6 +64,15 @@ typedef struct fmugen_scalars {
     int fsal_valid;            /* fsal holds f(time, x, u) (Dormand-Prince first-same-as-last) */
     double last_successful_time;
     int last_do_step_status;   /* fmi2Status of the last fmi2DoStep */
+    /* stiffness detection of Dormand-Prince (Hairer & Wanner's DOPRI5 test) */
+    int stiff_run, nonstiff_run; /* consecutive stiff / non-stiff step tests */
+    long long n_stiff;         /* stiffness detections so far (counter) */
+    int stiff_logged;          /* the detection has been logged (once per instance) */
+    /* RK4 stability limit from the Jacobian's dominant eigenvalue */
+    double rk4_h_limit;        /* largest stable step, 0 = not known */
+    double rk4_lambda;         /* |lambda| of the dominant eigenvalue [1/s] */
+    double rk4_warned_limit;   /* limit of the last warning, 0 = none yet */
+    double rk4_first_limit, rk4_first_lambda, rk4_first_time; /* the first warning's numbers, for the failure message */
 } fmugen_scalars;
 
 typedef struct fmugen_instance {

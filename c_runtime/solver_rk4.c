@@ -8,11 +8,181 @@
  * h = H / m); fixed_step = 0 means one step per communication step.  A state
  * that becomes NaN or infinite ends the communication step with a failure at
  * the last finite point.
+ *
+ * Stability limit: at the start of every communication step the dominant
+ * eigenvalue lambda of df/dx (the model's exact Jacobian, or differences) is
+ * estimated, and the largest stable step is h_max = r(arg lambda) / |lambda|,
+ * r the distance from 0 to the boundary of RK4's stability region
+ * |1 + z + z^2/2 + z^3/6 + z^4/24| = 1 along the ray of lambda (2.785 on the
+ * negative real axis, 2.828 on the imaginary axis, 2.62 at 120 degrees).
+ * A step above it is warned about once, and again when the limit moves by
+ * more than 10 % -- with the numbers, e.g. "h = 60 us exceeds the RK4
+ * stability limit ~ 55.7 us (largest |lambda| = 5e+04 1/s)" -- and the
+ * failure message of a blow-up repeats them.  It is a warning, not a refusal:
+ * a mode that is not excited, or a limit crossed briefly on a nonlinear
+ * trajectory, may still give a usable result, and the importer decides.
+ *
+ * The eigenvalue: power iteration on A = D^-1 J D (D = diag(x_nominal), so
+ * that pressures and angles weigh alike), then a Rayleigh-Ritz fit on the
+ * Krylov pair (v, A v, A^2 v): A^2 v ~ a A v + b v gives lambda^2 = a lambda
+ * + b, which captures a dominant complex pair as well as a real eigenvalue.
  */
+#include <complex.h>
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
 #include "solver.h"
+
+/* Distance from 0 to the boundary of RK4's stability region along the ray
+ * of direction d (|d| = 1, Re d < 0): the first r with |R(r d)| > 1, by a scan
+ * (the region is not star-shaped in general) and bisection. */
+static double rk4_boundary(double complex d)
+{
+    const int nscan = 700;
+    double lo = 0, hi = 0;
+    for (int k = 1; k <= nscan; k++) {
+        double r = 3.5 * k / nscan;
+        double complex z = r * d;
+        if (cabs(1 + z + z * z / 2 + z * z * z / 6 + z * z * z * z / 24) > 1 + 1e-13) { hi = r; break; }
+        lo = r;
+    }
+    if (hi == 0) return lo;
+    for (int it = 0; it < 50; it++) {
+        double mid = 0.5 * (lo + hi);
+        double complex z = mid * d;
+        if (cabs(1 + z + z * z / 2 + z * z * z / 6 + z * z * z * z / 24) > 1 + 1e-13) hi = mid; else lo = mid;
+    }
+    return lo;
+}
+
+static double dot(int n, const double *a, const double *b)
+{
+    double s = 0;
+    for (int i = 0; i < n; i++) s += a[i] * b[i];
+    return s;
+}
+
+/* y = A x with A = D^-1 J D (see the header) */
+static void scaled_matvec(const fmugen_model_def *m, const double *J, const double *x, double *y)
+{
+    const int n = m->nx;
+    for (int i = 0; i < n; i++) {
+        double s = 0;
+        for (int j = 0; j < n; j++) s += J[i * n + j] * m->x_nominal[j] * x[j];
+        y[i] = s / m->x_nominal[i];
+    }
+}
+
+/* Dominant eigenvalue of J (n x n) into *lam; returns 0, or 1 when no
+ * estimate is possible (a non-finite iterate).  v, w, z: n doubles each. */
+static int dominant_eigenvalue(const fmugen_model_def *m, const double *J, double *v, double *w, double *z,
+                               double complex *lam)
+{
+    const int n = m->nx;
+    for (int i = 0; i < n; i++) v[i] = 1.0 + 0.5 * sin(1.7 * i + 0.3); /* not orthogonal to anything simple */
+    double nv = sqrt(dot(n, v, v));
+    for (int i = 0; i < n; i++) v[i] /= nv;
+    for (int round = 0; round < 4; round++) {
+        for (int it = 0; it < 40; it++) {
+            scaled_matvec(m, J, v, w);
+            double nw = sqrt(dot(n, w, w));
+            if (!isfinite(nw)) return 1;
+            if (nw == 0) { *lam = 0; return 0; }
+            for (int i = 0; i < n; i++) v[i] = w[i] / nw;
+        }
+        scaled_matvec(m, J, v, w);
+        scaled_matvec(m, J, w, z);
+        const double ww = dot(n, w, w), wv = dot(n, w, v), vv = dot(n, v, v), wz = dot(n, w, z),
+                     vz = dot(n, v, z), zz = dot(n, z, z);
+        const double det = ww * vv - wv * wv;
+        if (!(zz > 0)) { *lam = 0; return 0; }
+        if (det <= 1e-14 * ww * vv) { /* v is an eigenvector: a real eigenvalue */
+            *lam = wv / vv;
+            return 0;
+        }
+        const double a = (wz * vv - vz * wv) / det, b = (ww * vz - wv * wz) / det;
+        double res = 0;
+        for (int i = 0; i < n; i++) { double r = z[i] - a * w[i] - b * v[i]; res += r * r; }
+        const double disc = a * a + 4 * b;
+        double complex l1, l2;
+        if (disc >= 0) { l1 = 0.5 * (a + sqrt(disc)); l2 = 0.5 * (a - sqrt(disc)); }
+        else { l1 = 0.5 * a + 0.5 * I * sqrt(-disc); l2 = conj(l1); }
+        *lam = cabs(l1) >= cabs(l2) ? l1 : l2;
+        if (res <= 1e-6 * zz) return 0; /* the pair spans an invariant subspace */
+    }
+    /* slow convergence (nearly equal moduli): the growth rate is still |lambda| */
+    *lam = -sqrt(dot(n, z, z) / dot(n, w, w));
+    return 0;
+}
+
+/* "60 us", "1.5 ms", "0.2 s" */
+static void fmt_time(char *buf, size_t n, double h)
+{
+    if (h < 1e-3) snprintf(buf, n, "%.3g us", h * 1e6);
+    else if (h < 1) snprintf(buf, n, "%.3g ms", h * 1e3);
+    else snprintf(buf, n, "%.3g s", h);
+}
+
+/* Estimates the stability limit at (t, x) with f(t, x) = fx, and warns when h
+ * exceeds it (once, and again when the limit moves by more than 10 %). */
+static void check_stability_limit(fmugen_ode *ode, double t, const double *fx, double h, double *w)
+{
+    fmugen_instance *inst = ode->inst;
+    const fmugen_model_def *m = inst->model;
+    const int n = m->nx;
+    double *J = w, *v = w + (size_t)n * n, *wv = v + n, *z = wv + n, *tmp = z + n;
+    if (fmugen_ode_jacobian(ode, t, inst->x, fx, J, tmp) != FMUGEN_OK) return;
+    double complex lam;
+    if (dominant_eigenvalue(m, J, v, wv, z, &lam)) return;
+    const double mod = cabs(lam);
+    if (!(mod > 0) || !isfinite(mod)) { inst->s.rk4_h_limit = 0; inst->s.rk4_lambda = 0; return; }
+    const double complex d = lam / mod;
+    double r;
+    if (creal(d) < -0.05) r = rk4_boundary(d);
+    else if (creal(d) < 0.05) r = 2.0 * sqrt(2.0); /* (nearly) undamped: the imaginary-axis limit */
+    else { inst->s.rk4_h_limit = 0; inst->s.rk4_lambda = mod; return; } /* a growing mode: no step is stable */
+    inst->s.rk4_h_limit = r / mod;
+    inst->s.rk4_lambda = mod;
+    const double lim = inst->s.rk4_h_limit, prev = inst->s.rk4_warned_limit;
+    if (h > lim && (prev == 0 || fabs(lim - prev) > 0.1 * prev)) {
+        char hb[32], lb[32];
+        fmt_time(hb, sizeof hb, h);
+        fmt_time(lb, sizeof lb, lim);
+        inst->s.rk4_warned_limit = lim;
+        if (prev == 0) {
+            inst->s.rk4_first_limit = lim;
+            inst->s.rk4_first_lambda = mod;
+            inst->s.rk4_first_time = t;
+        }
+        fmugen_log(inst, fmi2Warning, FMUGEN_LOG_STATUS_WARNING,
+                   "RK4: h = %s exceeds the RK4 stability limit ~ %s (largest |lambda| = %.3g 1/s, "
+                   "lambda = %.4g%+.4gi, at t = %.6g): the result will grow without bound; use fixed_step < %.3g "
+                   "or the implicit solver (solver.method = 2)",
+                   hb, lb, mod, creal(lam), cimag(lam), t, lim);
+    }
+}
+
+/* "h = 60 us exceeds the RK4 stability limit ~ 55.7 us found at t = 0, ..." (the
+ * first warning's numbers: those of a state not yet blown up), or the last
+ * estimate, or the plain hint */
+static void limit_text(const fmugen_instance *inst, double h, char *buf, size_t n)
+{
+    if (inst->s.rk4_first_limit > 0) {
+        char hb[32], lb[32];
+        fmt_time(hb, sizeof hb, h);
+        fmt_time(lb, sizeof lb, inst->s.rk4_first_limit);
+        snprintf(buf, n, "h = %s exceeds the RK4 stability limit ~ %s found at t = %.6g, largest |lambda| = %.3g "
+                 "1/s", hb, lb, inst->s.rk4_first_time, inst->s.rk4_first_lambda);
+    } else if (inst->s.rk4_h_limit > 0) {
+        char hb[32], lb[32];
+        fmt_time(hb, sizeof hb, h);
+        fmt_time(lb, sizeof lb, inst->s.rk4_h_limit);
+        snprintf(buf, n, "h = %s %s the RK4 stability limit ~ %s, largest |lambda| = %.3g 1/s", hb,
+                 h > inst->s.rk4_h_limit ? "exceeds" : "is within", lb, inst->s.rk4_lambda);
+    } else {
+        snprintf(buf, n, "the fixed step probably exceeds the stability limit");
+    }
+}
 
 int fmugen_solve_rk4(fmugen_ode *ode, double t_end, char *msg, size_t msgn)
 {
@@ -38,6 +208,7 @@ int fmugen_solve_rk4(fmugen_ode *ode, double t_end, char *msg, size_t msgn)
         const double t = t_start + (double)s * h;
         const double tn = (s + 1 == m) ? t_end : t_start + (double)(s + 1) * h;
         int rc = fmugen_ode_rhs(ode, t, x, k1);
+        if (rc == FMUGEN_OK && s == 0) check_stability_limit(ode, t, k1, h, w + 6 * n);
         if (rc == FMUGEN_OK) {
             for (int i = 0; i < n; i++) ys[i] = x[i] + 0.5 * h * k1[i];
             rc = fmugen_ode_rhs(ode, t + 0.5 * h, ys, k2);
@@ -50,21 +221,25 @@ int fmugen_solve_rk4(fmugen_ode *ode, double t_end, char *msg, size_t msgn)
             for (int i = 0; i < n; i++) ys[i] = x[i] + h * k3[i];
             rc = fmugen_ode_rhs(ode, tn, ys, k4);
         }
+        char lim[256];
+        if (rc != FMUGEN_OK) limit_text(inst, h, lim, sizeof lim);
         if (rc == FMUGEN_NOT_FINITE) {
             snprintf(msg, msgn, "RK4: the solution became non-finite in the step from t = %.17g with h = %.3g "
-                     "(the fixed step probably exceeds the stability limit)", t, h);
+                     "(%s)", t, h, lim);
             return FMUGEN_SOLVER_FAILED;
         }
         if (rc != FMUGEN_OK) {
             snprintf(msg, msgn, "RK4: model evaluation failed in the step from t = %.17g with h = %.3g: %s "
-                     "(the fixed step may exceed the stability limit)", t, h, fmugen_model_status_text(rc));
+                     "(%s)", t, h, fmugen_model_status_text(rc), lim);
             return FMUGEN_SOLVER_FAILED;
         }
         for (int i = 0; i < n; i++) xn[i] = x[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
         for (int i = 0; i < n; i++) {
             if (!isfinite(xn[i])) {
+                char lim[256];
+                limit_text(inst, h, lim, sizeof lim);
                 snprintf(msg, msgn, "RK4: state %s became non-finite in the step from t = %.17g with h = %.3g "
-                         "(the fixed step exceeds the stability limit)", inst->model->x_names[i], t, h);
+                         "(%s)", inst->model->x_names[i], t, h, lim);
                 return FMUGEN_SOLVER_FAILED;
             }
         }

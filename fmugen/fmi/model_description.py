@@ -113,6 +113,9 @@ def runtime_parameters() -> tuple:
                          None, "", "evaluations of the derivatives by the solver so far"),
         RuntimeParameter("solver.n_jac", d["FMUGEN_INT_N_JAC"], "Integer", "local", "discrete", "calculated",
                          None, "", "evaluations of the Jacobian by the solver so far"),
+        RuntimeParameter("solver.stiffness_detected", d["FMUGEN_INT_STIFFNESS_DETECTED"], "Integer", "local",
+                         "discrete", "calculated", None, "",
+                         "times Dormand-Prince found the problem stiff so far (use solver.method = 2 then)"),
     )
 
 
