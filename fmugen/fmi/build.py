@@ -147,6 +147,7 @@ def build_fmu(
     extra_cflags: Sequence[str] = (),
     keep_sources: bool = True,
     model_identifier: Optional[str] = None,
+    default_experiment: Optional[dict] = None,
 ) -> BuildResult:
     """Generate, compile and zip ``model`` into an FMI 2.0 FMU.
 
@@ -161,6 +162,7 @@ def build_fmu(
                          ``-O2 -fPIC -shared -Wall -Wextra -std=c99``
         keep_sources     put ``sources/`` into the FMU
         model_identifier defaults to a C identifier made from the model name
+        default_experiment  optional {startTime, stopTime, stepSize, tolerance}
 
     Returns a :class:`BuildResult` with the path, GUID, operation counts and
     timings.  Raises :class:`BuildError` (compiler command and its stderr in
@@ -181,7 +183,8 @@ def build_fmu(
 
     # generate with a placeholder GUID, hash C and XML together, substitute
     gen = generate_c(model, model_identifier=ident, guid=GUID_PLACEHOLDER)
-    xml = model_description_xml(model, GUID_PLACEHOLDER, ident, types, sources if keep_sources else ())
+    xml = model_description_xml(model, GUID_PLACEHOLDER, ident, types, sources if keep_sources else (),
+                                default_experiment=default_experiment)
     guid = deterministic_guid(gen.source, xml)
     c_src, xml = gen.source.replace(GUID_PLACEHOLDER, guid), xml.replace(GUID_PLACEHOLDER, guid)
     t_gen = time.perf_counter() - t0

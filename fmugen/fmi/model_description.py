@@ -276,8 +276,12 @@ def model_description_xml(
     model_identifier: str,
     fmi_types: Sequence[str] = ("me", "cs"),
     source_files: Sequence[str] = (),
+    default_experiment: Optional[dict] = None,
 ) -> str:
     """The text of modelDescription.xml.
+
+    ``default_experiment``: optional ``{startTime, stopTime, stepSize,
+    tolerance}`` (a scene's run), written as ``<DefaultExperiment>``.
 
     ``fmi_types``: "me" and/or "cs"; ``source_files``: the C files of the
     FMU's ``sources/`` to list under ``<SourceFiles>`` (FMI 2.0 sec. 2.2.6).
@@ -330,6 +334,8 @@ def model_description_xml(
     cats = ET.SubElement(root, "LogCategories")
     for name, desc in LOG_CATEGORIES:
         ET.SubElement(cats, "Category", name=name, description=desc)
+    if default_experiment:
+        _set(ET.SubElement(root, "DefaultExperiment"), **{k: float(v) for k, v in default_experiment.items()})
 
     mv = ET.SubElement(root, "ModelVariables")
     for v in layout.variables:

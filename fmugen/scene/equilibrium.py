@@ -1,0 +1,113 @@
+"""The scene's initial state: as given, or at rest where the scene holds still.
+
+``initial = "equilibrium"`` solves f(t0, x, u) = 0 on the monolithic model
+by Newton's method with its exact Jacobian.  Unknowns are all states except
+those an instance ``hold``s; the start values are the first guess.  Steps
+are least-squares solutions (minimum-norm corrections), so directions the
+equations leave free -- a joint whose position nothing fixes -- stay at
+their guesses.  The arm comes out held against gravity at its start pose
+(within the position error a P loop needs), each chain with the load
+pressure, spool position and current that produce that torque, and PI
+integrators with the value that makes the error vanish.
+
+No equilibrium -- Newton not converging, or converging outside a state's
+declared range -- is refused, naming the equation with the largest residual.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..codegen.evaluate import ModelEvaluator
+from .errors import SceneError
+
+
+@dataclass
+class InitialState:
+    model: object  # the monolithic SymbolicModel
+    values: dict  # state name "inst.var" -> value
+    mode: str = "given"
+    residual: float = 0.0  # max |f_i| * scale_i at the solution (equilibrium)
+    iterations: int = 0
+    changes: dict = field(default_factory=dict)  # state -> (guess, solution) for the report
+
+    def report(self) -> str:
+        if self.mode == "given":
+            return "initial state: as given (start values)"
+        lines = [f"initial state: equilibrium after {self.iterations} Newton iterations, "
+                 f"scaled residual {self.residual:.1e}"]
+        for k, (a, b) in self.changes.items():
+            lines.append(f"  {k}: {a:.6g} -> {b:.9g}")
+        return "\n".join(lines)
+
+
+def initial_state(scene) -> InitialState:
+    model = scene.monolithic_model()
+    x = np.array([v.start if v.start is not None else 0.0 for v in model.states], dtype=float)
+    values = {v.name: float(x[k]) for k, v in enumerate(model.states)}
+    if scene.spec.initial == "given":
+        return InitialState(model, values)
+    return solve_equilibrium(scene, model, x)
+
+
+def solve_equilibrium(scene, model, x0, max_iter: int = 60, tol: float = 1e-10) -> InitialState:
+    ev = ModelEvaluator(model)
+    t0 = scene.spec.start
+    u = np.array([v.start if v.start is not None else 0.0 for v in model.inputs], dtype=float)
+    names = [v.name for v in model.states]
+    held = {f"{inst}.{h}" for inst, ins in scene.spec.instances.items() for h in ins.hold}
+    free = np.array([k for k, n in enumerate(names) if n not in held], dtype=int)
+    # residual scale: a state's rate in units of its nominal per second
+    nom = np.array([abs(v.nominal) if v.nominal else 1.0 for v in model.states])
+    x = np.array(x0, dtype=float)
+    f = ev.f(t0, x, u)
+    r = np.max(np.abs(f) / nom) if len(f) else 0.0
+    it = 0
+    while r > tol and it < max_iter:
+        A = ev.jacobians(t0, x, u)[0][:, free]
+        dx = np.linalg.lstsq(A / nom[:, None], -f / nom, rcond=None)[0]
+        # damped step: halve until the residual falls
+        lam = 1.0
+        while lam > 1e-6:
+            xn = x.copy()
+            xn[free] += lam * dx
+            fn = ev.f(t0, xn, u)
+            rn = np.max(np.abs(fn) / nom) if np.all(np.isfinite(fn)) else np.inf
+            if rn < r:
+                break
+            lam /= 2
+        else:
+            break
+        x, f, r = xn, fn, rn
+        it += 1
+    where = f"{scene.src}: [scene] initial = \"equilibrium\""
+    if not np.isfinite(r) or r > tol:
+        worst = int(np.argmax(np.abs(f) / nom))
+        raise SceneError(f"{where}: no state of rest found ({it} Newton iterations, scaled residual {r:.2e}; "
+                         f"largest in der({names[worst]}) = {f[worst]:.3g}). The scene cannot hold still here -- "
+                         f"e.g. a load above an actuator's stall torque (P_s D_m) or a pose no actuator holds")
+    for v, val in zip(model.states, x):
+        if (v.min is not None and val < v.min) or (v.max is not None and val > v.max):
+            raise SceneError(f"{where}: the state of rest has {v.name} = {val:.6g}, outside its range "
+                             f"[{v.min}, {v.max}]: no valid equilibrium (e.g. a load above the stall torque)")
+    _check_hydraulics(scene, model, x, where)
+    values = {n: float(val) for n, val in zip(names, x)}
+    changes = {n: (float(a), float(b)) for n, a, b in zip(names, x0, x) if abs(a - b) > 1e-12 * max(1, abs(a))}
+    return InitialState(model, values, "equilibrium", float(r), it, changes)
+
+
+def _check_hydraulics(scene, model, x, where) -> None:
+    """Load pressures beyond the supply, or a spool beyond its stroke, are no state of rest."""
+    params = {v.name: v.start for v in model.parameters}
+    for k, v in enumerate(model.states):
+        inst, var = v.name.split(".", 1)
+        if var == "P_L":
+            ps = [params.get(f"{i}.P_s") for i in scene.spec.instances if params.get(f"{i}.P_s")]
+            P_s = max(ps) if ps else None
+            if P_s and abs(x[k]) >= P_s:
+                raise SceneError(f"{where}: holding still needs {v.name} = {x[k]:.4g} Pa, beyond the supply "
+                                 f"pressure {P_s:.4g} Pa: the load is above the actuator's stall torque")
+        if var == "x_v" and abs(x[k]) > 1.0:
+            raise SceneError(f"{where}: holding still needs {v.name} = {x[k]:.4g}, beyond the spool's stroke "
+                             f"(|x_v| <= 1): the load is above what the valve can hold")

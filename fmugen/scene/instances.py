@@ -1,0 +1,107 @@
+"""Scene instances -> SymbolicModels (robots, shipped components, user factories).
+
+A robot file becomes the arm's state-space model (free joints only when
+joints are locked); a component type calls the factory of
+:data:`fmugen.components.assembly.COMPONENT_TYPES` with its fidelity
+options, parameter set and overrides; a user factory is imported by its
+module path and called with the instance's options -- never evaluated text.
+``--set`` values for an instance land here: a parameter's value, or the
+start value of a state or an input.
+"""
+from __future__ import annotations
+
+import importlib
+from typing import Optional, Sequence
+
+from ..codegen.model import SymbolicModel
+from ..components.assembly import COMPONENT_TYPES
+from .errors import SceneError, did_you_mean
+from .file import InstanceSpec
+
+
+def instance_model(spec: InstanceSpec, default_set: str, src: str, sets: Optional[dict] = None,
+                   robot_outputs: Sequence[str] = ()) -> SymbolicModel:
+    """The instance's model with the scene's parameters and start values (nothing folded yet)."""
+    where = f"{src}: [instances.{spec.name}]"
+    sets = dict(sets or {})
+    overrides = dict(spec.parameters)
+    if spec.kind == "robot":
+        model = _robot_model(spec, where, robot_outputs)
+    else:
+        model = _component(spec, default_set, where, overrides)
+        params = {v.name for v in model.parameters}
+        late = {k: v for k, v in sets.items() if k in params}
+        if late:  # parameters change derived start values too: make the model again
+            for k, v in late.items():
+                overrides[k] = _float(v, f"--set {spec.name}.{k}")
+                sets.pop(k)
+            model = _component(spec, default_set, where, overrides)
+    values = dict(overrides) if spec.kind == "robot" else {}
+    values.update(spec.start)
+    for k, v in sets.items():
+        values[k] = _float(v, f"--set {spec.name}.{k}")
+    known = {v.name for g in (model.states, model.inputs, model.parameters) for v in g}
+    for k in values:
+        if k not in known:
+            raise SceneError(f"{where}: {k!r} is not a parameter, state or input of {spec.name}"
+                             f"{did_you_mean(k, known)}; parameters: "
+                             f"{', '.join(v.name for v in model.parameters) or '-'}")
+    model = model.with_starts(values)
+    missing = [v.name for v in model.parameters if v.start is None]
+    if missing:
+        raise SceneError(f"{where}: parameter(s) {', '.join(missing)} have no value; give them in "
+                         f"[instances.{spec.name}] parameters or on the command line, e.g. "
+                         f"--set {spec.name}.{missing[0]}=VALUE")
+    for h in spec.hold:
+        if h not in {v.name for v in model.states}:
+            raise SceneError(f"{where} hold: {h!r} is not a state of {spec.name}"
+                             f"{did_you_mean(h, [v.name for v in model.states])}")
+    return model
+
+
+def _float(v, where) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise SceneError(f"{where}: {v!r} must be a number")
+    return float(v)
+
+
+def _robot_model(spec: InstanceSpec, where: str, outputs) -> SymbolicModel:
+    import fmugen
+
+    try:
+        arm = fmugen.load_robot(spec.source, spec.options.get("formulation", "newton_euler"))
+        return arm.state_space_model(outputs=tuple(outputs), name=spec.name, locked=spec.locked or None)
+    except SceneError:
+        raise
+    except (ValueError, KeyError) as exc:
+        raise SceneError(f"{where}: {exc}") from None
+
+
+def _component(spec: InstanceSpec, default_set: str, where: str, overrides: dict) -> SymbolicModel:
+    if spec.kind == "factory":
+        module_name, func_name = spec.source.split(":", 1)
+        try:
+            factory = getattr(importlib.import_module(module_name), func_name)
+        except (ImportError, AttributeError) as exc:
+            raise SceneError(f"{where} factory = {spec.source!r}: cannot import: {exc}") from None
+        kwargs = dict(spec.options)
+        if spec.parameter_set is not None:
+            kwargs["parameter_set"] = spec.parameter_set
+        if overrides:
+            kwargs["overrides"] = overrides
+        try:
+            model = factory(name=spec.name, **kwargs)
+        except (ValueError, KeyError, TypeError) as exc:
+            raise SceneError(f"{where}: {spec.source}: {exc}") from None
+        if not isinstance(model, SymbolicModel):
+            raise SceneError(f"{where}: factory {spec.source} returned {type(model).__name__}, not a SymbolicModel")
+        return model
+    factory, _ = COMPONENT_TYPES[spec.source]
+    kwargs = dict(spec.options)
+    if spec.source != "table_trajectory":
+        kwargs["parameter_set"] = spec.parameter_set or default_set
+        kwargs["overrides"] = overrides
+    try:
+        return factory(name=spec.name, **kwargs)
+    except (ValueError, KeyError, TypeError, FileNotFoundError) as exc:
+        raise SceneError(f"{where}: {exc}") from None

@@ -1,0 +1,353 @@
+"""A scene: instances, connections, FMU groups, recorded outputs, one run.
+
+``Scene`` is the one description every later step reads: the build (one
+FMU per group, :mod:`fmugen.scene.build`), the co-simulation system
+(:meth:`Scene.cosim_system`), the monolithic model and the reference
+problem, the consistent initial state (:mod:`fmugen.scene.equilibrium`).
+
+Names: a scene variable is ``instance.variable`` (``arm.q[2]``,
+``valve1.x_v``).  Inside an FMU of one instance the instance's own names
+are kept (``q[2]``, ``theta``); an FMU of several instances uses
+``instance.variable``.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from functools import cached_property
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from ..codegen.model import SymbolicModel
+from ..components.connect import assemble, same_unit
+from .errors import SceneError, did_you_mean
+from .file import GroupSpec, SOLVERS, apply_sets, parse_scene, read_toml
+from .instances import instance_model
+from .settings import parse_sets
+
+#: instance kinds whose FMU integrates torques into motion: first in Gauss-Seidel
+_MECHANICAL_TYPES = {"joint_inertia", "dc_motor"}
+
+
+def load_scene(path, set=None) -> "Scene":
+    """Read a scene file; ``set`` holds ``--set`` overrides (``{"joint.J": 5}`` or ``["joint.J=5"]``)."""
+    path = Path(path)
+    sets = parse_sets(set)
+    data = read_toml(path)
+    deferred = apply_sets(data, sets, str(path))
+    spec = parse_scene(data, path)
+    return Scene(spec, deferred)
+
+
+class Scene:
+    def __init__(self, spec, deferred_sets: Optional[dict] = None):
+        self.spec = spec
+        self.src = str(spec.path)
+        self._sets = deferred_sets or {}
+        self.connections = self._checked_connections()
+        self._check_record()
+        self._check_loops()
+
+    # ------------------------------------------------------------------ basics
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    @cached_property
+    def base_models(self) -> dict:
+        """instance -> SymbolicModel with every robot output the scene may use."""
+        out = {}
+        for name, ins in self.spec.instances.items():
+            outs = ("p_ee", "qdd") if ins.kind == "robot" else ()
+            out[name] = instance_model(ins, self.spec.parameter_set, self.src, self._sets.get(name), outs)
+        return out
+
+    def _var(self, inst: str, var: str, where: str):
+        """(kind, Variable) of ``inst.var``: kind is "state", "input" or "output"."""
+        m = self.base_models[inst]
+        for kind, group in (("state", m.states), ("input", m.inputs), ("output", m.outputs)):
+            for v in group:
+                if v.name == var:
+                    return kind, v
+        names = [v.name for g in (m.states, m.inputs, m.outputs) for v in g]
+        raise SceneError(f"{where}: {inst} has no variable {var!r}{did_you_mean(var, names)}; "
+                         f"variables: {', '.join(names)}")
+
+    def _endpoint(self, text: str, where: str) -> tuple:
+        if "." not in text:
+            raise SceneError(f"{where}: {text!r} is not 'instance.variable'")
+        inst, var = text.split(".", 1)
+        if inst not in self.spec.instances:
+            raise SceneError(f"{where}: no instance {inst!r}{did_you_mean(inst, self.spec.instances)}; "
+                             f"instances: {', '.join(self.spec.instances)}")
+        return inst, var
+
+    def _checked_connections(self) -> list:
+        """[(source inst, var, target inst, input, factor)]: existence, direction, units, fan-in."""
+        out, seen = [], {}
+        for k, (s, t, factor) in enumerate(self.spec.connections):
+            where = f"{self.src}: [scene] connections[{k}] ({s} -> {t})"
+            si, sv = self._endpoint(s, where)
+            ti, tv = self._endpoint(t, where)
+            skind, svar = self._var(si, sv, where)
+            tkind, tvar = self._var(ti, tv, where)
+            if skind == "input":
+                raise SceneError(f"{where}: wrong direction: {s} is an input; a connection goes from a state "
+                                 f"or output to an input")
+            if tkind != "input":
+                raise SceneError(f"{where}: wrong direction: {t} is a {tkind}, not an input")
+            if factor is None and not same_unit(svar.unit, tvar.unit):
+                raise SceneError(f"{where}: unit mismatch: {s} is in [{svar.unit or '1'}] but {t} expects "
+                                 f"[{tvar.unit or '1'}]; state a conversion with "
+                                 f"{{ from = \"{s}\", to = \"{t}\", factor = ... }}")
+            if (ti, tv) in seen:
+                raise SceneError(f"{where}: input {t} is already driven by {seen[(ti, tv)]}")
+            seen[(ti, tv)] = s
+            out.append((si, sv, ti, tv, factor))
+        return out
+
+    def _check_record(self) -> None:
+        for r in self.spec.record:
+            inst, var = self._endpoint(r, f"{self.src}: [scene] record")
+            kind, _ = self._var(inst, var, f"{self.src}: [scene] record")
+            if kind == "input":
+                raise SceneError(f"{self.src}: [scene] record: {r} is an input; record the state or output "
+                                 f"that drives it")
+
+    def _check_loops(self) -> None:
+        """An algebraic loop: a cycle of outputs that depend directly on connected inputs."""
+        feeds = {}  # (inst, output) -> inputs of inst it depends on directly
+        for inst, m in self.base_models.items():
+            if not m.outputs:
+                continue
+            deps = m.dependencies()["outputs"]
+            by_sym = {v.symbol: v.name for v in m.inputs}
+            for v, d in zip(m.outputs, deps):
+                feeds[(inst, v.name)] = [by_sym[s] for s in d if s in by_sym]
+        driver = {(ti, tv): (si, sv) for si, sv, ti, tv, _ in self.connections}
+        state, path = {}, []
+
+        def visit(node):  # node: (inst, input)
+            if state.get(node) == 2:
+                return
+            if state.get(node) == 1:
+                loop = path[path.index(node):] + [node]
+                raise SceneError(f"{self.src}: algebraic loop through {' -> '.join(f'{a}.{b}' for a, b in loop)}: "
+                                 f"every output on it depends directly on its input; put a state in the loop")
+            state[node] = 1
+            path.append(node)
+            src = driver.get(node)
+            if src is not None:
+                for inp in feeds.get(src, []):
+                    visit((src[0], inp))
+            path.pop()
+            state[node] = 2
+
+        for node in driver:
+            visit(node)
+
+    # ------------------------------------------------------------------ groups
+    @property
+    def groups(self) -> dict:
+        """name -> GroupSpec; a monolithic scene is one group named after the scene."""
+        if self.spec.monolithic:
+            g = next(iter(self.spec.groups.values()), None)
+            return {self.name: GroupSpec(self.name, tuple(self.spec.instances), g.fmi_type if g else "cs",
+                                         g.solver if g else "rodas3", g.tolerance if g else None,
+                                         g.jacobian if g else "auto")}
+        return dict(self.spec.groups)
+
+    def group_of(self, inst: str) -> str:
+        for g in self.groups.values():
+            if inst in g.members:
+                return g.name
+        raise SceneError(f"{self.src}: instance {inst} is in no FMU")
+
+    def fmu_name(self, inst: str, var: str) -> str:
+        """The FMI name of scene variable ``inst.var`` inside its FMU."""
+        return var if len(self.groups[self.group_of(inst)].members) == 1 else f"{inst}.{var}"
+
+    def undriven_inputs(self, inst: str) -> list:
+        driven = {tv for _, _, ti, tv, _ in self.connections if ti == inst}
+        return [v for v in self.base_models[inst].inputs if v.name not in driven]
+
+    def read_variables(self, inst: str) -> list:
+        """Variables of ``inst`` that something reads: a connection or the record."""
+        names = [sv for si, sv, _, _, _ in self.connections if si == inst]
+        names += [r.split(".", 1)[1] for r in self.spec.record if r.split(".", 1)[0] == inst]
+        return list(dict.fromkeys(names))
+
+    def robot_outputs(self, inst: str, prune: bool = True) -> tuple:
+        ins = self.spec.instances[inst]
+        if not prune:
+            return ("p_ee", "qdd")
+        used = set(ins.options.get("outputs", ()))
+        for v in self.read_variables(inst):
+            stem = v.split("[", 1)[0]
+            if stem in ("p_ee", "qdd"):
+                used.add(stem)
+        return tuple(o for o in ("p_ee", "qdd") if o in used)
+
+    def needs_jacobian(self, group: GroupSpec) -> bool:
+        if group.jacobian != "auto":
+            return bool(group.jacobian)
+        scheme = str(self.spec.cosim.get("scheme", ""))
+        return group.fmi_type == "me" or group.solver == "rodas3" or scheme == "newton"
+
+    # ------------------------------------------------------------------ models
+    def instance_model(self, inst: str, prune: bool = True) -> tuple:
+        """(model, [what pruning removed]) for one instance, parameters fixed as the scene says."""
+        ins = self.spec.instances[inst]
+        removed = []
+        if ins.kind == "robot":
+            outs = self.robot_outputs(inst, prune)
+            m = instance_model(ins, self.spec.parameter_set, self.src, self._sets.get(inst), outs)
+            dropped = [o for o in ("p_ee", "qdd") if o not in outs]
+            if dropped:
+                removed.append(f"{inst}: outputs {', '.join(dropped)} (nothing reads them)")
+            if ins.locked:
+                removed.append(f"{inst}: joints {', '.join(f'q[{j}]' for j in sorted(ins.locked))} locked "
+                               f"({2 * len(ins.locked)} states)")
+        else:
+            m = self.base_models[inst]
+        fold = [v.name for v in m.parameters] if ins.fixed == "all" else list(ins.fixed)
+        unknown = [n for n in fold if n not in {v.name for v in m.parameters}]
+        if unknown:
+            raise SceneError(f"{self.src}: [instances.{inst}] fixed: {', '.join(unknown)} not parameters of {inst}"
+                             f"{did_you_mean(unknown[0], [v.name for v in m.parameters])}")
+        if prune:
+            zeros = [v.name for v in m.parameters if v.start == 0.0 and v.name not in fold]
+            if zeros:
+                removed.append(f"{inst}: terms of zero-valued parameters {', '.join(zeros)} (folded)")
+            fold += zeros
+        if fold:
+            m = m.with_parameters_folded(fold)
+        if prune:
+            undriven = {v.name: v.start if v.start is not None else 0.0 for v in self.undriven_inputs(inst)}
+            if undriven:
+                m = m.with_inputs_fixed(undriven)
+                removed.append(f"{inst}: inputs {', '.join(undriven)} (nothing drives them; fixed at their values)")
+        return m, removed
+
+    def group_model(self, group: str, prune: bool = True, x0: Optional[dict] = None) -> tuple:
+        """(SymbolicModel of the FMU, [what pruning removed]).  ``x0``: scene name -> initial value."""
+        g = self.groups[group]
+        members = list(g.members)
+        models, removed = {}, []
+        for inst in members:
+            models[inst], rem = self.instance_model(inst, prune)
+            removed += rem
+        inside = set(members)
+        exposed = []  # FMU-level names read from outside or recorded
+        for inst in members:
+            for v in self.read_variables(inst):
+                if any(si == inst and sv == v and ti not in inside for si, sv, ti, _, _ in self.connections) \
+                        or f"{inst}.{v}" in self.spec.record:
+                    exposed.append((inst, v))
+        if len(members) == 1:
+            inst = members[0]
+            m = models[inst]
+            if prune:
+                m = m.with_outputs([v for i, v in exposed if any(o.name == v for o in m.outputs)]
+                                   + [v for i, v in exposed if any(s.name == v for s in m.states)])
+            m = replace(m, name=group)
+        else:
+            internal = [(f"{si}.{sv}", f"{ti}.{tv}") + ((f,) if f is not None else ())
+                        for si, sv, ti, tv, f in self.connections if si in inside and ti in inside]
+            outputs = None
+            if prune:
+                outputs = [f"{i}.{v}" for i, v in exposed]
+            m = assemble(group, models, internal, outputs=outputs,
+                         description=self.spec.description or f"{group} of scene {self.name}",
+                         where=f"{self.src}: [fmus.{group}]")
+        if prune and not self.needs_jacobian(g):
+            m = m.without_jacobian()
+            removed.append(f"{group}: Jacobian program (explicit internal solver, no directional derivatives)")
+        if x0:
+            starts = {}
+            for inst in members:
+                for v in self.base_models[inst].states:
+                    key = f"{inst}.{v.name}"
+                    if key in x0:
+                        starts[self.fmu_name(inst, v.name)] = x0[key]
+            starts = {k: v for k, v in starts.items() if k in {s.name for s in m.states}}
+            m = m.with_starts(starts)
+        return m, removed
+
+    def monolithic_model(self) -> SymbolicModel:
+        """The whole scene as one model (names ``instance.variable``), nothing pruned or folded."""
+        models = {inst: self.base_models[inst] for inst in self.spec.instances}
+        conns = [(f"{si}.{sv}", f"{ti}.{tv}") + ((f,) if f is not None else ())
+                 for si, sv, ti, tv, f in self.connections]
+        outs = [r for r in self.spec.record]
+        states = {f"{i}.{v.name}" for i, m in models.items() for v in m.states}
+        outs = list(dict.fromkeys(outs + [f"{i}.{v.name}" for i, m in models.items() for v in m.states]))
+        outs = [o for o in outs if o in states or o in self.spec.record]
+        return assemble(self.name, models, conns, outputs=outs,
+                        description=self.spec.description or f"scene {self.name}", where=self.src)
+
+    # ------------------------------------------------------------------ initial state
+    @cached_property
+    def initial(self):
+        """:class:`fmugen.scene.equilibrium.InitialState` of the scene (given or at rest)."""
+        from .equilibrium import initial_state
+
+        return initial_state(self)
+
+    # ------------------------------------------------------------------ downstream
+    def build(self, out_dir, prune: bool = True, progress=None, use_cache: bool = True):
+        """One FMU per group into ``out_dir`` (see :func:`fmugen.scene.build.build_scene`)."""
+        from .build import build_scene
+
+        return build_scene(self, out_dir, prune=prune, progress=progress, use_cache=use_cache)
+
+    def gauss_seidel_order(self) -> tuple:
+        """Mechanical groups (arm, joint) first, then the rest in scene order."""
+        def mechanical(g):
+            return any(self.spec.instances[i].kind == "robot" or self.spec.instances[i].source in _MECHANICAL_TYPES
+                       for i in self.groups[g].members)
+        names = list(self.groups)
+        return tuple([g for g in names if mechanical(g)] + [g for g in names if not mechanical(g)])
+
+    def cosim_system(self, paths: dict):
+        """The :class:`fmugen.cosim.system.CosimSystem` of the built FMUs (``paths``: group -> .fmu)."""
+        from ..cosim.system import CosimSystem, Coupling, Recorded, Unit
+
+        x0 = self.initial.values
+        units = []
+        for gname, g in self.groups.items():
+            starts = {}
+            for inst in g.members:
+                for v in self.base_models[inst].states:
+                    key = f"{inst}.{v.name}"
+                    if key in x0:
+                        starts[self.fmu_name(inst, v.name)] = float(x0[key])
+            if g.fmi_type == "cs":
+                tol = g.tolerance or self.spec.tolerance
+                starts.update({"solver.method": SOLVERS[g.solver], "solver.rtol": tol, "solver.atol": tol})
+            units.append(Unit(gname, Path(paths[gname]), g.fmi_type, starts, self.needs_jacobian(g), g.members))
+        couplings = []
+        for si, sv, ti, tv, f in self.connections:
+            gs, gt = self.group_of(si), self.group_of(ti)
+            if gs != gt:
+                unit = self._var(ti, tv, self.src)[1].unit
+                couplings.append(Coupling((gs, self.fmu_name(si, sv)), (gt, self.fmu_name(ti, tv)),
+                                          1.0 if f is None else f, unit))
+        recorded = []
+        for r in self.spec.record:
+            inst, var = r.split(".", 1)
+            _, v = self._var(inst, var, self.src)
+            recorded.append(Recorded(r, self.group_of(inst), self.fmu_name(inst, var), v.unit))
+        return CosimSystem(self.name, tuple(units), tuple(couplings), tuple(recorded), self.spec.start,
+                           self.spec.stop, self.spec.step, self.gauss_seidel_order(), dict(self.spec.cosim))
+
+    def reference_problem(self):
+        """:class:`fmugen.cosim.system.ReferenceProblem`: the monolithic model from the scene's initial state."""
+        from ..cosim.system import ReferenceProblem
+
+        m = self.initial.model
+        x0 = np.array([self.initial.values[v.name] for v in m.states])
+        u = np.array([v.start if v.start is not None else 0.0 for v in m.inputs])
+        nominals = np.array([abs(v.nominal) if v.nominal else max(1.0, abs(x)) for v, x in zip(m.states, x0)])
+        return ReferenceProblem(m, x0, u, tuple(self.spec.record), self.spec.start, self.spec.stop, nominals)
