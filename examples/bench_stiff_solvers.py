@@ -56,7 +56,7 @@ def run(unzipdir, start, repeats):
 
 def solver_table(repeats=5, tolerances=(1e-4, 1e-6, 1e-8, 1e-10)):
     model = load_assembly(HERE / "single_joint_stiff.toml")
-    h_rk4 = stable_step(np.linalg.eigvals(linearise(model)), "rk4")
+    h_rk4 = stable_step(np.linalg.eigvals(linearise(model).A), "rk4")
     with tempfile.TemporaryDirectory() as tmp:
         fmu = build_fmu(model, Path(tmp) / "single_joint_stiff.fmu", fmi_type="cs").path
         unz = extract(str(fmu), str(Path(tmp) / "unz"))
@@ -95,7 +95,7 @@ def fidelity_table():
         m = single_joint("default", **opts)
         gen = generate_c(m).op_counts
         ops = {k: v.total.mul + v.total.add + v.total.div + v.total.n_calls for k, v in gen.items()}
-        h = stable_step(np.linalg.eigvals(linearise(m)), "rk4")
+        h = stable_step(np.linalg.eigvals(linearise(m).A), "rk4")
         th = reference(m, ts, T=0.6)
         full = th if full is None else full
         d = np.max(np.abs(th - full))

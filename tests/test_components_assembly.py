@@ -236,7 +236,7 @@ def test_robotr3_style_axis_tracks_ptp_and_linearises_as_by_hand():
     names = [v.name for v in axis.states]
     assert names == ["ctrl.x", "motor.theta", "motor.w", "motor.i", "motor.i_d"]
     perm = [4, 0, 1, 2, 3]  # hand order -> assembly order
-    assert np.allclose(linearise(axis), A[np.ix_(perm, perm)], rtol=1e-12, atol=1e-9)
+    assert np.allclose(linearise(axis).A, A[np.ix_(perm, perm)], rtol=1e-12, atol=1e-9)
     # nonlinear tracking of the 120 deg move
     ev = NumericModel(axis)
     # rtol 1e-6 (the tracking bound below is 0.02 rad): at 1e-8 scipy's Radau needs ~1e6

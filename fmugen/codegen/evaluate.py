@@ -6,21 +6,8 @@ functions: f(t, x, u), g(t, x, u) and the exact Jacobians A = df/dx,
 B = df/du, C = dg/dx, D = dg/du.  It works for the arm (mass-matrix solve)
 as for the small actuator components, without ever expanding closed forms.
 
-:func:`linearize` returns the model linearised at an operating point as a
-``control.StateSpace`` with named states, inputs and outputs (FMI names,
-with '.' replaced by '_', which python-control reserves):
-
-    dx = A dx + B du,   dy = C dx + D du
-
->>> import sympy as sp
->>> from fmugen.codegen.model import SymbolicModel, Variable
->>> x, u, k = sp.symbols("x u k", real=True)
->>> m = SymbolicModel.from_equations("lag", [Variable("x", x, start=0.0)], [Variable("u", u, start=0.0)],
-...                                  [Variable("k", k, start=2.0)], [-k * x + u],
-...                                  [Variable("y", sp.Symbol("y", real=True))], [x])
->>> sys = linearize(m)
->>> sys.A.tolist(), sys.B.tolist(), sys.C.tolist(), sys.D.tolist()
-([[-2.0]], [[1.0]], [[1.0]], [[0.0]])
+:func:`fmugen.control.linearize` (re-exported here as ``linearize``) turns
+the Jacobians into a ``control.StateSpace``.
 """
 from __future__ import annotations
 
@@ -93,30 +80,11 @@ class ModelEvaluator:
                      for M, (r, c) in zip(self._jac(*self._args(t, x, u)), shapes))
 
 
-def linearize(model: SymbolicModel, x=None, u=None, t: float = 0.0,
-              parameter_values: Optional[Mapping[str, float]] = None, outputs: str = "all"):
-    """``control.StateSpace`` of ``model`` linearised at (t, x, u).
+def __getattr__(name):
+    # linearize moved to fmugen.control.linearize (one linearisation function
+    # for arms, components and scenes); imported lazily, since it imports this module
+    if name == "linearize":
+        from ..control.linearize import linearize
 
-    ``outputs="all"`` gives the state-outputs (q, qd of an arm) followed by
-    the computed outputs; ``"computed"`` only the latter.  x and u default to
-    the start values.
-    """
-    import control
-
-    ev = ModelEvaluator(model, parameter_values)
-    A, B, C, D = ev.jacobians(t, x, u)
-    names_y = [v.name for v in model.outputs]
-    if outputs == "all":
-        sel = [i for i, v in enumerate(model.states) if v.output]
-        C = np.vstack([np.eye(model.nx)[sel], C])
-        D = np.vstack([np.zeros((len(sel), model.nu)), D])
-        names_y = [model.states[i].name for i in sel] + names_y
-    elif outputs != "computed":
-        raise ValueError(f"outputs must be 'all' or 'computed', not {outputs!r}")
-    # python-control reserves '.' in signal names (subsystem paths): valve.x_v -> valve_x_v
-    def sig(name):
-        return name.replace(".", "_")
-
-    return control.ss(A, B, C, D, states=[sig(v.name) for v in model.states],
-                      inputs=[sig(v.name) for v in model.inputs], outputs=[sig(n) for n in names_y],
-                      name=sig(model.name))
+        return linearize
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

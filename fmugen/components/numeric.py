@@ -1,6 +1,7 @@
 """Numeric evaluation of a SymbolicModel with numpy, and stable explicit steps.
 
-For tests, linearisation and benchmarks at the Python level.  Parameters
+For tests, linearisation and benchmarks at the Python level.  ``linearise``
+is :func:`fmugen.control.linearize` under its British name.  Parameters
 take their start values unless given.
 
 >>> from fmugen.components import joint_inertia
@@ -10,13 +11,11 @@ take their start values unless given.
 """
 from __future__ import annotations
 
-from typing import Mapping, Optional
-
 import numpy as np
-import sympy as sp
 
 from ..codegen.evaluate import ModelEvaluator
-from ..codegen.model import SymbolicModel
+# the one linearisation function (control.StateSpace; ``linearise(m).A`` is df/dx)
+from ..control.linearize import linearize as linearise  # noqa: F401
 
 
 class NumericModel(ModelEvaluator):
@@ -61,10 +60,3 @@ def stable_step(eigenvalues, method: str = "rk4") -> float:
             lo, hi = (mid, hi) if abs(R(mid * d)) <= 1 else (lo, mid)
         h = min(h, lo / abs(lam))
     return h
-
-
-def linearise(model: SymbolicModel, x=None, u=None, t: float = 0.0,
-              parameter_values: Optional[Mapping[str, float]] = None) -> np.ndarray:
-    """dfdx of the model (exact, from its Jacobian program) at (t, x, u)."""
-    ev = NumericModel(model, parameter_values)
-    return ev.dfdx(t, ev.x0 if x is None else x, u)

@@ -1,0 +1,24 @@
+"""Control design with python-control: operating points and linearisation.
+
+* :func:`trim` -- an operating point with any states, inputs and outputs held;
+* :func:`linearize` -- ``control.StateSpace`` at that point, exact Jacobians;
+* :func:`linearize_fmu` -- the same matrices from a built FMU through
+  ``fmi2GetDirectionalDerivative`` (what any other FMI tool would see);
+* :mod:`.names` -- the naming rule (FMI names; '.' written '_' for python-control).
+
+Every function takes a SymbolicModel or a scene (an object with
+``monolithic_model()``).
+"""
+from .names import signal_name
+from .linearize import linearize
+from .trim import OperatingPoint, TrimError, trim
+
+__all__ = ["trim", "linearize", "linearize_fmu", "OperatingPoint", "TrimError", "signal_name"]
+
+
+def __getattr__(name):
+    if name == "linearize_fmu":  # imports fmpy only when used
+        from .fmu import linearize_fmu
+
+        return linearize_fmu
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
