@@ -277,7 +277,7 @@ class Manipulator:
         params = tuple(
             Variable(p.name, p.symbol, p.unit, p.description, start=p.value) for p in robot.parameters
         )
-        return SymbolicModel(
+        model = SymbolicModel(
             name=name or robot.name,
             description=robot.description or f"{robot.name}: {n}-link manipulator",
             states=tuple(states),
@@ -295,6 +295,8 @@ class Manipulator:
             provenance=f"{robot.source or robot.name}; {formulation or self.formulation} formulation"
                        + (f"; joints {sorted(locked)} locked at {[locked[j] for j in sorted(locked)]}" if locked else ""),
         )
+        # locked joints leave rows of M and h nobody reads: drop their steps
+        return model.pruned() if locked else model
 
     def inverse_dynamics_model(self, formulation=None, name=None) -> SymbolicModel:
         """tau = ID(q, qd, qdd, w_ext) as a state-free model (e.g. for computed-torque control).
