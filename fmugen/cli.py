@@ -4,9 +4,13 @@
     fmugen build FILE.toml --fmi-type me|cs|both -o OUT.fmu [--outputs p_ee,qdd] [--fold all]
                            [--model inverse_dynamics]
     fmugen info FILE.toml
+    fmugen build SCENE.toml -o DIR [--set NAME=VALUE ...] [--no-prune] [--no-cache]
 
-FILE is a robot file (a ``[robot]`` table) or an assembly of actuator-chain
-components (an ``[assembly]`` table).
+FILE is a robot file (a ``[robot]`` table), an assembly of actuator-chain
+components (an ``[assembly]`` table) or a scene (a ``[scene]`` table: one FMU
+per group into DIR).  ``--set NAME=VALUE`` (repeatable) gives any parameter or
+start value (``--set m=1`` for a robot with a symbolic m, ``--set joint.J=5``
+in a scene).
 """
 from __future__ import annotations
 
@@ -18,36 +22,58 @@ from pathlib import Path
 
 
 def _kind(path: Path) -> str:
+    # user errors are InputFileError (a ValueError): main() prints one line and exits 2
+    from .errors import InputFileError, read_text_file
+
     try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
-    except FileNotFoundError:
-        raise SystemExit(f"fmugen: {path}: no such file") from None
+        data = tomllib.loads(read_text_file(path, "TOML file"))
     except tomllib.TOMLDecodeError as exc:
-        raise SystemExit(f"fmugen: {path}: not valid TOML: {exc}") from None
+        raise InputFileError(f"{path}: not valid TOML: {exc}") from None
     if "robot" in data:
         return "robot"
     if "assembly" in data:
         return "assembly"
-    raise SystemExit(f"fmugen: {path}: neither a robot file ([robot] table) nor an assembly ([assembly] table)")
+    if "scene" in data:
+        return "scene"
+    raise InputFileError(f"{path}: neither a robot file ([robot] table), an assembly ([assembly] table) "
+                         f"nor a scene ([scene] table)")
 
 
-def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler", model="forward_dynamics"):
-    """The SymbolicModel a file describes (robot or component assembly).
+def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler", model="forward_dynamics",
+                   sets=None):
+    """The SymbolicModel a file describes (robot, component assembly, or a scene's monolithic model).
 
     For a robot, ``model`` chooses the forward dynamics (states q, qd; input
-    tau) or the inverse dynamics (inputs q, qd, qdd; output tau).
+    tau) or the inverse dynamics (inputs q, qd, qdd; output tau).  ``sets``
+    ({name: value}) gives parameters and start values by name.
     """
-    if _kind(path) == "robot":
+    from .scene import SceneError, load_scene, parse_sets
+
+    sets = parse_sets(sets)
+    kind = _kind(path)
+    if kind == "scene":
+        return load_scene(path, set=sets).monolithic_model()
+    if kind == "robot":
         import fmugen
 
         arm = fmugen.load_robot(path, formulation)
-        if model == "inverse_dynamics":
-            return arm.inverse_dynamics_model()
-        return arm.state_space_model(outputs=outputs)
-    from .components.assembly import load_assembly
+        m = arm.inverse_dynamics_model() if model == "inverse_dynamics" else arm.state_space_model(outputs=outputs)
+    else:
+        from .components.assembly import load_assembly
 
-    return load_assembly(path)
+        m = load_assembly(path)
+    if sets:
+        names = {v.name for g in (m.states, m.inputs, m.parameters) for v in g}
+        from .scene.errors import did_you_mean
+
+        for k, v in sets.items():
+            if k not in names:
+                raise SceneError(f"{path}: --set {k}: no parameter, state or input named {k!r}"
+                                 f"{did_you_mean(k, names)}; parameters: {', '.join(p.name for p in m.parameters)}")
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise SceneError(f"{path}: --set {k}={v!r}: a number is needed")
+        m = m.with_starts(sets)
+    return m
 
 
 def _cmd_equations(args) -> int:
@@ -59,13 +85,28 @@ def _cmd_equations(args) -> int:
     return 0
 
 
+def _cmd_build_scene(args) -> int:
+    from .scene import load_scene
+
+    scene = load_scene(args.file, set=args.set)
+    out = Path(args.output) if args.output else Path(scene.name)
+    if out.suffix == ".fmu":
+        raise ValueError(f"{args.file}: a scene builds one FMU per group: -o names a folder, not {out}")
+    built = scene.build(out, prune=not args.no_prune, use_cache=not args.no_cache)
+    print(built.summary())
+    print(f"wrote {len(built.fmus)} FMU(s) into {out}")
+    return 0
+
+
 def _cmd_build(args) -> int:
     from .fmi.build import build_fmu
 
     path = Path(args.file)
+    if _kind(path) == "scene":
+        return _cmd_build_scene(args)
     t0 = time.perf_counter()
     outputs = tuple(o for o in args.outputs.split(",") if o)
-    model = symbolic_model(path, outputs, args.formulation, args.model)
+    model = symbolic_model(path, outputs, args.formulation, args.model, sets=args.set)
     t1 = time.perf_counter()
     fold = None if args.fold == "none" else ("all" if args.fold == "all" else args.fold.split(","))
     out = Path(args.output) if args.output else Path(f"{model.name}.fmu")
@@ -80,7 +121,20 @@ def _cmd_build(args) -> int:
 
 def _cmd_info(args) -> int:
     path = Path(args.file)
-    model = symbolic_model(path)
+    if _kind(path) == "scene":
+        from .scene import load_scene
+
+        scene = load_scene(path, set=args.set)
+        print(f"scene {scene.name}: {scene.spec.description}")
+        for g in scene.groups:
+            m, removed = scene.group_model(g)
+            print(f"FMU {g} ({', '.join(scene.groups[g].members)}): {m.nx} states; inputs "
+                  f"{', '.join(v.name for v in m.inputs) or '-'}; outputs "
+                  f"{', '.join([v.name for v in m.states if v.output] + [v.name for v in m.outputs]) or '-'}")
+            for r in removed:
+                print(f"    pruned: {r}")
+        return 0
+    model = symbolic_model(path, sets=args.set)
     print(f"{model.name}: {model.description}")
     for title, group in (("states", model.states), ("inputs", model.inputs), ("outputs", model.outputs),
                          ("parameters", model.parameters)):
@@ -106,7 +160,7 @@ def main(argv=None) -> int:
     p = sub.add_parser("build", help="derive, generate, compile and zip an FMI 2.0 FMU")
     p.add_argument("file", help="robot or assembly TOML file")
     p.add_argument("--fmi-type", default="both", choices=["me", "cs", "both"])
-    p.add_argument("-o", "--output", help="path of the .fmu (default: <model name>.fmu)")
+    p.add_argument("-o", "--output", help="path of the .fmu (default: <model name>.fmu); a folder for a scene")
     p.add_argument("--outputs", default="p_ee", help="robot outputs besides q, qd: p_ee, qdd (comma separated)")
     p.add_argument("--formulation", default="newton_euler", choices=["newton_euler", "lagrange"])
     p.add_argument("--model", default="forward_dynamics", choices=["forward_dynamics", "inverse_dynamics"],
@@ -114,17 +168,24 @@ def main(argv=None) -> int:
     p.add_argument("--fold", default="none",
                    help="fold parameters into constants: none (default), all, or comma-separated names")
     p.add_argument("--ops", action="store_true", help="print operation counts of the generated functions")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="set a parameter, start value or option (repeatable), e.g. m=1 or joint.J=5")
+    p.add_argument("--no-prune", action="store_true", help="scenes: keep what the scene does not need")
+    p.add_argument("--no-cache", action="store_true", help="scenes: rebuild every FMU")
     p.set_defaults(func=_cmd_build)
 
     p = sub.add_parser("info", help="list the variables a file's model will have")
     p.add_argument("file")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="set a parameter, start value or option (repeatable)")
     p.set_defaults(func=_cmd_info)
 
     args = parser.parse_args(argv)
     try:
         return args.func(args)
     except (ValueError, KeyError, OSError) as exc:  # clear message, no traceback, for user errors
-        print(f"fmugen: {exc}", file=sys.stderr)
+        text = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
+        print("fmugen: " + str(text).replace("\n", " "), file=sys.stderr)  # one line
         return 2
 
 
