@@ -27,6 +27,17 @@ def load_robot(path, formulation: str = "newton_euler") -> Manipulator:
     return Manipulator(load_robot_description(path), formulation)
 
 
+def load_scene(path, set=None):
+    """Read a scene file (a whole system: arm, actuator chains, controllers, paths).
+
+    ``set`` overrides values by name (``{"joint.J": 5}`` or ``["joint.J=5"]``);
+    see :mod:`fmugen.scene`.
+    """
+    from .scene import load_scene as _load
+
+    return _load(path, set=set)
+
+
 def build_fmu(model, output_path, fmi_type: str = "both", **options):
     """Generate, compile and package ``model`` (a SymbolicModel) as an FMU."""
     from .fmi.build import build_fmu as _build
@@ -36,4 +47,4 @@ def build_fmu(model, output_path, fmi_type: str = "both", **options):
 
 from .codegen.evaluate import ModelEvaluator, linearize  # noqa: E402
 
-__all__ = ["load_robot", "build_fmu", "linearize", "ModelEvaluator", "Manipulator", "FORMULATIONS", "__version__"]
+__all__ = ["load_robot", "load_scene", "build_fmu", "linearize", "ModelEvaluator", "Manipulator", "FORMULATIONS", "__version__"]
