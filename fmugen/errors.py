@@ -68,18 +68,17 @@ def check_finite(value: float, where: str) -> float:
     return v
 
 
-def check_identifier(name, where: str, what: str = "name") -> str:
+def check_identifier(name, where: str) -> str:
     """``name`` if it is an ASCII identifier of at most :data:`MAX_IDENTIFIER_LENGTH`
-    characters, else an :class:`InputFileError` at ``where`` saying why."""
+    characters, else an :class:`InputFileError` ``"<where> must be a C identifier ..."``."""
+    rule = (f"must be a C identifier (ASCII letters, digits and '_', starting with a letter; at most "
+            f"{MAX_IDENTIFIER_LENGTH} characters, as it also becomes a file name)")
     if not isinstance(name, str):
-        raise InputFileError(f"{where}: {what} must be a string, got {name!r}")
+        raise InputFileError(f"{where} {rule}, got {name!r}")
     if len(name) > MAX_IDENTIFIER_LENGTH:
-        raise InputFileError(f"{where}: {what} is {len(name)} characters long; at most "
-                             f"{MAX_IDENTIFIER_LENGTH} are allowed (it becomes a C identifier and a file name)")
+        raise InputFileError(f"{where} {rule}, got {len(name)} characters ({name[:20]!r}...)")
     if not IDENTIFIER_PATTERN.match(name):
         bad = sorted({c for c in name if not (c.isascii() and (c.isalnum() or c == "_"))})
-        why = (f"characters {''.join(bad)!r} are not allowed" if bad
-               else "it must start with a letter")
-        raise InputFileError(f"{where}: {what} {name!r} is not an identifier: {why} "
-                             f"(ASCII letters, digits and '_', starting with a letter)")
+        why = f"the characters {''.join(bad)!r} are not allowed" if bad else "it does not start with a letter"
+        raise InputFileError(f"{where} {rule}, got {name!r}: {why}")
     return name

@@ -104,8 +104,13 @@ def test_negative_mass_through_a_parameter(tmp_path):
 
 
 def test_zero_mass_needs_zero_inertia(tmp_path):
-    expect_error(write_robot(tmp_path, {"mass": "0"}), LINK2, "inertia", "zero mass but non-zero inertia")
-    robot = load_robot_description(write_robot(tmp_path, {"mass": "0", "inertia": "[0, 0, 0]"}))
+    # a zero mass must be declared (issue 9), and a declared massless link has no inertia
+    expect_error(write_robot(tmp_path, {"mass": "0"}), LINK2, "mass", "massless = true")
+    expect_error(write_robot(tmp_path, {"mass": "0", "massless": "true"}), LINK2, "inertia",
+                 "zero mass but non-zero inertia")
+    # ... and the joint it hangs on must still move something: here its rotor
+    robot = load_robot_description(write_robot(tmp_path, {"mass": "0", "massless": "true", "inertia": "[0, 0, 0]",
+                                                          "rotor_inertia": "0.01"}))
     assert robot.links[1].mass == 0
 
 

@@ -27,11 +27,13 @@ The lead's ``fmugen build FILE --fmi-type me|cs`` calls :func:`load_assembly`.
 """
 from __future__ import annotations
 
+import math
 import tomllib
 from pathlib import Path
 from typing import Union
 
 from ..codegen.model import SymbolicModel
+from ..errors import InputFileError, check_identifier, read_text_file
 from .amplifier import amplifier
 from .connect import assemble
 from .controller import controller
@@ -72,12 +74,9 @@ def load_assembly(path: Union[str, Path]) -> SymbolicModel:
     path = Path(path)
     src = str(path)
     try:
-        with open(path, "rb") as f:
-            data = tomllib.load(f)
-    except FileNotFoundError:
-        raise FileNotFoundError(f"assembly file not found: {path}") from None
+        data = tomllib.loads(read_text_file(path, "assembly file"))
     except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"{src}: not valid TOML: {exc}") from None
+        raise InputFileError(f"{src}: not valid TOML: {exc}") from None
     extra = sorted(set(data) - {"assembly", "components"})
     if extra:
         raise ValueError(f"{src}: unknown top-level key(s) {', '.join(extra)}; expected [assembly] and [components.*]")
@@ -87,9 +86,8 @@ def load_assembly(path: Union[str, Path]) -> SymbolicModel:
     bad = sorted(set(asm) - _ASSEMBLY_KEYS)
     if bad:
         raise ValueError(f"{src}: [assembly] has unknown key(s) {', '.join(bad)}; known: {', '.join(sorted(_ASSEMBLY_KEYS))}")
-    name = asm.get("name")
-    if not isinstance(name, str) or not name.isidentifier():
-        raise ValueError(f"{src}: [assembly] name must be a C identifier string, got {name!r}")
+    # the name becomes the model identifier, C identifiers and file names: ASCII, bounded
+    name = check_identifier(asm.get("name"), f"{src}: [assembly] name")
     pset_name = asm.get("parameter_set", "default")
     if not isinstance(pset_name, str):
         raise ValueError(f"{src}: [assembly] parameter_set must be a string")
@@ -110,6 +108,8 @@ def load_assembly(path: Union[str, Path]) -> SymbolicModel:
     components = {}
     for inst, spec in comps_tab.items():
         where = f"[components.{inst}]"
+        # instance names prefix every variable name ("valve.x_v") and C identifier
+        check_identifier(inst, f"{src}: {where}: the instance name")
         if not isinstance(spec, dict):
             raise ValueError(f"{src}: {where} must be a table")
         typ = spec.get("type")
@@ -136,16 +136,21 @@ def load_assembly(path: Union[str, Path]) -> SymbolicModel:
                 pset = pset_of(spec["parameter_set"], f"{where} parameter_set")
             kwargs["parameter_set"] = pset
             over = spec.get("parameters", {})
-            if not isinstance(over, dict) or any(isinstance(v, bool) or not isinstance(v, (int, float))
-                                                 for v in over.values()):
-                raise ValueError(f"{src}: {where}.parameters must be a table of numbers")
+            if not isinstance(over, dict):
+                raise InputFileError(f"{src}: {where}.parameters must be a table of numbers")
+            for key, val in over.items():
+                if isinstance(val, bool) or not isinstance(val, (int, float)):
+                    raise InputFileError(f"{src}: {where}.parameters: {key} = {val!r} is not a number")
+                if not math.isfinite(val):  # TOML has nan and inf literals
+                    raise InputFileError(f"{src}: {where}.parameters: {key}: non-finite value {val!r}")
             kwargs["overrides"] = over
         elif "parameters" in spec or "parameter_set" in spec:
             raise ValueError(f"{src}: {where}: a table_trajectory has no parameters (its knots are data)")
         try:
             components[inst] = factory(name=inst, **kwargs)
         except (ValueError, KeyError, TypeError) as exc:
-            raise ValueError(f"{src}: {where}: {exc}") from None
+            text = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
+            raise InputFileError(f"{src}: {where}: {text}") from None
     conns = asm.get("connections", [])
     if not isinstance(conns, list):
         raise ValueError(f"{src}: [assembly] connections must be a list of [source, target] pairs")

@@ -21,17 +21,23 @@ from typing import Mapping, Optional, Sequence
 import sympy as sp
 
 from ..codegen.model import Variable
-from .parameters import ParameterSet, load_parameter_set
+from ..errors import FmugenError
+from .parameters import ParameterSet, load_parameter_set, value_problem
 
 #: the model time, the ``t`` argument of the generated C functions
 TIME = sp.Symbol("t", real=True)
 
 
 def var(name: str, unit: str = "", description: str = "", start: Optional[float] = None,
-        output: bool = False, nominal: Optional[float] = None, symbol: Optional[str] = None) -> Variable:
-    """A Variable whose sympy symbol is the (C-safe) name itself."""
+        output: bool = False, nominal: Optional[float] = None, symbol: Optional[str] = None,
+        min: Optional[float] = None, max: Optional[float] = None) -> Variable:
+    """A Variable whose sympy symbol is the (C-safe) name itself.
+
+    ``min``/``max``: the validity range of the equations (the FMU reports a
+    value outside it after a Co-Simulation step; modelDescription.xml carries
+    it as the variable's min/max)."""
     return Variable(name=name, symbol=sp.Symbol(symbol or name, real=True), unit=unit,
-                    description=description, start=start, output=output, nominal=nominal)
+                    description=description, start=start, output=output, nominal=nominal, min=min, max=max)
 
 
 def parameters(family: str, specs: Sequence[tuple], used: Sequence[str], parameter_set="default",
@@ -51,8 +57,12 @@ def parameters(family: str, specs: Sequence[tuple], used: Sequence[str], paramet
     known = {s[0] for s in specs}
     unknown = sorted(set(overrides) - known)
     if unknown:
-        raise ValueError(f"{family}: unknown parameter override(s) {', '.join(unknown)}; "
-                         f"known: {', '.join(sorted(known))}")
+        raise FmugenError(f"{family}: unknown parameter override(s) {', '.join(unknown)}; "
+                          f"known: {', '.join(sorted(known))}")
+    for key, val in overrides.items():
+        problem = value_problem(family, key, val)
+        if problem:
+            raise FmugenError(f"{family}: parameter override {key} = {val!r} {problem}")
     pset.check_section(family, known)
     out = {}
     for name, unit, description in specs:

@@ -20,6 +20,7 @@ speed input stand for D_m, w or A_p, v.  Equations (actuator-chain.md, eqs.
 from __future__ import annotations
 
 from ..codegen.model import SymbolicModel
+from ..errors import FmugenError
 from .base import parameters, var
 from .parameters import ParameterSet, load_parameter_set
 from .smooth import smooth_lower_bound
@@ -34,7 +35,20 @@ SPECS = (
     ("C_em", "m3/(s.Pa)", "external leakage coefficient"),
     ("P_cav", "Pa", "cavitation floor of the chamber pressures"),
     ("eps_P", "Pa", "width of the smooth band at the cavitation floor"),
+    ("stroke", "rad", "largest |theta| (|s| in m, linear kind) the joint reaches; two-chamber form: "
+                      "V_t/2 - D*stroke must stay > 0 (checked, not a model parameter)"),
 )
+
+
+def _supply_pressure(pset) -> float | None:
+    """P_s of the parameter set's [servo_valve] table (the validity range of
+    the pressures), or None when the set has none."""
+    return pset.sections.get("servo_valve", {}).get("P_s")
+
+
+def chamber_stroke_limit(V_t: float, D: float) -> float:
+    """|theta| [rad] (|s| [m]) at which a chamber volume V_t/2 - D |theta| reaches zero."""
+    return V_t / (2 * D)
 
 
 def hydraulic_actuator(form: str = "load_pressure", kind: str = "rotary", P_s: float = None,
@@ -51,32 +65,52 @@ def hydraulic_actuator(form: str = "load_pressure", kind: str = "rotary", P_s: f
     D_name = "D_m" if kind == "rotary" else "A_p"
     used = [D_name, "V_t", "beta_e"] + (["C_tm"] if form == "load_pressure" else ["C_im", "C_em", "P_cav", "eps_P"])
     p = parameters("hydraulic_actuator", SPECS, used, parameter_set, overrides)
+    pset = parameter_set if isinstance(parameter_set, ParameterSet) else load_parameter_set(parameter_set)
     s = {k: v.symbol for k, v in p.items()}
     D = s[D_name]
+    P_supply = P_s if P_s is not None else _supply_pressure(pset)
+    pos_range = (None, None)
+    if form == "two_chamber":
+        # the chamber volumes V_t/2 -+ D theta must stay positive over the joint's range
+        V_t, D_val = p["V_t"].start, p[D_name].start
+        limit = chamber_stroke_limit(V_t, D_val)
+        stroke = (overrides or {}).get("stroke", pset.sections.get("hydraulic_actuator", {}).get("stroke"))
+        unit = "rad" if kind == "rotary" else "m"
+        if stroke is not None and stroke >= limit:
+            raise FmugenError(
+                f"hydraulic_actuator {name!r}: stroke = {stroke!r} {unit} is not compatible with the chamber "
+                f"volumes: V_t/2 - {D_name}*stroke = {V_t / 2 - D_val * stroke:.4g} m3 <= 0 (V_t = {V_t!r} m3, "
+                f"{D_name} = {D_val!r}); the volumes allow |position| < {limit:.6g} {unit}: reduce the stroke "
+                f"or enlarge V_t")
+        bound = stroke if stroke is not None else limit
+        pos_range = (-bound, bound)
     if kind == "rotary":
-        pos = var("theta", "rad", "joint angle", start=0.0)
+        pos = var("theta", "rad", "joint angle", start=0.0, min=pos_range[0], max=pos_range[1])
         speed = var("w", "rad/s", "joint speed", start=0.0)
         effort = var("tau", "N.m", "actuator torque on the joint")
     else:
-        pos = var("s", "m", "piston position", start=0.0)
+        pos = var("s", "m", "piston position", start=0.0, min=pos_range[0], max=pos_range[1])
         speed = var("v", "m/s", "piston speed", start=0.0)
         effort = var("F", "N", "actuator force on the joint")
     w = speed.symbol
     if form == "load_pressure":
         Q_L = var("Q_L", "m3/s", "load flow from the valve", start=0.0)
-        P_L = var("P_L", "Pa", "load pressure P_A - P_B", start=0.0, output=True, nominal=1e6)
+        # |P_L| <= P_s: an ideal valve cannot make more; beyond it the model is outside its range
+        P_L = var("P_L", "Pa", "load pressure P_A - P_B", start=0.0, output=True, nominal=1e6,
+                  min=None if P_supply is None else -P_supply, max=P_supply)
         der = 4 * s["beta_e"] / s["V_t"] * (Q_L.symbol - D * w - s["C_tm"] * P_L.symbol)
         return SymbolicModel.from_equations(
             name, [P_L], [Q_L, speed], list(p.values()), [der], [effort], [D * P_L.symbol],
             description=f"hydraulic {kind} actuator, load-pressure form",
             provenance="actuator-chain.md eqs. 5-6 (Merritt 1967 sec. 6.2)")
     if P_s is None:
-        pset = parameter_set if isinstance(parameter_set, ParameterSet) else load_parameter_set(parameter_set)
         P_s = pset.value("servo_valve", "P_s")
     Q_A = var("Q_A", "m3/s", "flow into chamber A", start=0.0)
     Q_B = var("Q_B", "m3/s", "flow out of chamber B", start=0.0)
-    P_A = var("P_A", "Pa", "pressure state of chamber A", start=P_s / 2, nominal=1e7)
-    P_B = var("P_B", "Pa", "pressure state of chamber B", start=P_s / 2, nominal=1e7)
+    # valid between the vapour pressure (cavitation floor) and the supply
+    P_cav = p["P_cav"].start
+    P_A = var("P_A", "Pa", "pressure state of chamber A", start=P_s / 2, nominal=1e7, min=P_cav, max=P_s)
+    P_B = var("P_B", "Pa", "pressure state of chamber B", start=P_s / 2, nominal=1e7, min=P_cav, max=P_s)
     V_A = s["V_t"] / 2 + D * pos.symbol
     V_B = s["V_t"] / 2 - D * pos.symbol
     leak = s["C_im"] * (P_A.symbol - P_B.symbol)

@@ -66,10 +66,11 @@ def servo_valve(order: int = 2, stroke_limit: bool = False, flow: str = "load_pr
     states, ders, outs, out_exprs = [], [], [], []
     if order == 0:
         x = K_sv * i.symbol
-        outs.append(var("x_v", "1", "normalised spool stroke"))
+        # |x_v| <= 1: the spool cannot move beyond its stroke (validity range)
+        outs.append(var("x_v", "1", "normalised spool stroke", min=-1.0, max=1.0))
         out_exprs.append(x)
     else:
-        xv = var("x_v", "1", "normalised spool stroke", start=0.0, output=True, nominal=0.1)
+        xv = var("x_v", "1", "normalised spool stroke", start=0.0, output=True, nominal=0.1, min=-1.0, max=1.0)
         states.append(xv)
         x = xv.symbol
         if order == 1:

@@ -23,10 +23,16 @@ from __future__ import annotations
 import numpy as np
 import sympy as sp
 
+from ..errors import InputFileError
+
 INERTIA_RTOL = 1e-6
+#: off-diagonal pairs of an inertia matrix in a file are equal when they agree
+#: to this fraction of the largest entry (a tensor rotated in floating point
+#: is symmetric to ~1e-16 only; data typed twice agree to every digit)
+SYMMETRY_RTOL = 1e-9
 
 
-class RobotFileError(ValueError):
+class RobotFileError(InputFileError):
     """A robot file (or description) is malformed or physically impossible."""
 
 
@@ -78,10 +84,27 @@ def check_nonnegative(expr, values: dict, location: str, what: str, unit: str) -
         raise RobotFileError(f"{location}: negative {what} {v:g} {unit}")
 
 
-def check_symmetric(rows, location: str) -> None:
-    """Refuse a 3x3 matrix whose transpose differs (symbolically) from it."""
+def check_symmetric(rows, location: str, values: dict | None = None, rtol: float = SYMMETRY_RTOL) -> None:
+    """Refuse a 3x3 matrix whose transpose differs from it.
+
+    Numeric entries are compared with the relative tolerance ``rtol`` of the
+    matrix's largest entry: a tensor rotated in floating point is symmetric
+    only to the last bit, and that is symmetric.  Symbolic entries must agree
+    symbolically.  The message prints the numbers with all their digits.
+    """
+    nums = [[numeric(rows[i][j], values or {}) for j in range(3)] for i in range(3)]
+    known = [abs(v) for row in nums for v in row if v is not None]
+    scale = max(known) if known else 0.0
     for i in range(3):
         for j in range(i + 1, 3):
+            a, b = nums[i][j], nums[j][i]
+            if a is not None and b is not None:
+                if abs(a - b) <= rtol * scale:
+                    continue
+                raise RobotFileError(
+                    f"{location}: inertia matrix is not symmetric: [{i}][{j}] = {a!r} but [{j}][{i}] = {b!r} "
+                    f"(differ by {abs(a - b):.3g}, more than {rtol:g} of the largest entry {scale!r})"
+                )
             if sp.simplify(rows[i][j] - rows[j][i]) != 0:
                 raise RobotFileError(
                     f"{location}: inertia matrix is not symmetric: "
@@ -117,3 +140,85 @@ def inertia_problems(mass: float, inertia_com: np.ndarray, rtol: float = INERTIA
             )
     return problems
 
+
+
+# --------------------------------------------------------------------------
+# well-posedness of the whole chain: M(q) positive definite
+# --------------------------------------------------------------------------
+def _rot_x(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[1, 0, 0, 0], [0, c, -s, 0], [0, s, c, 0], [0, 0, 0, 1.0]])
+
+
+def _rot_z(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
+
+
+def _trans(x, z):
+    T = np.eye(4)
+    T[0, 3], T[2, 3] = x, z
+    return T
+
+
+def mass_matrix_numeric(links: list, q, modified: bool, payload=None) -> np.ndarray:
+    """M(q) of a chain from numbers only, by Jacobians (N x N, SI units).
+
+    ``links``: dicts with ``prismatic, a, alpha, d, theta, mass, com (3,),
+    inertia (3x3 about the COM, link-frame axes), rotor``; ``payload``:
+    ``(mass, com)`` in the last frame or None.
+    M = sum_i m_i Jv_i^T Jv_i + Jw_i^T R_i I_i R_i^T Jw_i, plus the rotor
+    inertias on the diagonal.  A check, independent of the symbolic
+    derivation: it is used only to decide whether M can be singular.
+    """
+    n = len(links)
+    T = np.eye(4)
+    axes, origins, frames = [], [], []
+    for i, L in enumerate(links):
+        theta = L["theta"] + (0.0 if L["prismatic"] else q[i])
+        d = L["d"] + (q[i] if L["prismatic"] else 0.0)
+        if modified:  # Rx(alpha_{i-1}) Tx(a_{i-1}) Rz(theta_i) Tz(d_i); joint axis z_i
+            T = T @ _rot_x(L["alpha"]) @ _trans(L["a"], 0.0) @ _rot_z(theta)
+            axes.append(T[:3, 2].copy())
+            origins.append(T[:3, 3].copy())
+            T = T @ _trans(0.0, d)
+        else:  # Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i); joint axis z_{i-1}
+            axes.append(T[:3, 2].copy())
+            origins.append(T[:3, 3].copy())
+            T = T @ _rot_z(theta) @ _trans(0.0, d) @ _trans(L["a"], 0.0) @ _rot_x(L["alpha"])
+        frames.append(T.copy())
+    M = np.zeros((n, n))
+    bodies = [(i, L["mass"], np.asarray(L["com"], float), np.asarray(L["inertia"], float))
+              for i, L in enumerate(links)]
+    if payload is not None:
+        bodies.append((n - 1, payload[0], np.asarray(payload[1], float), np.zeros((3, 3))))
+    for i, m, com, I in bodies:
+        R, p = frames[i][:3, :3], frames[i][:3, :3] @ com + frames[i][:3, 3]
+        Jv, Jw = np.zeros((3, n)), np.zeros((3, n))
+        for j in range(i + 1):
+            if links[j]["prismatic"]:
+                Jv[:, j] = axes[j]
+            else:
+                Jv[:, j] = np.cross(axes[j], p - origins[j])
+                Jw[:, j] = axes[j]
+        M += m * Jv.T @ Jv + Jw.T @ (R @ I @ R.T) @ Jw
+    M += np.diag([L["rotor"] for L in links])
+    return M
+
+
+def singular_joint(links: list, modified: bool, payload=None, rtol: float = 1e-10, seed: int = 9):
+    """``(joint index, q)`` at which M(q) is singular, or None.
+
+    M is evaluated at q = 0 and at three seeded random configurations (a
+    chain whose M is singular everywhere -- a joint that moves no mass, no
+    inertia about its axis and no rotor -- is found at any of them).  The
+    joint reported is the last one whose column is (nearly) dependent.
+    """
+    n = len(links)
+    rng = np.random.default_rng(seed)
+    for q in [np.zeros(n)] + [rng.uniform(-np.pi, np.pi, n) for _ in range(3)]:
+        M = mass_matrix_numeric(links, q, modified, payload)
+        lam, vec = np.linalg.eigh(0.5 * (M + M.T))
+        if lam[0] <= rtol * max(lam[-1], 1e-300):
+            return int(np.argmax(np.abs(vec[:, 0]))), q
+    return None

@@ -32,8 +32,11 @@ import builtins
 import keyword
 import math
 import re
+import sys
 
 import sympy as sp
+
+from ..errors import FmugenError
 
 FUNCTIONS = {
     "sqrt": sp.sqrt,
@@ -64,11 +67,16 @@ _BUILTINS = frozenset(n for n in dir(builtins) if not n.startswith("_")) | {"__i
 _MODEL_VARIABLE = re.compile(r"(q|qd|qdd|tau|qdd_out|p_ee)_[0-9]+\Z|(f_ext|t_ext)_[0-9]+_[xyz]\Z")
 
 MAX_TEXT_LENGTH = 2000  # a robot quantity longer than this is not a quantity
+# Bounds on the parsed tree, checked before anything recursive (the builder,
+# sympy) sees it: 999 '+' terms or 1500 nested unary minus signs fit in 2000
+# characters but would exhaust Python's recursion limit downstream.
+MAX_DEPTH = 50  # nesting of operators, calls and parentheses
+MAX_NODES = 200  # operators, operands and calls in one quantity
 MAX_EXPONENT = 64  # refuse 10**10**10 and friends before sympy tries them
 ANGLE_SNAP_TOLERANCE = 1e-12  # rad
 
 
-class ExpressionError(ValueError):
+class ExpressionError(FmugenError):
     """A quantity's text is not an accepted expression (message says why)."""
 
 
@@ -113,8 +121,38 @@ def parse_expression(text: str) -> sp.Expr:
     try:
         tree = ast.parse(text.strip(), mode="eval")
     except SyntaxError as exc:
-        raise ExpressionError(f"syntax error in {text!r}: {exc.msg}") from None
+        if "too many nested" in str(exc.msg):  # the parser's own limit (200 parentheses)
+            raise ExpressionError(f"expression nested too deeply (more than {MAX_DEPTH} levels) "
+                                  f"in {_short(text)}") from None
+        raise ExpressionError(f"syntax error in {_short(text)}: {exc.msg}") from None
+    except (RecursionError, MemoryError):  # the parser's own nesting limit
+        raise ExpressionError(f"expression nested too deeply (more than {MAX_DEPTH} levels) "
+                              f"in {_short(text)}") from None
+    _check_size(tree.body, text)
     return _Builder(text.strip()).build(tree.body)
+
+
+def _short(text: str, n: int = 60) -> str:
+    """``repr`` of ``text``, cut to ``n`` characters for messages."""
+    return repr(text) if len(text) <= n else repr(text[:n]) + f"... ({len(text)} characters)"
+
+
+def _check_size(root, text: str) -> None:
+    """Refuse a tree deeper than :data:`MAX_DEPTH` or larger than
+    :data:`MAX_NODES` (walked with an explicit stack, so never a RecursionError)."""
+    stack, nodes = [(root, 1)], 0
+    while stack:
+        node, depth = stack.pop()
+        if isinstance(node, (ast.operator, ast.unaryop, ast.expr_context)):
+            continue
+        nodes += 1
+        if depth > MAX_DEPTH:
+            raise ExpressionError(f"expression nested too deeply (more than {MAX_DEPTH} levels of "
+                                  f"operators, calls or parentheses) in {_short(text)}")
+        if nodes > MAX_NODES:
+            raise ExpressionError(f"expression too long: more than {MAX_NODES} terms, operators and "
+                                  f"calls in {_short(text)}; name intermediate quantities in [parameters]")
+        stack.extend((child, depth + 1) for child in ast.iter_child_nodes(node))
 
 
 def quantity(value) -> sp.Expr:
@@ -139,9 +177,25 @@ def quantity(value) -> sp.Expr:
         )
     if expr.has(sp.zoo, sp.oo, -sp.oo, sp.nan):
         raise ExpressionError(f"non-finite value {value!r}")
-    if not expr.free_symbols and not expr.is_real:
-        raise ExpressionError(f"{value!r} is not a real number")
+    if not expr.free_symbols:
+        if not expr.is_real:
+            raise ExpressionError(f"{value!r} is not a real number")
+        # exact sympy numbers such as 1e308*10 or exp(1000) are finite
+        # symbolically but not as doubles, which is what the C code computes
+        check_double(expr, repr(value))
     return expr
+
+
+def check_double(expr, text: str) -> float:
+    """``float(expr)``, or an :class:`ExpressionError` when that is not a finite double."""
+    try:
+        v = float(expr)
+    except (OverflowError, TypeError, ValueError):
+        v = math.inf
+    if not math.isfinite(v):
+        raise ExpressionError(f"{text} is not a finite double-precision number "
+                              f"(|value| > {sys.float_info.max:.3g} or undefined)")
+    return v
 
 
 def snap_angle(expr: sp.Expr) -> sp.Expr:

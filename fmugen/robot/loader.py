@@ -38,6 +38,7 @@ import sympy as sp
 
 from .checks import (
     RobotFileError,
+    singular_joint,
     UnrealisableInertiaWarning,
     check_nonnegative,
     check_symmetric,
@@ -47,7 +48,8 @@ from .checks import (
     where,
 )
 from .description import MODIFIED, PRISMATIC, REVOLUTE, STANDARD, Link, Parameter, Payload, Robot
-from .expressions import ExpressionError, NAME_PATTERN, quantity, snap_angle, symbol_name_problem
+from .expressions import ExpressionError, NAME_PATTERN, check_double, quantity, snap_angle, symbol_name_problem
+from ..errors import MAX_IDENTIFIER_LENGTH, InputFileError, read_text_file
 
 TOP_KEYS = {"robot": True, "parameters": False, "links": True, "payload": False}
 ROBOT_KEYS = {
@@ -74,6 +76,7 @@ LINK_KEYS = {
     "damping": False,
     "external_wrench": False,
     "allow_unrealisable_inertia": False,
+    "massless": False,
 }
 PAYLOAD_KEYS = {"mass": True, "com": True}
 PARAMETER_KEYS = {"value": False, "unit": False, "description": False}
@@ -91,7 +94,11 @@ def load_robot_description(path) -> Robot:
     unrealisable inertia the file explicitly allows.
     """
     path = Path(path)
-    return robot_from_toml(path.read_text(encoding="utf-8"), source=str(path))
+    try:
+        text = read_text_file(path, "robot file")
+    except InputFileError as exc:
+        raise RobotFileError(str(exc)) from None
+    return robot_from_toml(text, source=str(path))
 
 
 def robot_from_toml(text: str, source: str = "<string>") -> Robot:
@@ -120,10 +127,10 @@ class _Reader:
         head = self._table(data["robot"], "[robot]")
         self._keys(head, ROBOT_KEYS, where(self.file, field="[robot]"))
         name = self._string(head["name"], "[robot]: name")
-        if not NAME_PATTERN.match(name):
+        if not NAME_PATTERN.match(name) or len(name) > MAX_IDENTIFIER_LENGTH:
             raise RobotFileError(
-                f"{self.file}: [robot]: name: {name!r} is not an identifier "
-                "(it becomes the FMU model identifier)"
+                f"{self.file}: [robot]: name: {name[:80]!r} is not an identifier of at most "
+                f"{MAX_IDENTIFIER_LENGTH} characters (it becomes the FMU model identifier and a file name)"
             )
         convention = self._choice(head.get("convention", STANDARD), CONVENTIONS, "[robot]: convention")
         self.convention = convention
@@ -147,6 +154,7 @@ class _Reader:
                 raise RobotFileError(f"{where(self.file, i, n, 'name')}: duplicate link name (also link {names.index(n) + 1})")
 
         payload = self._payload(data["payload"]) if "payload" in data else None
+        self._check_well_posed(links, payload)
         parameters = self._parameters(links, gravity, payload)
         return Robot(
             name=name,
@@ -180,7 +188,9 @@ class _Reader:
                 expr = self._parse(raw, loc + ": value")
                 if expr.free_symbols:
                     raise RobotFileError(f"{loc}: value: must be a number, got {raw!r}")
-                value = float(expr)
+                value = self._double(expr, raw, loc + ": value")
+            if unit:
+                self._unit(unit, loc + ": unit")
             symbol = sp.Symbol(name, real=True)
             self.declared[name] = Parameter(name, symbol, value, unit, description)
             if value is not None:
@@ -218,7 +228,7 @@ class _Reader:
             return expr
         if expr == 0:
             return sp.Integer(0)
-        value = float(expr)
+        value = self._double(expr, expr, loc)
         symbol = sp.Symbol(name, real=True)
         self.auto[name] = Parameter(name, symbol, value, unit, description)
         self.auto_origin[name] = loc
@@ -267,6 +277,16 @@ class _Reader:
         allow = allow_all or self._bool(table.get("allow_unrealisable_inertia", False), None,
                                         loc("allow_unrealisable_inertia"))
 
+        massless = self._bool(table.get("massless", False), None, loc("massless"))
+        m_value = numeric(mass, self.values)
+        if m_value is not None and m_value == 0 and not massless:
+            raise RobotFileError(
+                f"{loc('mass')}: zero mass; a link must have a positive mass, or say massless = true "
+                "(then its inertia must be zero and the joints it carries must still move some "
+                "mass, inertia or rotor)")
+        if massless and (m_value is None or m_value != 0):
+            raise RobotFileError(f"{loc('massless')}: massless = true but mass = {table['mass']!r}; "
+                                 "a massless link has mass = 0")
         inertia_com = self._inertia(table, i, label, mass, com, loc)
         field = "gyration_sq" if "gyration_sq" in table else "inertia"
         self._check_body(mass, inertia_com, allow, loc(field), label)
@@ -314,7 +334,7 @@ class _Reader:
                 f"{loc}: expected a 3x3 matrix [[Ixx, Ixy, Ixz], [Ixy, Iyy, Iyz], [Ixz, Iyz, Izz]] "
                 f"or the diagonal [Ixx, Iyy, Izz], got {value!r}"
             )
-        check_symmetric(rows, loc)
+        check_symmetric(rows, loc, self.values)
         for r in range(3):
             check_nonnegative(rows[r][r], self.values, f"{loc}[{r}][{r}]", "moment of inertia", "kg m^2")
         J = sp.zeros(3, 3)
@@ -346,6 +366,40 @@ class _Reader:
             "if you really mean it"
         )
 
+    def _check_well_posed(self, links, payload) -> None:
+        """Refuse a chain whose mass matrix is singular (a joint that moves no
+        mass, no inertia about its axis and no rotor): forward dynamics would
+        fail only in the FMU, at initialisation.  Checked when every value is known."""
+        def num(e):
+            return numeric(e, self.values)
+
+        data = []
+        for link in links:
+            I = numeric_matrix([list(r) for r in link.inertia_com], self.values)
+            vals = [num(e) for e in (link.a, link.alpha, link.d, link.theta, link.mass, link.rotor_inertia)]
+            com = [num(e) for e in link.com]
+            if I is None or None in vals or None in com:
+                return
+            a, alpha, d, theta, m, rotor = vals
+            data.append(dict(prismatic=link.joint == PRISMATIC, a=a, alpha=alpha, d=d, theta=theta,
+                             mass=m, com=com, inertia=I, rotor=rotor))
+        pl = None
+        if payload is not None:
+            pm, pc = num(payload.mass), [num(e) for e in payload.com]
+            if pm is None or None in pc:
+                return
+            pl = (pm, pc)
+        found = singular_joint(data, self.convention == MODIFIED, pl)
+        if found is None:
+            return
+        j, q = found
+        link = links[j]
+        raise RobotFileError(
+            f"{where(self.file, j + 1, link.name)}: the mass matrix is singular (at q = "
+            f"[{', '.join(f'{v:.3g}' for v in q)}]): joint {j + 1} moves no mass, no inertia about its axis "
+            "and no rotor inertia, so its acceleration is undefined. Give the links it carries a mass "
+            "or inertia, or the joint a rotor_inertia")
+
     def _payload(self, table) -> Payload:
         loc = where(self.file, field="[payload]")
         table = self._table(table, "[payload]")
@@ -363,7 +417,26 @@ class _Reader:
         except ExpressionError as exc:
             raise RobotFileError(f"{loc}: {exc}") from None
         self.user_names |= {s.name for s in expr.free_symbols}
+        if expr.free_symbols and self.values:
+            # with the declared values substituted, the number must still be a double
+            e = sp.sympify(expr.xreplace(self.values))  # a bare symbol becomes a Python float
+            if not e.free_symbols:
+                self._double(e, value, loc, " with the [parameters] values")
         return expr
+
+    def _double(self, expr, text, loc: str, how: str = "") -> float:
+        try:
+            return check_double(expr, repr(text) + how)
+        except ExpressionError as exc:
+            raise RobotFileError(f"{loc}: {exc}") from None
+
+    def _unit(self, unit: str, loc: str) -> None:
+        from ..fmi.units import base_units
+
+        try:
+            base_units(unit)
+        except ValueError as exc:
+            raise RobotFileError(f"{loc}: {exc}") from None
 
     def _vector(self, value, loc, auto, unit, what, nonnegative=None) -> tuple:
         if not isinstance(value, list) or len(value) != 3 or any(isinstance(v, (list, dict)) for v in value):
