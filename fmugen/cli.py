@@ -5,6 +5,7 @@
                            [--model inverse_dynamics]
     fmugen info FILE.toml
     fmugen build SCENE.toml -o DIR [--set NAME=VALUE ...] [--no-prune] [--no-cache]
+    fmugen suite [FILE.toml] [--cases NAME ...] [--quick] --out DIR   (stiff and extreme cases, fmugen/suite)
 
 FILE is a robot file (a ``[robot]`` table), an assembly of actuator-chain
 components (an ``[assembly]`` table) or a scene (a ``[scene]`` table: one FMU
@@ -179,6 +180,10 @@ def main(argv=None) -> int:
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="set a parameter, start value or option (repeatable)")
     p.set_defaults(func=_cmd_info)
+
+    from .suite.cli import add_parser as add_suite_parser  # fmugen suite: stiff and extreme cases
+
+    add_suite_parser(sub)
 
     args = parser.parse_args(argv)
     try:
