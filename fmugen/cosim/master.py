@@ -1,0 +1,799 @@
+"""The co-simulation master: macro steps over FMUs coupled by their inputs and outputs.
+
+Notation.  Between communication points t_n and t_{n+1} = t_n + H every FMU
+advances on its own (its internal solver); the master exchanges the coupled
+values only at communication points.  ``U`` (length m) is the vector of all
+coupled inputs, ``Y`` the vector of the outputs they are taken from,
+``U = F * Y[S]`` (factor F, source index S).  A scheme decides which inputs an
+FMU sees during [t_n, t_{n+1}]:
+
+* ``jacobi``: every FMU steps from the values at t_n (any order, could run in
+  parallel);
+* ``gauss-seidel``: FMUs step one after another (``order``); an FMU whose
+  source has already stepped sees its value at t_{n+1} (held) or the line
+  from U_n to U_{n+1} (with extrapolation);
+* ``iterative`` / ``newton``: the macro step is implicit in the coupling.
+  All FMUs are saved (fmi2GetFMUstate), the end values V = U_{n+1} are guessed
+  (extrapolation), every FMU steps with its inputs on the line from U_n to V
+  (fmi2SetRealInputDerivatives), and V is corrected -- by the fixed point
+  V <- G(V) or by Newton on R(V) = G(V) - V = 0 -- with the FMUs restored
+  before each repetition, until |R| is below ``coupling_tol`` relative to the
+  signals.  The interface Jacobian dG/dV is the sensitivity of a whole macro
+  step, which the FMUs' directional derivatives (partials of f and g) do not
+  give: it is obtained by **finite differences of rolled-back steps**, one
+  re-step of FMU k per input of FMU k (dG is block-sparse: an FMU's outputs
+  depend only on its own inputs), and reused across macro steps while Newton
+  converges fast (modified Newton).
+
+Extrapolation of U over the step from past communication points: ``hold``
+(constant, order 1), ``linear`` (order 2), ``quadratic`` (through three
+points).  FMUs that declare ``canInterpolateInputs`` receive the value at t_n
+and its slope (fmi2SetRealInputDerivatives, order 1); our runtime accepts
+first derivatives only, so ``quadratic`` passes the secant from U_n to the
+quadratic's value at t_{n+1} (exact at both ends; the global order stays 2).
+FMUs that cannot interpolate get the extrapolant's value at the midpoint.
+
+Adaptive macro step (``adaptive=True``): the local error indicator is the
+**interface defect** d = U_{n+1} - P(t_{n+1}), the mismatch between what an FMU
+was told its input would be at t_{n+1} (extrapolant P, or the Newton
+predictor) and what it turned out to be, relative to ``tol`` times each
+signal's magnitude.  A step with max|d|/(tol*scale) > 1 is rolled back
+(all FMUs restored) and retried smaller; an accepted step sets the next H by a
+PI controller (Gustafsson) with growth at most 2x, no growth right after a
+rejection, and a dead band (changes below 20 % are not made) so H does not
+chatter.
+
+Failures end the run and return what was computed: an FMU's fmi2Discard or
+fmi2Error, a step that does not meet ``tol`` at ``min_step``, a Newton or
+fixed-point iteration that does not converge, and **divergence of the
+coupling**, detected from the interface defect before any value overflows:
+the window maxima of the defect have grown monotonically by more than 10x
+while the defect is as large as a tenth of the signal itself (the coupling
+error has become the signal), or a coupled value has grown beyond 1e8 times
+its initial scale.  The report names the coupling with the largest defect, or
+the FMU that failed, the time and the cause; when an FMU fails while the
+coupling defect is growing, the report says that the coupling (inputs that
+jumped), not stiffness, is the likely cause.
+"""
+from __future__ import annotations
+
+import math
+import time as _time
+from dataclasses import dataclass, field
+from typing import Optional, Sequence
+
+import numpy as np
+
+from .errors import CosimError
+from .system import CosimSystem
+from .units import ModelUnit, SlaveUnit, UnitFailure, dptr, vr_array
+
+SCHEMES = ("jacobi", "gauss-seidel", "iterative", "newton")
+EXTRAPOLATIONS = ("hold", "linear", "quadratic")
+_ALIASES = {"gs": "gauss-seidel", "gauss_seidel": "gauss-seidel", "seidel": "gauss-seidel",
+            "fixed-point": "iterative", "held": "hold", "constant": "hold", "zoh": "hold"}
+
+
+@dataclass
+class FailureReport:
+    """Why and where a run stopped early."""
+
+    time: float  # last accepted communication point [s]
+    cause: str  # "fmu-failure", "diverged", "tolerance", "not-converged", "non-finite"
+    message: str
+    unit: Optional[str] = None  # the FMU that failed
+    coupling: Optional[str] = None  # "src.var -> dst.var"
+    fmu_messages: list = field(default_factory=list)
+
+    def __str__(self) -> str:
+        where = []
+        if self.unit:
+            where.append(f"FMU {self.unit!r}")
+        if self.coupling:
+            where.append(f"coupling {self.coupling}")
+        lines = [f"co-simulation stopped at t = {self.time:.9g} s ({self.cause})"
+                 + (f" [{'; '.join(where)}]" if where else "") + f": {self.message}"]
+        lines += [f"  {m}" for m in self.fmu_messages[-5:]]
+        return "\n".join(lines)
+
+
+@dataclass
+class Summary:
+    """Work and outcome of one run."""
+
+    system: str
+    scheme: str
+    extrapolation: str
+    adaptive: bool
+    status: str = "ok"  # "ok" or "failed"
+    macro_steps: int = 0  # accepted
+    rollbacks: int = 0  # rejected (restored) macro steps
+    iterations: int = 0  # coupling iterations beyond the first (iterative/newton)
+    jacobians: int = 0  # interface Jacobians by finite differences
+    do_steps: int = 0  # fmi2DoStep calls (all FMUs, also rolled-back ones)
+    fmu_calls: int = 0  # all fmi2* calls of the master
+    wall_time: float = 0.0  # [s]
+    simulated_time: float = 0.0  # [s]
+    step_min: float = math.inf
+    step_max: float = 0.0
+    failure: Optional[FailureReport] = None
+
+    @property
+    def real_time_factor(self) -> float:
+        """Simulated seconds per wall-clock second."""
+        return self.simulated_time / self.wall_time if self.wall_time > 0 else math.inf
+
+    def as_dict(self) -> dict:
+        d = {k: getattr(self, k) for k in ("system", "scheme", "extrapolation", "adaptive", "status",
+                                           "macro_steps", "rollbacks", "iterations", "jacobians",
+                                           "do_steps", "fmu_calls", "wall_time", "simulated_time",
+                                           "step_min", "step_max")}
+        d["real_time_factor"] = self.real_time_factor
+        d["failure"] = str(self.failure) if self.failure else ""
+        return d
+
+    def __str__(self) -> str:
+        s = (f"{self.system}: {self.scheme}/{self.extrapolation}{' adaptive' if self.adaptive else ''}: "
+             f"{self.status}; {self.macro_steps} macro steps (H {self.step_min:.4g}..{self.step_max:.4g} s), "
+             f"{self.rollbacks} rollbacks, {self.iterations} iterations, {self.jacobians} Jacobians, "
+             f"{self.do_steps} doStep, {self.fmu_calls} FMU calls, wall {self.wall_time:.4g} s "
+             f"({self.real_time_factor:.3g}x real time)")
+        if self.failure:
+            s += "\n" + str(self.failure)
+        return s
+
+
+@dataclass
+class CosimResult:
+    """Recorded values at every accepted communication point (t_0 included)."""
+
+    time: np.ndarray  # (n,)
+    values: np.ndarray  # (n, len(columns))
+    columns: tuple
+    summary: Summary
+
+    @property
+    def ok(self) -> bool:
+        return self.summary.status == "ok"
+
+    def __getitem__(self, column: str) -> np.ndarray:
+        try:
+            return self.values[:, self.columns.index(column)]
+        except ValueError:
+            raise KeyError(f"no recorded column {column!r}; columns: {', '.join(self.columns)}") from None
+
+    def structured(self) -> np.ndarray:
+        """A structured array with fields ``time`` and every column (fmpy's result layout)."""
+        dt = np.dtype([("time", float)] + [(c, float) for c in self.columns])
+        out = np.empty(len(self.time), dtype=dt)
+        out["time"] = self.time
+        for i, c in enumerate(self.columns):
+            out[c] = self.values[:, i]
+        return out
+
+
+def _norm_choice(value, choices, what) -> str:
+    v = str(value).strip().lower().replace("_", "-")
+    v = _ALIASES.get(v, v)
+    if v not in choices:
+        raise CosimError(f"unknown {what} {value!r}; choose one of {', '.join(choices)}")
+    return v
+
+
+def _positive(name, value):
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise CosimError(f"{name} must be a number, not {value!r}") from None
+    if not (math.isfinite(v) and v > 0):
+        raise CosimError(f"{name} must be finite and positive, not {value!r}")
+    return v
+
+
+class Master:
+    """Instantiates the system's FMUs once and runs it (see the module docstring).
+
+    ``Master(system, scheme, extrapolation)``, then ``run(...)`` (once), then
+    ``close()``; or use :func:`run`.  ``order`` (Gauss-Seidel) defaults to
+    ``system.order``, else scene order.
+    """
+
+    def __init__(self, system: CosimSystem, scheme: str = "gauss-seidel", extrapolation: str = "hold",
+                 order: Optional[Sequence[str]] = None):
+        if not isinstance(system, CosimSystem):
+            raise CosimError(f"expected a CosimSystem, got {type(system).__name__}")
+        self.system = system
+        self.scheme = _norm_choice(scheme, SCHEMES, "scheme")
+        self.extrapolation = _norm_choice(extrapolation, EXTRAPOLATIONS, "extrapolation")
+        if not system.units:
+            raise CosimError(f"{system.name}: no FMUs")
+        names = [u.name for u in system.units]
+        if len(set(names)) != len(names):
+            raise CosimError(f"{system.name}: FMU names repeat: {names}")
+        order = tuple(order) if order is not None else (tuple(system.order) if system.order else tuple(names))
+        if sorted(order) != sorted(names):
+            raise CosimError(f"{system.name}: Gauss-Seidel order {list(order)} must name every FMU once: {names}")
+        self.order = order
+        self.units = []
+        try:
+            for u in system.units:
+                ft = str(u.fmi_type).lower()
+                if ft == "cs":
+                    self.units.append(SlaveUnit(u, system.start_time, system.stop_time))
+                elif ft == "me":
+                    self.units.append(ModelUnit(u, system.start_time, system.stop_time))
+                else:
+                    raise CosimError(f"{system.name}: FMU {u.name!r}: fmi_type must be 'cs' or 'me', not {u.fmi_type!r}")
+            self._resolve()
+        except BaseException:
+            self.close()
+            raise
+
+    # -- set-up ---------------------------------------------------------------
+    def _resolve(self) -> None:
+        sysm = self.system
+        index = {u.name: k for k, u in enumerate(self.units)}
+        outs = [[] for _ in self.units]  # variable names read from each unit
+        ins = [[] for _ in self.units]
+        src_of, factor_of, label_of = {}, {}, {}
+        for c in sysm.couplings:
+            (su, sv), (tu, tv) = c.source, c.target
+            for un in (su, tu):
+                if un not in index:
+                    raise CosimError(f"{sysm.name}: coupling {su}.{sv} -> {tu}.{tv}: no FMU named {un!r}")
+            if su == tu:
+                raise CosimError(f"{sysm.name}: coupling {su}.{sv} -> {tu}.{tv} connects an FMU to itself")
+            self.units[index[su]].variable(sv, ("output", "local"))
+            self.units[index[tu]].variable(tv, ("input",))
+            if (tu, tv) in src_of:
+                raise CosimError(f"{sysm.name}: input {tu}.{tv} is driven twice")
+            f = float(c.factor)
+            if not math.isfinite(f):
+                raise CosimError(f"{sysm.name}: coupling {su}.{sv} -> {tu}.{tv}: factor {c.factor} is not finite")
+            src_of[(tu, tv)] = (su, sv)
+            factor_of[(tu, tv)] = f
+            label_of[(tu, tv)] = f"{su}.{sv} -> {tu}.{tv}"
+            if sv not in outs[index[su]]:
+                outs[index[su]].append(sv)
+            ins[index[tu]].append(tv)
+        for r in sysm.recorded:
+            if r.unit not in index:
+                raise CosimError(f"{sysm.name}: recorded column {r.column!r}: no FMU named {r.unit!r}")
+            self.units[index[r.unit]].variable(r.variable)
+            if r.variable not in outs[index[r.unit]]:
+                outs[index[r.unit]].append(r.variable)
+        # Y: outputs of unit 0, unit 1, ...; U: inputs of unit 0, unit 1, ...
+        y_off, u_off, y_at, u_labels = [], [], {}, []
+        ny = nu = 0
+        for k, unit in enumerate(self.units):
+            y_off.append(ny)
+            for v in outs[k]:
+                y_at[(unit.name, v)] = ny
+                ny += 1
+            u_off.append(nu)
+            nu += len(ins[k])
+        S, F, owner_u, src_unit = [], [], [], []
+        for k, unit in enumerate(self.units):
+            for v in ins[k]:
+                s = src_of[(unit.name, v)]
+                S.append(y_at[s])
+                F.append(factor_of[(unit.name, v)])
+                u_labels.append(label_of[(unit.name, v)])
+                owner_u.append(k)
+                src_unit.append(index[s[0]])
+        self.ny, self.nu = ny, nu
+        self.S = np.array(S, dtype=np.intp)
+        self.F = np.array(F, dtype=float)
+        self.u_owner = np.array(owner_u, dtype=np.intp)
+        self.u_src_unit = np.array(src_unit, dtype=np.intp)
+        self.coupling_labels = tuple(u_labels)
+        self.columns = tuple(r.column for r in sysm.recorded)
+        self.rec_idx = np.array([y_at[(r.unit, r.variable)] for r in sysm.recorded], dtype=np.intp)
+        # buffers (ctypes pointers into them are taken once)
+        self.Y = np.zeros(max(ny, 1))  # outputs at t_{n+1} (being computed)
+        self.Uset = np.zeros(max(nu, 1))  # input values passed at t_n
+        self.DUset = np.zeros(max(nu, 1))  # input slopes passed at t_n
+        self.unit_io = []
+        for k, unit in enumerate(self.units):
+            out_vrs = [unit.variables[v].valueReference for v in outs[k]]
+            in_vrs = [unit.variables[v].valueReference for v in ins[k]]
+            unit.n_in, unit.n_out = len(in_vrs), len(out_vrs)
+            unit.in_vr, unit.out_vr = vr_array(in_vrs), vr_array(out_vrs)
+            unit.in_sl = slice(u_off[k], u_off[k] + len(in_vrs))
+            unit.out_sl = slice(y_off[k], y_off[k] + len(out_vrs))
+            unit.u_ptr = dptr(self.Uset, u_off[k])
+            unit.du_ptr = dptr(self.DUset, u_off[k])
+            unit.y_ptr = dptr(self.Y, y_off[k])
+            unit.in_order = (__import__("ctypes").c_int * max(1, len(in_vrs)))(*([1] * len(in_vrs)))
+            unit.in_names, unit.out_names = list(ins[k]), list(outs[k])
+        # which U entries belong to FMUs that cannot take input derivatives
+        self.no_interp = np.array([not getattr(self.units[k], "can_interpolate", False) for k in owner_u], dtype=bool)
+        # Gauss-Seidel: for the FMU at position i of the order, its inputs whose source steps earlier
+        pos = {name: i for i, name in enumerate(self.order)}
+        self.gs_new = []
+        for k, unit in enumerate(self.units):
+            idx = [j for j in range(unit.in_sl.start, unit.in_sl.stop)
+                   if pos[self.units[src_unit[j]].name] < pos[unit.name]]
+            self.gs_new.append(np.array(idx, dtype=np.intp))
+        self.gs_units = [self.units[index[n]] for n in self.order]
+        self.gs_k = [index[n] for n in self.order]
+        if any(u.kind == "me" for u in self.units):
+            me = [u.name for u in self.units if u.kind == "me"]
+            raise CosimError(f"{self.system.name}: FMU(s) {', '.join(me)} are Model Exchange; this master "
+                             "co-simulates Co-Simulation FMUs only (build them with fmi_type 'cs' or 'both')")
+        else:
+            self.me_block = None
+        # scales of the coupled signals: the declared nominal of the source (times the factor), else 1
+        nominal = np.ones(nu)
+        for j, (k, yi) in enumerate(zip(src_unit, S)):
+            nom = getattr(self.units[k].variables[outs[k][yi - y_off[k]]], "nominal", None)
+            try:
+                if nom not in (None, ""):
+                    nominal[j] = abs(float(nom) * F[j]) or 1.0
+            except (TypeError, ValueError):
+                pass
+        self.u_nominal = np.array(nominal, dtype=float)
+
+    def close(self) -> None:
+        for u in getattr(self, "units", []):
+            u.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    # -- primitives (hot loop: attributes bound to locals, no allocation) ------
+    def _read_all(self) -> int:
+        calls = 0
+        Y = self.Y
+        for u in self.units:
+            if u.n_out:
+                st = u._getReal(u.c, u.out_vr, u.n_out, u.y_ptr)
+                calls += 1
+                if st > 1:
+                    raise UnitFailure(u.name, "fmi2GetReal", st, u.messages())
+        return calls
+
+    def _coupled(self, out: np.ndarray) -> np.ndarray:
+        np.take(self.Y, self.S, out=out)
+        out *= self.F
+        return out
+
+    # -- the run ----------------------------------------------------------------
+    def run(self, step: Optional[float] = None, stop: Optional[float] = None, adaptive: bool = False,
+            tol: float = 1e-4, min_step: Optional[float] = None, max_step: Optional[float] = None,
+            coupling_tol: float = 1e-8, max_iterations: int = 30, detect_divergence: bool = True) -> CosimResult:
+        sysm = self.system
+        t0 = float(sysm.start_time)
+        stop = float(sysm.stop_time if stop is None else stop)
+        H0 = _positive("step", sysm.step if step is None else step)
+        if not (math.isfinite(stop) and stop > t0):
+            raise CosimError(f"stop time {stop} must be finite and after the start time {t0}")
+        tol = _positive("tol", tol)
+        coupling_tol = _positive("coupling_tol", coupling_tol)
+        Hmin = _positive("min_step", min_step) if min_step is not None else (H0 * 1e-3 if adaptive else H0)
+        Hmax = _positive("max_step", max_step) if max_step is not None else (max(H0, (stop - t0) / 10) if adaptive else H0)
+        if Hmin > Hmax:
+            raise CosimError(f"min_step {Hmin} exceeds max_step {Hmax}")
+        max_iterations = int(max_iterations)
+        implicit = self.scheme in ("iterative", "newton")
+        summ = Summary(sysm.name, self.scheme, self.extrapolation, bool(adaptive))
+        nu = self.nu
+        ext = {"hold": 0, "linear": 1, "quadratic": 2}[self.extrapolation]
+        p_err = 2 if implicit else ext + 1  # the defect is O(H^p_err)
+
+        units, F, S = self.units, self.F, self.S
+        Y, Uset, DUset = self.Y, self.Uset, self.DUset
+        no_interp = self.no_interp
+        any_no_interp = bool(no_interp.any())
+        U_hist = np.zeros((3, max(nu, 1)))  # U at t_n, t_{n-1}, t_{n-2}
+        t_hist = [t0, t0, t0]
+        n_hist = 1
+        Unew = np.zeros(max(nu, 1))
+        Upred = np.zeros(max(nu, 1))
+        d = np.zeros(max(nu, 1))
+        scale = np.zeros(max(nu, 1))
+        rec_idx = self.rec_idx
+        cap = int(min(max((stop - t0) / Hmin, 16), 1_000_000)) + 2 if not adaptive else 1024
+        T = np.empty(cap)
+        V = np.empty((cap, len(rec_idx)))
+        n_rows = 0
+        wall0 = _time.perf_counter()
+        calls = 0
+        rollback_ok = adaptive or implicit
+        need_states = rollback_ok
+        states = []
+        failure = None
+        t = t0
+        try:
+            # consistent coupled values at t0 (outputs without feedthrough: two passes suffice for
+            # chains of feedthrough no longer than one; more would be an algebraic loop)
+            for _ in range(2):
+                calls += self._read_all()
+                self._coupled(Uset)
+                for u in units:
+                    if u.n_in:
+                        st = u._setReal(u.c, u.in_vr, u.n_in, u.u_ptr)
+                        calls += 1
+                        if st > 1:
+                            raise UnitFailure(u.name, "fmi2SetReal", st, u.messages())
+            calls += self._read_all()
+            self._coupled(U_hist[0])
+            np.abs(U_hist[0], out=scale)
+            np.maximum(scale, self.u_nominal, out=scale)
+            scale0 = scale.copy()
+            T[0] = t
+            V[0] = Y[rec_idx]
+            n_rows = 1
+            if need_states:
+                states = [u.new_state() for u in units]
+                calls += len(units)
+            if self.me_block is not None:
+                self.me_block.start(t0)
+            H = min(H0, Hmax)
+            err_prev = 1.0
+            rejected_last = False
+            # divergence monitor: window maxima of the scaled defect
+            win_len, win_max, win_sig, windows, win_count = 5, 0.0, 0.0, [], 0
+            J = None
+            J_H = None
+            while t < stop - 1e-12 * max(1.0, abs(stop)):
+                if t + H > stop or stop - (t + H) < 1e-3 * H:
+                    H = stop - t
+                # -- predictor: extrapolant through the last communication points --
+                U0 = U_hist[0]
+                Uset[:nu] = U0[:nu]
+                if ext == 0 or n_hist == 1:
+                    DUset[:nu] = 0.0
+                elif ext == 1 or n_hist == 2:
+                    DUset[:nu] = (U0[:nu] - U_hist[1, :nu]) / (t_hist[0] - t_hist[1])
+                else:  # quadratic: slope of the secant to P(t_n + H)
+                    h1, h2 = t_hist[0] - t_hist[1], t_hist[1] - t_hist[2]
+                    d1 = (U0[:nu] - U_hist[1, :nu]) / h1
+                    d2 = (U_hist[1, :nu] - U_hist[2, :nu]) / h2
+                    c2 = (d1 - d2) / (h1 + h2)
+                    DUset[:nu] = d1 + c2 * (H + h1)  # (P(t+H) - U_n)/H = d1 + c2 (H + h1)
+                Upred[:nu] = U0[:nu] + DUset[:nu] * H
+                if need_states:
+                    for k, u in enumerate(units):
+                        st = u.save(states[k])
+                        if st > 1:
+                            raise UnitFailure(u.name, "fmi2GetFMUstate", st, u.messages())
+                    calls += len(units)
+                # -- the macro step --
+                if not implicit:
+                    if self.scheme == "jacobi":
+                        calls += self._step_jacobi(t, H, ext, any_no_interp, rollback_ok)
+                    else:
+                        calls += self._step_gauss_seidel(t, H, ext, any_no_interp, rollback_ok, U0)
+                    self._coupled(Unew)
+                else:
+                    if J is not None and J_H is not None and abs(H - J_H) > 1e-12 * H:
+                        J = None  # the step's sensitivity depends on H
+                    Vg = Upred[:nu].copy()
+                    it = 0
+                    conv = False
+                    err_c_prev = math.inf
+                    while True:
+                        if it > 0:
+                            for k, u in enumerate(units):
+                                st = u.restore(states[k])
+                                if st > 1:
+                                    raise UnitFailure(u.name, "fmi2SetFMUstate", st, u.messages())
+                            calls += len(units)
+                        Uset[:nu] = U0[:nu]
+                        DUset[:nu] = (Vg - U0[:nu]) / H
+                        calls += self._step_jacobi(t, H, 1, any_no_interp, True)
+                        self._coupled(Unew)
+                        R = Unew[:nu] - Vg
+                        err_c = float(np.max(np.abs(R) / (coupling_tol * np.maximum(scale[:nu], np.abs(Vg)))))\
+                            if nu else 0.0
+                        if err_c <= 1.0:
+                            conv = True
+                            break
+                        if it >= max_iterations or not math.isfinite(err_c):
+                            break
+                        it += 1
+                        if self.scheme == "iterative":
+                            Vg = Unew[:nu].copy()
+                        else:
+                            if J is None or err_c > 0.5 * err_c_prev:
+                                J, c2 = self._interface_jacobian(t, H, U0, Vg, Unew, states, scale)
+                                calls += c2
+                                J_H = H
+                                summ.jacobians += 1
+                            Vg = Vg + J @ R
+                        err_c_prev = err_c
+                    summ.iterations += it
+                    if not conv:
+                        j = int(np.argmax(np.abs(R))) if nu else 0
+                        if adaptive and H > Hmin * (1 + 1e-12):
+                            for k, u in enumerate(units):
+                                u.restore(states[k])
+                            calls += len(units)
+                            summ.rollbacks += 1
+                            H = max(Hmin, H / 4)
+                            rejected_last = True
+                            continue
+                        failure = FailureReport(t, "not-converged",
+                                                f"{self.scheme} coupling iteration did not converge in "
+                                                f"{max_iterations} iterations at H = {H:.4g} s "
+                                                f"(residual {err_c:.3g} x coupling_tol)",
+                                                coupling=self.coupling_labels[j] if nu else None)
+                        break
+                # -- defect, error estimate, divergence --
+                np.subtract(Unew[:nu], Upred[:nu], out=d[:nu])
+                if not np.all(np.isfinite(Unew[:nu])):
+                    j = int(np.argmax(~np.isfinite(Unew[:nu])))
+                    failure = FailureReport(t, "non-finite", "a coupled value is not finite",
+                                            coupling=self.coupling_labels[j])
+                    break
+                absU = np.abs(Unew[:nu])
+                np.maximum(scale[:nu], absU, out=scale[:nu])
+                if adaptive:
+                    ratio = np.abs(d[:nu]) / (tol * scale[:nu])
+                    err = float(ratio.max()) if nu else 0.0
+                    if err > 1.0:
+                        if H <= Hmin * (1 + 1e-12):
+                            j = int(np.argmax(ratio))
+                            failure = FailureReport(t, "tolerance",
+                                                    f"interface defect {err:.3g} x tol at the minimum macro step "
+                                                    f"{Hmin:.4g} s", coupling=self.coupling_labels[j])
+                            break
+                        for k, u in enumerate(units):
+                            st = u.restore(states[k])
+                            if st > 1:
+                                raise UnitFailure(u.name, "fmi2SetFMUstate", st, u.messages())
+                        calls += len(units)
+                        summ.rollbacks += 1
+                        H = max(Hmin, H * max(0.2, 0.9 * err ** (-1.0 / p_err)))
+                        rejected_last = True
+                        continue
+                # -- accept --
+                t = t + H if stop - (t + H) > 1e-12 * max(1.0, abs(stop)) else stop
+                summ.macro_steps += 1
+                summ.step_min = min(summ.step_min, H)
+                summ.step_max = max(summ.step_max, H)
+                U_hist[2, :nu] = U_hist[1, :nu]
+                U_hist[1, :nu] = U_hist[0, :nu]
+                U_hist[0, :nu] = Unew[:nu]
+                t_hist[2], t_hist[1], t_hist[0] = t_hist[1], t_hist[0], t
+                n_hist = min(n_hist + 1, 3)
+                if n_rows == len(T):
+                    T = np.concatenate([T, np.empty(len(T))])
+                    V = np.concatenate([V, np.empty_like(V)])
+                T[n_rows] = t
+                V[n_rows] = Y[rec_idx]
+                n_rows += 1
+                if detect_divergence and nu:
+                    dn = float(np.max(np.abs(d[:nu]) / scale0[:nu]))
+                    sn = float(np.max(absU / scale0[:nu]))
+                    if sn > 1e8:
+                        j = int(np.argmax(absU / scale0[:nu]))
+                        failure = FailureReport(t, "diverged",
+                                                f"coupled value grew to {sn:.3g} x its initial scale",
+                                                coupling=self.coupling_labels[j])
+                        break
+                    win_max = max(win_max, dn)
+                    win_sig = max(win_sig, sn)
+                    win_count += 1
+                    if win_count == win_len:
+                        windows.append((win_max, win_sig))
+                        win_max = win_sig = 0.0
+                        win_count = 0
+                        div = _diverging(windows)
+                        if div:
+                            jrel = np.abs(d[:nu]) / scale0[:nu]
+                            j = int(np.argmax(jrel))
+                            failure = FailureReport(
+                                t, "diverged",
+                                f"the coupling diverges: the interface defect (changed {div:.3g}x over the last "
+                                f"{win_len * max(_run_length(windows), min(len(windows), SUSTAINED))} macro steps) "
+                                f"does not decay and is as large as the signal (H = {H:.4g} s is above this scheme's stability limit: take a smaller "
+                                f"step, extrapolation, or an iterative/newton scheme)",
+                                coupling=self.coupling_labels[j])
+                            break
+                # -- next H --
+                if adaptive:
+                    err = max(err, 1e-10)
+                    fac = 0.9 * err ** (-0.7 / p_err) * err_prev ** (0.4 / p_err)
+                    fac = min(2.0, max(0.2, fac))
+                    if rejected_last:
+                        fac = min(fac, 1.0)
+                    if 1.0 <= fac < 1.2:
+                        fac = 1.0  # dead band: no chattering
+                    H = min(Hmax, max(Hmin, H * fac))
+                    err_prev = err
+                    rejected_last = False
+                else:
+                    H = min(H0, Hmax)
+        except UnitFailure as e:
+            growing = _growing(windows) if detect_divergence else False
+            coupling = None
+            msg = str(e)
+            if growing and nu:
+                j = int(np.argmax(np.abs(d[:nu]) / np.maximum(scale0[:nu], 1e-300)))
+                coupling = self.coupling_labels[j]
+                msg += ("; the interface defect had been growing before this failure: the inputs this FMU was "
+                        "given jumped, so the coupling (macro step too large for the scheme), not stiffness "
+                        "of the FMU, is the likely cause")
+            failure = FailureReport(t, "fmu-failure", msg, unit=e.unit, coupling=coupling, fmu_messages=e.messages)
+        finally:
+            for k, s in enumerate(states):
+                try:
+                    units[k].free_state(s)
+                except Exception:
+                    pass
+        summ.wall_time = _time.perf_counter() - wall0
+        summ.simulated_time = t - t0
+        summ.fmu_calls = calls + sum(getattr(u, "n_calls", 0) for u in units)
+        summ.do_steps = self._do_steps
+        if failure is not None:
+            summ.status = "failed"
+            summ.failure = failure
+        if summ.macro_steps == 0:
+            summ.step_min = summ.step_max = 0.0
+        return CosimResult(T[:n_rows].copy(), V[:n_rows].copy(), self.columns, summ)
+
+    _do_steps = 0
+
+    def _do(self, u, t, H, no_prior) -> int:
+        """Set u's inputs (values, slopes), fmi2DoStep, read its outputs.  Returns the number of calls."""
+        calls = 0
+        if u.n_in:
+            st = u._setReal(u.c, u.in_vr, u.n_in, u.u_ptr)
+            if st > 1:
+                raise UnitFailure(u.name, "fmi2SetReal", st, u.messages())
+            calls += 1
+            if u.can_interpolate:
+                st = u._setInDer(u.c, u.in_vr, u.n_in, u.in_order, u.du_ptr)
+                if st > 1:
+                    raise UnitFailure(u.name, "fmi2SetRealInputDerivatives", st, u.messages())
+                calls += 1
+        st = u._doStep(u.c, t, H, no_prior)
+        self._do_steps += 1
+        if st > 1:
+            raise UnitFailure(u.name, f"fmi2DoStep(t = {t:.9g}, H = {H:.4g})", st, u.messages())
+        if u.n_out:
+            st = u._getReal(u.c, u.out_vr, u.n_out, u.y_ptr)
+            if st > 1:
+                raise UnitFailure(u.name, "fmi2GetReal", st, u.messages())
+            calls += 1
+        return calls + 1
+
+    def _prepare_no_interp(self, H):
+        """FMUs without input derivatives: pass the extrapolant's midpoint value, held."""
+        m = self.no_interp[: self.nu]
+        self.Uset[: self.nu][m] += 0.5 * H * self.DUset[: self.nu][m]
+
+    def _step_jacobi(self, t, H, ext, any_no_interp, rollback_ok) -> int:
+        if any_no_interp and ext:
+            self._prepare_no_interp(H)
+        no_prior = 0 if rollback_ok else 1
+        calls = 0
+        for u in self.units:
+            if u.kind == "me":
+                continue
+            calls += self._do(u, t, H, no_prior)
+        if self.me_block is not None:
+            calls += self.me_block.step(t, H)
+        return calls
+
+    def _step_gauss_seidel(self, t, H, ext, any_no_interp, rollback_ok, U0) -> int:
+        if any_no_interp and ext:
+            self._prepare_no_interp(H)
+        Uset, DUset, Y, S, F = self.Uset, self.DUset, self.Y, self.S, self.F
+        no_prior = 0 if rollback_ok else 1
+        calls = 0
+        for k, u in zip(self.gs_k, self.gs_units):
+            idx = self.gs_new[k]
+            if len(idx):
+                new = F[idx] * Y[S[idx]]
+                if ext == 0 or not getattr(u, "can_interpolate", False):
+                    Uset[idx] = new  # the source's value at t_{n+1}, held
+                    DUset[idx] = 0.0
+                else:  # the line from U_n to the source's U_{n+1}
+                    Uset[idx] = U0[idx]
+                    DUset[idx] = (new - U0[idx]) / H
+            if u.kind == "me":
+                calls += self.me_block.step(t, H)
+            else:
+                calls += self._do(u, t, H, no_prior)
+        return calls
+
+    def _interface_jacobian(self, t, H, U0, Vg, Unew, states, scale):
+        """M = (I - dG/dV)^-1 by finite differences of rolled-back steps, one FMU at a time."""
+        nu = self.nu
+        Jg = np.zeros((nu, nu))
+        calls = 0
+        Y, Uset, DUset = self.Y, self.Uset, self.DUset
+        Y_base = Y.copy()
+        for k, u in enumerate(self.units):
+            if not u.n_in or u.kind == "me":
+                continue
+            rows = np.nonzero(self.u_src_unit[:nu] == k)[0]
+            if not len(rows):
+                continue
+            for j in range(u.in_sl.start, u.in_sl.stop):
+                delta = 1e-6 * max(abs(Vg[j]), scale[j])
+                u.restore(states[k])
+                Uset[: nu] = U0[: nu]
+                DUset[: nu] = (Vg - U0[: nu]) / H
+                DUset[j] += delta / H
+                if self.no_interp[j]:
+                    Uset[j] = 0.5 * (U0[j] + Vg[j] + delta)
+                calls += 1 + self._do(u, t, H, 0)
+                Jg[rows, j] = (self.F[rows] * Y[self.S[rows]] - Unew[rows]) / delta
+                Y[u.out_sl] = Y_base[u.out_sl]
+        if self.me_block is not None:
+            calls += self.me_block.interface_jacobian(t, H, U0, Vg, Unew, Jg, scale)
+        # Newton on R(V) = G(V) - V: V <- V + (I - dG/dV)^-1 R
+        return np.linalg.inv(np.eye(nu) - Jg), calls
+
+
+SUSTAINED = 20  # windows (100 macro steps) of a defect that neither decays nor shrinks against the signal
+ENVELOPE = 6  # windows (of 5 macro steps) in the defect's envelope: longer than an oscillation period
+
+
+def _envelope(windows, i) -> float:
+    return max(w[0] for w in windows[max(0, i - ENVELOPE + 1): i + 1])
+
+
+def _run_length(windows) -> int:
+    """Number of windows over which the defect's envelope has not decreased, ending now."""
+    n = 0
+    for i in range(len(windows) - 1, 0, -1):
+        if _envelope(windows, i) >= _envelope(windows, i - 1):
+            n += 1
+        else:
+            break
+    return n
+
+
+def _diverging(windows) -> float:
+    """Growth factor if the defect's envelope rose without a pause >= 10x and the defect is at
+    least a tenth of the signal (the coupling error has become the signal); else 0."""
+    n = _run_length(windows)
+    if n >= 3:
+        growth = _envelope(windows, len(windows) - 1) / max(_envelope(windows, len(windows) - 1 - n), 1e-300)
+        if growth >= 10.0 and windows[-1][0] >= 0.1 * windows[-1][1]:
+            return growth
+    # a growth that a nonlinearity (valve flow, rails) has bounded: a limit cycle whose defect stays a
+    # sizeable part of the signal and does not decay over SUSTAINED windows
+    if len(windows) > SUSTAINED:
+        last = windows[-SUSTAINED:]
+        env_now, env_then = _envelope(windows, len(windows) - 1), _envelope(windows, len(windows) - 1 - SUSTAINED)
+        if all(w[0] >= 0.1 * w[1] for w in last) and env_now >= 0.5 * env_then and env_now > 0:
+            return env_now / env_then
+    return 0.0
+
+
+def _growing(windows) -> bool:
+    return _run_length(windows) >= 2
+
+
+def run(system, scheme: str = "gauss-seidel", extrapolation: str = "hold", step: Optional[float] = None,
+        adaptive: bool = False, tol: float = 1e-4, stop: Optional[float] = None,
+        order: Optional[Sequence[str]] = None, **options) -> CosimResult:
+    """Co-simulate ``system`` (a :class:`CosimSystem`, or a scene: it is built into a temporary folder).
+
+    scheme: ``jacobi`` | ``gauss-seidel`` | ``iterative`` | ``newton``;
+    extrapolation: ``hold`` | ``linear`` | ``quadratic``; step: macro step H [s]
+    (default ``system.step``); adaptive: control H by the interface defect to
+    ``tol`` (relative to each coupled signal's magnitude) between ``min_step``
+    and ``max_step``; stop: stop time [s] (default ``system.stop_time``).
+    Further options: ``min_step``, ``max_step``, ``coupling_tol`` (iterative,
+    newton), ``max_iterations``, ``detect_divergence``.
+
+    Returns a :class:`CosimResult` (``time``, ``values`` per column,
+    ``summary``); a run that fails returns its values up to the failure and
+    ``summary.failure``.
+    """
+    if not isinstance(system, CosimSystem) and hasattr(system, "build"):
+        import tempfile
+
+        system = system.build(tempfile.mkdtemp(prefix="fmugen_scene_")).system
+    with Master(system, scheme, extrapolation, order=order) as m:
+        return m.run(step=step, stop=stop, adaptive=adaptive, tol=tol, **options)

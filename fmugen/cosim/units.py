@@ -1,0 +1,259 @@
+"""One FMU of a co-simulation, driven through fmpy's low-level API.
+
+:class:`SlaveUnit` wraps an ``fmpy.fmi2.FMU2Slave`` (Co-Simulation) and
+:class:`ModelUnit` an ``FMU2Model`` (Model Exchange).  Both resolve every
+value reference once and keep ctypes pointers to preallocated numpy buffers,
+so that the master's hot loop calls the C functions directly
+(``fmi2DoStep``, ``fmi2GetReal``, ``fmi2SetReal``, ...) without building a
+ctypes array or looking anything up per call.  The raw functions return the
+FMI status instead of raising (fmpy's wrappers raise on fmi2Discard), so the
+master can roll back or report.
+
+Messages the FMU logs are kept (the last :data:`LOG_KEEP`) for failure
+reports.
+"""
+from __future__ import annotations
+
+import atexit
+import ctypes
+import shutil
+import tempfile
+from collections import deque
+from ctypes import POINTER, byref, c_double, c_int, c_uint, c_void_p
+from pathlib import Path
+
+import numpy as np
+
+from .errors import CosimError
+
+LOG_KEEP = 20
+STATUS = ("fmi2OK", "fmi2Warning", "fmi2Discard", "fmi2Error", "fmi2Fatal", "fmi2Pending")
+
+_extracted: dict = {}
+_tmp_root: list = []
+
+
+def _extract(path: Path) -> str:
+    """Unzip an FMU once per (path, size, mtime) for the whole process."""
+    import fmpy
+
+    st = path.stat()
+    key = (str(path.resolve()), st.st_size, st.st_mtime_ns)
+    if key not in _extracted:
+        if not _tmp_root:
+            _tmp_root.append(tempfile.mkdtemp(prefix="fmugen_cosim_"))
+            atexit.register(shutil.rmtree, _tmp_root[0], True)
+        _extracted[key] = fmpy.extract(str(path), unzipdir=tempfile.mkdtemp(dir=_tmp_root[0]))
+    return _extracted[key]
+
+
+def dptr(arr: np.ndarray, offset: int = 0):
+    """ctypes double* to ``arr[offset]`` (arr float64, contiguous, kept alive by the caller)."""
+    return ctypes.cast(arr.ctypes.data + 8 * offset, POINTER(c_double))
+
+
+def vr_array(vrs) -> ctypes.Array:
+    return (c_uint * max(1, len(vrs)))(*vrs)
+
+
+class _Unit:
+    """What CS and ME units share: loading, start values, logging, get/set."""
+
+    kind = ""
+
+    def __init__(self, unit, start_time: float, stop_time: float):
+        from fmpy import read_model_description
+        from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                               fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+        from fmpy import calloc, free
+
+        self.name = unit.name
+        self.unit = unit
+        path = Path(unit.path)
+        if not path.is_file():
+            raise CosimError(f"FMU {unit.name!r}: file {path} does not exist")
+        self.md = read_model_description(str(path))
+        if self.md.fmiVersion != "2.0":
+            raise CosimError(f"FMU {unit.name!r} ({path}): FMI {self.md.fmiVersion}, the master needs FMI 2.0")
+        self.variables = {v.name: v for v in self.md.modelVariables}
+        self.log = deque(maxlen=LOG_KEEP)
+        log = self.log
+
+        def logger(env, instance, status, category, message):
+            text = message.decode("utf-8", "replace").replace("%%", "%")
+            log.append(f"[{STATUS[status] if 0 <= status < 6 else status}] {text}")
+
+        cb = fmi2CallbackFunctions()
+        cb.logger = fmi2CallbackLoggerTYPE(logger)
+        cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        self._callbacks = cb  # keep the CFUNCTYPE alive as long as the instance
+        self._unzip = _extract(path)
+        self.fmu = self._make_fmu()
+        self.fmu.instantiate(callbacks=cb, loggingOn=False)
+        self.c = self.fmu.component
+        f = self.fmu._functions
+        self._getReal = f["fmi2GetReal"]
+        self._setReal = f["fmi2SetReal"]
+        self._getState = f["fmi2GetFMUstate"]
+        self._setState = f["fmi2SetFMUstate"]
+        self._freeState = f["fmi2FreeFMUstate"]
+        self._dirDer = f["fmi2GetDirectionalDerivative"]
+        self._apply_start_values(unit.start_values)
+        st = self.fmu.fmi2SetupExperiment(self.c, 0, 0.0, start_time, 1, stop_time)
+        self.check(st, "fmi2SetupExperiment")
+        self.check(self.fmu.fmi2EnterInitializationMode(self.c), "fmi2EnterInitializationMode")
+        self.check(self.fmu.fmi2ExitInitializationMode(self.c), "fmi2ExitInitializationMode")
+        self.n_calls = 4
+
+    # -- set-up ---------------------------------------------------------------
+    def _apply_start_values(self, values) -> None:
+        for name, value in dict(values).items():
+            v = self.variables.get(name)
+            if v is None:
+                raise CosimError(f"FMU {self.name!r}: start value for unknown variable {name!r}")
+            try:
+                value = float(value)
+            except (TypeError, ValueError):
+                raise CosimError(f"FMU {self.name!r}: start value of {name!r} is not a number: {value!r}") from None
+            if not np.isfinite(value):
+                raise CosimError(f"FMU {self.name!r}: start value of {name!r} is not finite: {value}")
+            if v.type == "Integer":
+                st = self.fmu.fmi2SetInteger(self.c, (c_uint * 1)(v.valueReference), 1, (c_int * 1)(int(value)))
+            elif v.type == "Real":
+                st = self.fmu.fmi2SetReal(self.c, (c_uint * 1)(v.valueReference), 1, (c_double * 1)(value))
+            else:
+                raise CosimError(f"FMU {self.name!r}: cannot set {v.type} variable {name!r}")
+            self.check(st, f"fmi2Set{v.type}({name} = {value})")
+
+    def variable(self, name: str, causality=None):
+        v = self.variables.get(name)
+        if v is None:
+            import difflib
+
+            near = difflib.get_close_matches(name, self.variables, n=3)
+            hint = f" (did you mean {', '.join(near)}?)" if near else ""
+            raise CosimError(f"FMU {self.name!r} ({self.unit.path}): no variable {name!r}{hint}")
+        if v.type != "Real":
+            raise CosimError(f"FMU {self.name!r}: variable {name!r} is {v.type}; couplings need Real")
+        if causality is not None and v.causality not in causality:
+            raise CosimError(f"FMU {self.name!r}: variable {name!r} has causality {v.causality}, "
+                             f"expected {' or '.join(causality)}")
+        return v
+
+    def check(self, status: int, what: str) -> None:
+        if status > 1:
+            raise UnitFailure(self.name, what, status, list(self.log))
+
+    def messages(self) -> list:
+        return list(self.log)
+
+    # -- state ---------------------------------------------------------------
+    def new_state(self):
+        s = c_void_p()
+        self.check(self._getState(self.c, byref(s)), "fmi2GetFMUstate")
+        return s
+
+    def save(self, s) -> int:
+        """Overwrite FMU state ``s`` (FMI lets a state be reused)."""
+        return self._getState(self.c, byref(s))
+
+    def restore(self, s) -> int:
+        return self._setState(self.c, s)
+
+    def free_state(self, s) -> None:
+        if s:
+            self._freeState(self.c, byref(s))
+
+    def get_reals(self, vrs) -> np.ndarray:
+        out = np.zeros(len(vrs))
+        if len(vrs):
+            self.check(self._getReal(self.c, vr_array(vrs), len(vrs), dptr(out)), "fmi2GetReal")
+        return out
+
+    def get_integer(self, name: str) -> int:
+        v = self.variables[name]
+        out = (c_int * 1)()
+        self.check(self.fmu.fmi2GetInteger(self.c, (c_uint * 1)(v.valueReference), 1, out), "fmi2GetInteger")
+        return out[0]
+
+    def close(self) -> None:
+        if self.c is None:
+            return
+        try:
+            self.fmu.fmi2Terminate(self.c)
+        except Exception:  # terminate after an error state may be refused; free anyway
+            pass
+        try:
+            self.fmu.freeInstance()
+        except Exception:
+            pass
+        self.c = None
+
+
+class SlaveUnit(_Unit):
+    """A Co-Simulation FMU."""
+
+    kind = "cs"
+
+    def _make_fmu(self):
+        from fmpy.fmi2 import FMU2Slave
+
+        cs = self.md.coSimulation
+        if cs is None:
+            raise CosimError(f"FMU {self.name!r} ({self.unit.path}) has no Co-Simulation interface")
+        self.can_interpolate = bool(cs.canInterpolateInputs)
+        self.can_save_state = bool(cs.canGetAndSetFMUstate)
+        fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self._unzip, modelIdentifier=cs.modelIdentifier,
+                        instanceName=self.name)
+        f = fmu._functions
+        self._doStep = f["fmi2DoStep"]
+        self._setInDer = f["fmi2SetRealInputDerivatives"]
+        self._getRealStatus = f["fmi2GetRealStatus"]
+        return fmu
+
+    def last_successful_time(self) -> float:
+        t = c_double(float("nan"))
+        self._getRealStatus(self.c, 2, byref(t))  # fmi2LastSuccessfulTime
+        return t.value
+
+
+class ModelUnit(_Unit):
+    """A Model-Exchange FMU (integrated by the master's ME block)."""
+
+    kind = "me"
+
+    def _make_fmu(self):
+        from fmpy.fmi2 import FMU2Model
+
+        me = self.md.modelExchange
+        if me is None:
+            raise CosimError(f"FMU {self.name!r} ({self.unit.path}) has no Model-Exchange interface")
+        fmu = FMU2Model(guid=self.md.guid, unzipDirectory=self._unzip, modelIdentifier=me.modelIdentifier,
+                        instanceName=self.name)
+        return fmu
+
+    def enter_continuous_time(self) -> None:
+        f = self.fmu._functions
+        self.nx = len(self.md.derivatives)
+        self.check(f["fmi2EnterContinuousTimeMode"](self.c), "fmi2EnterContinuousTimeMode")
+        self._setTime = f["fmi2SetTime"]
+        self._setX = f["fmi2SetContinuousStates"]
+        self._getX = f["fmi2GetContinuousStates"]
+        self._getDer = f["fmi2GetDerivatives"]
+        self._completed = f["fmi2CompletedIntegratorStep"]
+        self.x_vrs = [d.variable.derivative.valueReference for d in self.md.derivatives]
+        self.der_vrs = [d.variable.valueReference for d in self.md.derivatives]
+        nom = (c_double * max(1, self.nx))()
+        self.check(f["fmi2GetNominalsOfContinuousStates"](self.c, nom, self.nx), "fmi2GetNominalsOfContinuousStates")
+        self.nominals = np.array(nom[: self.nx], dtype=float)
+
+
+class UnitFailure(Exception):
+    """An FMU returned fmi2Discard, fmi2Error or fmi2Fatal."""
+
+    def __init__(self, unit: str, call: str, status: int, messages: list):
+        self.unit, self.call, self.status, self.messages = unit, call, status, messages
+        name = STATUS[status] if 0 <= status < len(STATUS) else str(status)
+        tail = ("; last message: " + messages[-1]) if messages else ""
+        super().__init__(f"FMU {unit!r}: {call} returned {name}{tail}")
