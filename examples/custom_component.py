@@ -13,7 +13,7 @@ exported as one FMU.
 
 Run:  python examples/custom_component.py [output_dir]
 """
-import sys
+import argparse
 from pathlib import Path
 
 import sympy as sp
@@ -63,4 +63,6 @@ def main(out_dir="build"):
 
 
 if __name__ == "__main__":
-    main(*sys.argv[1:])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("output_dir", nargs="?", default="build", help="where the FMUs go (default: build)")
+    main(ap.parse_args().output_dir)
