@@ -185,6 +185,10 @@ def main(argv=None) -> int:
 
     add_suite_parser(sub)
 
+    from .control.cli import add_parser as add_linearize_parser  # fmugen linearize: trim, A B C D
+
+    add_linearize_parser(sub)
+
     args = parser.parse_args(argv)
     try:
         return args.func(args)

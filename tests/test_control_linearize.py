@@ -174,3 +174,22 @@ def test_open_loop_scene_feeds_python_control_interconnect():
     assert np.isclose(cl.dcgain(), 0.5 * G, rtol=1e-12)
     # at rest with no load, P_L = 0, so no flow is needed and no error remains: unit static gain
     assert np.isclose(G, 1.0, rtol=1e-9)
+
+
+def test_scene_file_monolithic_fmu_agrees(tmp_path):
+    """A scene file's monolithic model, trimmed against a load: FMU = symbolic = central differences."""
+    from fmugen.scene import load_scene
+
+    m = load_scene("examples/scenes/single_joint_split.toml").monolithic_model()
+    op = trim(m, at={"joint.tau_load": 60.0})
+    assert op["actuator.P_L"] == pytest.approx(60.0 / 1.5e-5, rel=1e-12)
+    sym = linearize(m, op)
+    A, B, C, D = central_differences(m, op.x, op.u)
+    assert_close(sym.A, A, 1e-6, "A vs central differences")
+    assert_close(sym.B, B, 1e-6, "B vs central differences")
+    fmu = tmp_path / "scene.fmu"
+    fmugen.build_fmu(m, fmu, fmi_type="me")
+    num = linearize_fmu(fmu, op)
+    order = [num.output_labels.index(n) for n in sym.output_labels]
+    for a, b, what in zip((num.A, num.B, num.C[order], num.D[order]), (sym.A, sym.B, sym.C, sym.D), "ABCD"):
+        assert_close(a, b, 1e-12, what)

@@ -23,6 +23,7 @@ rule of :mod:`fmugen.control.names` (FMI names, '.' written '_').
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Mapping, Optional, Sequence, Union
 
 import numpy as np
@@ -71,6 +72,36 @@ def linearize(model, x=None, u=None, t: float = 0.0,
        expand to ``q[1]`` ... ``q[n]``).
     inputs: None (all) or a list of input names: the columns of B and D.
     """
+    import control
+
+    lm = linear_model(model, x, u, t, parameter_values, outputs, inputs)
+    return control.ss(lm.A, lm.B, lm.C, lm.D, states=[signal_name(n) for n in lm.states],
+                      inputs=[signal_name(n) for n in lm.inputs], outputs=[signal_name(n) for n in lm.outputs],
+                      name=signal_name(lm.name))
+
+
+@dataclass
+class LinearModel:
+    """(A, B, C, D) with FMI names, and the point (t, x0, u0, y0) they were taken at."""
+
+    name: str
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    states: list
+    inputs: list
+    outputs: list
+    t: float
+    x0: np.ndarray
+    u0: np.ndarray  # every input of the model, not only the selected columns
+    y0: np.ndarray  # the selected outputs
+    all_inputs: list
+
+
+def linear_model(model, x=None, u=None, t: float = 0.0, parameter_values=None, outputs="all",
+                 inputs=None) -> LinearModel:
+    """What :func:`linearize` returns, as plain arrays with FMI names (for files and other tools)."""
     model = as_model(model)
     if hasattr(x, "x") and hasattr(x, "u"):  # an OperatingPoint
         op = x
@@ -79,6 +110,10 @@ def linearize(model, x=None, u=None, t: float = 0.0,
         if parameter_values is None:
             parameter_values = op.parameter_values
     check_signal_names(model)
+    for what, v, n in (("x", x, model.nx), ("u", u, model.nu)):
+        if v is not None and np.size(v) != n:
+            raise FmugenError(f"{model.name}: {what} has {np.size(v)} values, the model has {n} "
+                              f"{'states' if what == 'x' else 'inputs'}")
     ev = ModelEvaluator(model, parameter_values)
     A, B, C, D = ev.jacobians(t, x, u)
     if isinstance(outputs, str) and outputs in ("all", "computed"):
@@ -94,8 +129,10 @@ def linearize(model, x=None, u=None, t: float = 0.0,
     C = np.array(C_rows).reshape(len(chosen), model.nx)
     D = np.array(D_rows).reshape(len(chosen), model.nu)[:, cols]
     B = B[:, cols]
-    import control
-
-    return control.ss(A, B, C, D, states=[signal_name(v.name) for v in model.states],
-                      inputs=[signal_name(model.inputs[i].name) for i in cols],
-                      outputs=[signal_name(s.name) for s in chosen], name=signal_name(model.name))
+    x0 = ev.x0 if x is None else np.asarray(x, dtype=float).ravel()
+    u0 = ev.u0 if u is None else np.asarray(u, dtype=float).ravel()
+    g = ev.g(t, x0, u0)
+    y0 = np.array([x0[s.index] if s.kind == "state" else g[s.index] for s in chosen])
+    return LinearModel(model.name, A, B, C, D, [v.name for v in model.states],
+                       [model.inputs[i].name for i in cols], [s.name for s in chosen], t, x0, u0, y0,
+                       [v.name for v in model.inputs])
