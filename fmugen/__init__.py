@@ -45,6 +45,7 @@ def build_fmu(model, output_path, fmi_type: str = "both", **options):
     return _build(model, output_path, fmi_type=fmi_type, **options)
 
 
-from .codegen.evaluate import ModelEvaluator, linearize  # noqa: E402
+from .codegen.evaluate import ModelEvaluator  # noqa: E402
+from .control import linearize, trim  # noqa: E402  (operating points and A, B, C, D for python-control)
 
-__all__ = ["load_robot", "load_scene", "build_fmu", "linearize", "ModelEvaluator", "Manipulator", "FORMULATIONS", "__version__"]
+__all__ = ["load_robot", "load_scene", "build_fmu", "linearize", "trim", "ModelEvaluator", "Manipulator", "FORMULATIONS", "__version__"]
