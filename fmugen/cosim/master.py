@@ -59,6 +59,7 @@ from __future__ import annotations
 
 import math
 import time as _time
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Optional, Sequence
 
@@ -66,7 +67,9 @@ import numpy as np
 
 from .errors import CosimError
 from .system import CosimSystem
-from .units import ModelUnit, SlaveUnit, UnitFailure, dptr, vr_array
+from .units import STATUS, ModelUnit, SlaveUnit, UnitFailure, dptr, vr_array
+
+STATUS_NAMES = dict(enumerate(STATUS))
 
 SCHEMES = ("jacobi", "gauss-seidel", "iterative", "newton")
 EXTRAPOLATIONS = ("hold", "linear", "quadratic")
@@ -437,6 +440,7 @@ class Master:
             rejected_last = False
             # divergence monitor: window maxima of the scaled defect
             win_len, win_max, win_sig, windows, win_count = 5, 0.0, 0.0, [], 0
+            recent = deque(maxlen=8)  # (defect, signal) of the last macro steps
             J = None
             J_H = None
             while t < stop - 1e-12 * max(1.0, abs(stop)):
@@ -576,6 +580,16 @@ class Master:
                                                 f"coupled value grew to {sn:.3g} x its initial scale",
                                                 coupling=self.coupling_labels[j])
                         break
+                    recent.append((dn, sn))
+                    if _explosive(recent):
+                        j = int(np.argmax(np.abs(d[:nu]) / scale0[:nu]))
+                        failure = FailureReport(
+                            t, "diverged",
+                            f"the coupling diverges: the coupled values grew more than 100x within "
+                            f"{len(recent)} macro steps with a defect as large as the signal (H = {H:.4g} s is "
+                            f"above this scheme's stability limit: take a smaller step, extrapolation, or an "
+                            f"iterative/newton scheme)", coupling=self.coupling_labels[j])
+                        break
                     win_max = max(win_max, dn)
                     win_sig = max(win_sig, sn)
                     win_count += 1
@@ -610,16 +624,20 @@ class Master:
                 else:
                     H = min(H0, Hmax)
         except UnitFailure as e:
-            growing = _growing(windows) if detect_divergence else False
+            growing = detect_divergence and nu and (_growing(windows) or _growing_steps(recent))
             coupling = None
             msg = str(e)
-            if growing and nu:
+            cause = "fmu-failure"
+            if growing:
                 j = int(np.argmax(np.abs(d[:nu]) / np.maximum(scale0[:nu], 1e-300)))
                 coupling = self.coupling_labels[j]
-                msg += ("; the interface defect had been growing before this failure: the inputs this FMU was "
-                        "given jumped, so the coupling (macro step too large for the scheme), not stiffness "
-                        "of the FMU, is the likely cause")
-            failure = FailureReport(t, "fmu-failure", msg, unit=e.unit, coupling=coupling, fmu_messages=e.messages)
+                cause = "diverged"
+                msg = (f"the coupling diverges: the interface defect grew over the last macro steps until FMU "
+                       f"{e.unit!r} failed ({e.call} returned {STATUS_NAMES.get(e.status, e.status)}). The inputs "
+                       f"this FMU was given jumped, so the coupling (H = {H:.4g} s is above this scheme's stability "
+                       f"limit: take a smaller step, extrapolation, or an iterative/newton scheme) is the cause, "
+                       f"not stiffness of the FMU, whatever its message suggests")
+            failure = FailureReport(t, cause, msg, unit=e.unit, coupling=coupling, fmu_messages=e.messages)
         finally:
             for k, s in enumerate(states):
                 try:
@@ -771,7 +789,33 @@ def _diverging(windows) -> float:
 
 
 def _growing(windows) -> bool:
-    return _run_length(windows) >= 2
+    return _run_length(windows) >= 2 and windows[-1][0] >= 0.1 * windows[-1][1]
+
+
+def _halves(recent):
+    r = list(recent)
+    h = len(r) // 2
+    return r[:h], r[h:]
+
+
+def _growing_steps(recent) -> bool:
+    """The defect of the latest macro steps is >= 10x that of the ones before and a sizeable part of the signal."""
+    if len(recent) < 4:
+        return False
+    a, b = _halves(recent)
+    db = max(x[0] for x in b)
+    return db >= 10 * max(max(x[0] for x in a), 1e-300) and db >= 0.1 * max(x[1] for x in b)
+
+
+def _explosive(recent) -> bool:
+    """The coupled signals grew >= 100x from one group of 4 macro steps to the next, with a defect as large
+    as half the signal: faster than any polynomial ramp of degree <= 5 (at most 2^5 = 32x), so the coupling
+    itself amplifies.  (A physically unstable system would be flagged too: switch detection off for it.)"""
+    if len(recent) < 8:
+        return False
+    a, b = _halves(recent)
+    sb = max(x[1] for x in b)
+    return sb >= 100 * max(max(x[1] for x in a), 1e-300) and max(x[0] for x in b) >= 0.5 * sb
 
 
 def run(system, scheme: str = "gauss-seidel", extrapolation: str = "hold", step: Optional[float] = None,

@@ -1,0 +1,92 @@
+"""Accuracy of the coupling schemes against the monolithic reference (same components, one model).
+
+* observed orders over a macro-step halving: 1 with held inputs, 2 with linear
+  extrapolation (Jacobi and Gauss-Seidel);
+* convergence to the monolithic solution as H -> 0, far above the reference's
+  own error estimate;
+* the issue's goal on the split stiff rig: Newton on the interface is stable
+  and within 1e-4 rad at 10x the largest stable Gauss-Seidel/held step, where
+  Gauss-Seidel/held diverges.
+"""
+import numpy as np
+import pytest
+
+from cosim_rigs import LIMITS, reference_problem, split_system
+from fmugen.cosim import run, solve_reference
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _cache(tmp_path_factory):
+    mp = pytest.MonkeyPatch()
+    mp.setenv("FMUGEN_CACHE", str(tmp_path_factory.mktemp("reference_cache")))
+    yield
+    mp.undo()
+
+
+H_SWEEP = (2e-3, 1e-3, 5e-4)
+
+
+@pytest.fixture(scope="module")
+def ref_default():
+    # every communication point of the sweep lies on this grid
+    return solve_reference(reference_problem("default", "step", 1.0), times=np.linspace(0.0, 1.0, 4001))
+
+
+def _error(result, ref, column="joint.theta"):
+    h = ref.time[1] - ref.time[0]
+    idx = np.rint((result.time - ref.time[0]) / h).astype(int)
+    assert np.allclose(ref.time[idx], result.time, atol=1e-12)
+    return float(np.max(np.abs(result[column] - ref[column][idx])))
+
+
+def test_reference_is_far_below_the_errors(ref_default):
+    # two Radau tolerances and DOP853 agree to 1e-12 rad (the default set is not stiff for DOP853 over 1 s)
+    assert ref_default.error_of("joint.theta") < 1e-12
+    assert any("DOP853 rtol" in c for c in ref_default.settings["confirm"])
+
+
+@pytest.mark.parametrize("scheme,ext,order", [("jacobi", "hold", 1), ("jacobi", "linear", 2),
+                                              ("gauss-seidel", "hold", 1), ("gauss-seidel", "linear", 2),
+                                              ("newton", "linear", 2)])
+def test_observed_order(ref_default, scheme, ext, order):
+    errs = np.array([_error(run(split_system("default", "step"), scheme, ext, step=H), ref_default)
+                     for H in H_SWEEP])
+    observed = np.log2(errs[:-1] / errs[1:])
+    assert np.all(np.abs(observed - order) < 0.15), (errs, observed)
+    # and every error is > 100x the reference's own error estimate
+    assert errs.min() > 100 * ref_default.error_of("joint.theta")
+
+
+def test_converges_to_the_monolithic_model(ref_default):
+    errs = [_error(run(split_system("default", "step"), "gauss-seidel", "linear", step=H), ref_default)
+            for H in (4e-3, 1e-3, 2.5e-4)]
+    assert errs[0] > errs[1] > errs[2]
+    assert errs[2] < 2e-6
+    # the chamber pressure (peak ~5 MPa, a fast state) converges as well: 4.2e2 Pa at H = 0.25 ms,
+    # order 2 over the last halving
+    e_p = [_error(run(split_system("default", "step"), "gauss-seidel", "linear", step=H), ref_default, "actuator.P_L")
+           for H in (5e-4, 2.5e-4)]
+    assert e_p[1] < 2e-4 * np.max(np.abs(ref_default["actuator.P_L"]))
+    assert 1.8 < np.log2(e_p[0] / e_p[1]) < 2.2
+
+
+def test_iterative_and_newton_reach_the_same_implicit_solution():
+    a = run(split_system("default", "step"), "iterative", "linear", step=1e-3, coupling_tol=1e-9)
+    b = run(split_system("default", "step"), "newton", "linear", step=1e-3, coupling_tol=1e-9)
+    assert a.ok and b.ok
+    assert np.max(np.abs(a["joint.theta"] - b["joint.theta"])) < 1e-9
+    assert a.summary.iterations > b.summary.iterations > 0
+    assert b.summary.jacobians >= 1
+
+
+def test_newton_holds_1e_4_rad_at_ten_times_the_gauss_seidel_limit():
+    H = 10 * LIMITS["stiff"][("gauss-seidel", "hold")]  # 56 ms
+    stop = 2.5
+    gs = run(split_system("stiff", "smooth", stop=stop), "gauss-seidel", "hold", step=H)
+    assert gs.summary.status == "failed" and gs.summary.failure.cause == "diverged"
+    nw = run(split_system("stiff", "smooth", stop=stop), "newton", "linear", step=H)
+    assert nw.ok, nw.summary
+    ref = solve_reference(reference_problem("stiff", "smooth", stop), times=nw.time)
+    err = np.max(np.abs(nw["joint.theta"] - ref["joint.theta"]))
+    assert err < 1e-4
+    assert err > 100 * ref.error_of("joint.theta")
