@@ -175,19 +175,40 @@ static const char *solver_name(int solver)
     }
 }
 
+/* Smallest number of significant digits of the step size H that must
+ * survive the sum t + H: (t + H) - t differs from H by up to half an ulp of
+ * t + H, so at t = 1e10 a step of 0.01 keeps only 4 digits, and at t = 1e15
+ * none (t + H == t: time would not advance at all). */
+#define FMUGEN_STEP_REL_RESOLUTION 1e-6
+
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
                       fmi2Boolean noSetFMUStatePriorToCurrentPoint)
 {
-    (void)noSetFMUStatePriorToCurrentPoint;
     CS_CHECK(FMUGEN_STEP_COMPLETE, "fmi2DoStep");
     fmugen_instance *inst = INST;
     const fmugen_model_def *m = inst->model;
     const double tc = currentCommunicationPoint, H = communicationStepSize;
     const double t = inst->s.time;
-    if (!isfinite(tc) || !isfinite(H) || H < 0) {
+    if (!isfinite(tc) || !isfinite(H) || !(H > 0)) {
         fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
-                   "fmi2DoStep: communication point %g and step size %g must be finite, the step size >= 0", tc, H);
+                   "fmi2DoStep: communication point %g and step size %g must be finite, the step size > 0", tc, H);
         return fmi2Error;
+    }
+    if (noSetFMUStatePriorToCurrentPoint != fmi2True && noSetFMUStatePriorToCurrentPoint != fmi2False) {
+        fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                   "fmi2DoStep: noSetFMUStatePriorToCurrentPoint = %d is not a Boolean (fmi2True = 1 or "
+                   "fmi2False = 0)", (int)noSetFMUStatePriorToCurrentPoint);
+        return fmi2Error;
+    }
+    {
+        const double advanced = (tc + H) - tc;
+        if (advanced == 0 || fabs(advanced - H) > FMUGEN_STEP_REL_RESOLUTION * H) {
+            fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                       "fmi2DoStep: a step of %.17g s at t = %.17g cannot be resolved in double precision "
+                       "(t + h - t = %.17g); time would %s. Start the experiment at a smaller time or take larger "
+                       "steps", H, tc, advanced, advanced == 0 ? "not advance" : "advance by a wrong amount");
+            return fmi2Error;
+        }
     }
     /* importers compute communication points by their own arithmetic:
      * accept a difference of rounding size and take the importer's time */
@@ -208,7 +229,6 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
         inst->s.fsal_valid = 0;
         fmugen_invalidate(inst);
     }
-    if (H == 0) return fmi2OK;
 
     const size_t off = fmugen_solver_work_doubles(m->nx);
     double *u0 = inst->work + off, *u_work = u0 + m->nu;
@@ -239,12 +259,24 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
         return fmi2Discard;
     }
     inst->s.time = t_end;
+    /* never fmi2OK about an unchecked point: states, and outputs and
+     * derivatives at the end point, finite; values inside their validity ranges */
+    fmi2Status checked = fmugen_check_step_result(inst, "fmi2DoStep", msg, sizeof msg);
+    if (checked == fmi2Discard) {
+        inst->s.fmi_state = FMUGEN_STEP_FAILED;
+        inst->s.last_do_step_status = fmi2Discard;
+        inst->s.fsal_valid = 0;
+        inst->s.last_successful_time = tc;
+        fmugen_log(inst, fmi2Discard, FMUGEN_LOG_STATUS_ERROR,
+                   "fmi2DoStep from t = %.17g to %.17g discarded: %s", tc, t_end, msg);
+        return fmi2Discard;
+    }
     inst->s.last_successful_time = t_end;
-    inst->s.last_do_step_status = fmi2OK;
+    inst->s.last_do_step_status = checked;
     fmugen_log(inst, fmi2OK, FMUGEN_LOG_ALL, "fmi2DoStep to t = %.17g with %s: %lld steps, %lld rejected, %lld f",
                t_end, solver_name(inst->s.solver), inst->s.n_steps - steps0, inst->s.n_rejected - rej0,
                inst->s.n_rhs - rhs0);
-    return fmi2OK;
+    return checked;
 }
 
 fmi2Status fmi2CancelStep(fmi2Component c)

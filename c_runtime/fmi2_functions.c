@@ -265,6 +265,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
     }
     INST->s.time = startTime;
     INST->s.start_time = startTime;
+    INST->s.last_successful_time = startTime;
     INST->s.stop_time_defined = stopTimeDefined ? 1 : 0;
     INST->s.stop_time = stopTimeDefined ? stopTime : 0.0;
     /* the importer's tolerance is the CS relative tolerance unless rtol was
@@ -455,7 +456,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
 }
 
 static const char *const int_names[FMUGEN_INT_COUNT] = {"solver", "n_steps", "n_rejected", "n_rhs", "n_jac",
-                                                         "stiffness_detected"};
+                                                         "stiffness_detected", "range_check"};
 
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[])
 {
@@ -478,6 +479,7 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
         case FMUGEN_INT_N_REJECTED: v = inst->s.n_rejected; break;
         case FMUGEN_INT_N_RHS: v = inst->s.n_rhs; break;
         case FMUGEN_INT_N_JAC: v = inst->s.n_jac; break;
+        case FMUGEN_INT_RANGE_CHECK: v = inst->s.range_check; break;
         default: v = inst->s.n_stiff; break;
         }
         value[i] = v > 2147483647LL ? 2147483647 : (fmi2Integer)v; /* counters saturate */
@@ -497,7 +499,7 @@ fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
                        FMUGEN_INT_COUNT - 1);
             return fmi2Error;
         }
-        if (vr[i] != FMUGEN_INT_SOLVER) {
+        if (vr[i] != FMUGEN_INT_SOLVER && vr[i] != FMUGEN_INT_RANGE_CHECK) {
             fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
                        "fmi2SetInteger: cannot set %s (value reference %u): it is a solver counter (output of "
                        "the runtime)", int_names[vr[i]], vr[i]);
@@ -505,10 +507,19 @@ fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
         }
         if (!(inst->s.fmi_state & MASK_BEFORE_INIT_END)) {
             fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
-                       "fmi2SetInteger: cannot set solver (value reference %u) in state %s: a parameter "
+                       "fmi2SetInteger: cannot set %s (value reference %u) in state %s: a parameter "
                        "(variability fixed) can be set only before fmi2ExitInitializationMode",
-                       vr[i], fmugen_state_name(inst->s.fmi_state));
+                       int_names[vr[i]], vr[i], fmugen_state_name(inst->s.fmi_state));
             return fmi2Error;
+        }
+        if (vr[i] == FMUGEN_INT_RANGE_CHECK) {
+            if (value[i] < FMUGEN_RANGE_IGNORE || value[i] > FMUGEN_RANGE_ERROR) {
+                fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                           "fmi2SetInteger: range_check = %d rejected: use 0 (ignore), 1 (warn) or 2 (error: "
+                           "fmi2Discard)", value[i]);
+                return fmi2Error;
+            }
+            continue;
         }
         if (value[i] < FMUGEN_SOLVER_DOPRI5 || value[i] > FMUGEN_SOLVER_RK4) {
             fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
@@ -517,7 +528,10 @@ fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
             return fmi2Error;
         }
     }
-    for (size_t i = 0; i < nvr; i++) inst->s.solver = value[i];
+    for (size_t i = 0; i < nvr; i++) {
+        if (vr[i] == FMUGEN_INT_RANGE_CHECK) inst->s.range_check = value[i];
+        else inst->s.solver = value[i];
+    }
     return fmi2OK;
 }
 

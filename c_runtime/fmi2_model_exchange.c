@@ -38,6 +38,7 @@ fmi2Status fmi2EnterEventMode(fmi2Component c)
 {
     ME_CHECK(FMUGEN_EVENT_MODE | FMUGEN_CONTINUOUS_TIME_MODE, "fmi2EnterEventMode");
     INST->s.fmi_state = FMUGEN_EVENT_MODE;
+    INST->s.last_successful_time = INST->s.time; /* time may not go back before an event */
     fmugen_log(INST, fmi2OK, FMUGEN_LOG_EVENTS, "fmi2EnterEventMode at t = %g", INST->s.time);
     return fmi2OK;
 }
@@ -63,19 +64,27 @@ fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c)
 {
     ME_CHECK(FMUGEN_EVENT_MODE, "fmi2EnterContinuousTimeMode");
     INST->s.fmi_state = FMUGEN_CONTINUOUS_TIME_MODE;
+    INST->s.last_successful_time = INST->s.time;
     return fmi2OK;
 }
 
 fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noSetFMUStatePriorToCurrentPoint,
                                        fmi2Boolean *enterEventMode, fmi2Boolean *terminateSimulation)
 {
-    (void)noSetFMUStatePriorToCurrentPoint;
     ME_CHECK(FMUGEN_CONTINUOUS_TIME_MODE, "fmi2CompletedIntegratorStep");
     if (!enterEventMode || !terminateSimulation) {
         fmugen_log(INST, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
                    "fmi2CompletedIntegratorStep: enterEventMode or terminateSimulation is NULL");
         return fmi2Error;
     }
+    if (noSetFMUStatePriorToCurrentPoint != fmi2True && noSetFMUStatePriorToCurrentPoint != fmi2False) {
+        fmugen_log(INST, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                   "fmi2CompletedIntegratorStep: noSetFMUStatePriorToCurrentPoint = %d is not a Boolean "
+                   "(fmi2True = 1 or fmi2False = 0)", (int)noSetFMUStatePriorToCurrentPoint);
+        return fmi2Error;
+    }
+    /* the step is accepted: the integrator will not go back before it */
+    INST->s.last_successful_time = INST->s.time;
     *enterEventMode = fmi2False;
     *terminateSimulation = fmi2False;
     return fmi2OK;
@@ -86,6 +95,15 @@ fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time)
     ME_CHECK(FMUGEN_EVENT_MODE | FMUGEN_CONTINUOUS_TIME_MODE, "fmi2SetTime");
     if (!isfinite(time)) {
         fmugen_log(INST, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "fmi2SetTime: time %g is not finite", time);
+        return fmi2Error;
+    }
+    /* an integrator may try any time after the last accepted point (a
+     * rejected step goes back to it), never before it */
+    if (time < INST->s.last_successful_time) {
+        fmugen_log(INST, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                   "fmi2SetTime: time %.17g goes back before t = %.17g (the last completed integrator step, "
+                   "event or initialisation); restore an FMU state to go back", time,
+                   INST->s.last_successful_time);
         return fmi2Error;
     }
     if (time != INST->s.time) {

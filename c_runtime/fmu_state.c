@@ -11,7 +11,7 @@
  *
  * Serialised form (native byte order, for the same platform):
  *   8 bytes  magic "FMUGENST"
- *   u32      format version (2: with the stiffness and stability monitors)
+ *   u32      format version (2: with the stiffness and stability monitors; 3: with range_check)
  *   u32      fmuType
  *   u32 x 4  nx, nu, ny, np
  *   u32      length of the GUID, then the GUID bytes (no terminator)
@@ -28,7 +28,7 @@
 #include "fmugen_runtime.h"
 
 #define SNAPSHOT_MAGIC 0x464D5547u /* "FMUG" */
-#define FORMAT_VERSION 2u
+#define FORMAT_VERSION 3u
 static const char blob_magic[8] = {'F', 'M', 'U', 'G', 'E', 'N', 'S', 'T'};
 
 typedef struct fmugen_snapshot {
@@ -178,6 +178,7 @@ static void put_scalars(writer *w, const fmugen_scalars *s)
     put_f64(w, s->rk4_first_limit);
     put_f64(w, s->rk4_first_lambda);
     put_f64(w, s->rk4_first_time);
+    put_i64(w, s->range_check);
 }
 
 typedef struct reader {
@@ -226,6 +227,7 @@ static void get_scalars(reader *r, fmugen_scalars *s)
     s->rk4_first_limit = get_f64(r);
     s->rk4_first_lambda = get_f64(r);
     s->rk4_first_time = get_f64(r);
+    s->range_check = (int)get_i64(r);
 }
 
 static uint64_t fnv1a(const unsigned char *p, size_t n)
@@ -331,7 +333,31 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
     int st = s.fmi_state;
     if (st <= 0 || st > FMUGEN_ERROR || (st & (st - 1)) != 0) return fail(inst, fn, "invalid FMI state in blob");
     if (s.solver < FMUGEN_SOLVER_DOPRI5 || s.solver > FMUGEN_SOLVER_RK4) return fail(inst, fn, "invalid solver in blob");
+    if (s.range_check < FMUGEN_RANGE_IGNORE || s.range_check > FMUGEN_RANGE_ERROR)
+        return fail(inst, fn, "invalid range_check in blob");
     if (!isfinite(s.time)) return fail(inst, fn, "non-finite time in blob");
+    /* everything fmi2SetReal/fmi2SetupExperiment would refuse is refused
+     * here too: a restored state must be one the API could have produced */
+    if (!isfinite(s.start_time) || !isfinite(s.stop_time) || !isfinite(s.last_successful_time) ||
+        s.last_successful_time > s.time)
+        return fail(inst, fn, "invalid start, stop or last successful time in blob");
+    if ((s.stop_time_defined & ~1) || (s.rtol_set & ~1) || (s.fsal_valid & ~1) || (s.stiff_logged & ~1))
+        return fail(inst, fn, "a flag in the blob is not 0 or 1");
+    if (!(s.rt[FMUGEN_RT_RTOL] > 0 && s.rt[FMUGEN_RT_RTOL] < 1) || !(s.rt[FMUGEN_RT_ATOL] > 0) ||
+        !isfinite(s.rt[FMUGEN_RT_ATOL]) || !(s.rt[FMUGEN_RT_MAX_STEP] >= 0) || !isfinite(s.rt[FMUGEN_RT_MAX_STEP]) ||
+        !(s.rt[FMUGEN_RT_FIXED_STEP] >= 0) || !isfinite(s.rt[FMUGEN_RT_FIXED_STEP]))
+        return fail(inst, fn, "a runtime parameter (rtol, atol, max_step, fixed_step) in the blob is out of range");
+    if (!(s.h_next >= 0) || !isfinite(s.h_next) || !isfinite(s.facold))
+        return fail(inst, fn, "invalid solver memory (step size, controller history) in blob");
+    if (s.n_steps < 0 || s.n_rejected < 0 || s.n_rhs < 0 || s.n_jac < 0 || s.n_stiff < 0)
+        return fail(inst, fn, "negative counter in blob");
+    if (s.last_do_step_status < fmi2OK || s.last_do_step_status > fmi2Error)
+        return fail(inst, fn, "invalid last fmi2DoStep status in blob");
+    {
+        reader v = r; /* the arrays x, u, du, p, fsal: finite, as fmi2SetReal would have them */
+        for (size_t i = 0; i < inst->n_vec; i++)
+            if (!isfinite(get_f64(&v))) return fail(inst, fn, "non-finite value (state, input, parameter) in blob");
+    }
     fmugen_snapshot *snap = *FMUstate ? as_snapshot(inst, *FMUstate) : new_snapshot(inst);
     if (!snap) return fail(inst, fn, *FMUstate ? "*FMUstate is not a state of this FMU" : "out of memory");
     snap->s = s;

@@ -45,7 +45,13 @@ extern "C" {
 #define FMUGEN_INT_N_RHS 3      /* local: evaluations of f so far */
 #define FMUGEN_INT_N_JAC 4      /* local: evaluations of the Jacobian so far */
 #define FMUGEN_INT_STIFFNESS_DETECTED 5 /* local: times Dormand-Prince found the problem stiff so far */
-#define FMUGEN_INT_COUNT 6
+#define FMUGEN_INT_RANGE_CHECK 6 /* parameter: what leaving a validity range does, FMUGEN_RANGE_* */
+#define FMUGEN_INT_COUNT 7
+
+/* values of the range_check parameter (validity ranges: x_min ... below) */
+#define FMUGEN_RANGE_IGNORE 0 /* not checked */
+#define FMUGEN_RANGE_WARN 1   /* default: fmi2DoStep returns fmi2Warning and logs the variable */
+#define FMUGEN_RANGE_ERROR 2  /* fmi2DoStep returns fmi2Discard */
 
 #define FMUGEN_SOLVER_DOPRI5 1
 #define FMUGEN_SOLVER_IMPLICIT 2
@@ -76,6 +82,15 @@ typedef struct fmugen_model_def {
      * has_jacobian is 0. */
     int (*jacobian)(const double *p, double t, const double *x, const double *u,
                     double *dfdx, double *dfdu, double *dgdx, double *dgdu);
+
+    /* Validity ranges of states (nx), inputs (nu) and computed outputs (ny):
+     * the model's equations hold only for min <= v <= max (a pressure up to
+     * the supply, a positive chamber volume, a spool within its stroke).
+     * -HUGE_VAL / HUGE_VAL where a side is open; NULL pointers: no range.
+     * Checked by the Co-Simulation runtime after every communication step. */
+    const double *x_min, *x_max;
+    const double *u_min, *u_max;
+    const double *y_min, *y_max;
 } fmugen_model_def;
 
 /* Symbols shared by the runtime and model.c but not part of the FMU's

@@ -73,6 +73,7 @@ typedef struct fmugen_scalars {
     double rk4_lambda;         /* |lambda| of the dominant eigenvalue [1/s] */
     double rk4_warned_limit;   /* limit of the last warning, 0 = none yet */
     double rk4_first_limit, rk4_first_lambda, rk4_first_time; /* the first warning's numbers, for the failure message */
+    int range_check;           /* FMUGEN_RANGE_*: what leaving a validity range does */
 } fmugen_scalars;
 
 typedef struct fmugen_instance {
@@ -99,6 +100,8 @@ typedef struct fmugen_instance {
     /* solver workspace, sized for the largest method */
     double *work;
     int *ipiv;
+
+    int range_messages;        /* validity-range warnings logged so far (bounded) */
 } fmugen_instance;
 
 /* ---- support (runtime_support.c) ---- */
@@ -119,6 +122,7 @@ FMUGEN_INTERNAL int fmugen_evaluate_cached(fmugen_instance *inst, const char *fn
 FMUGEN_INTERNAL const char *fmugen_model_status_text(int code);
 FMUGEN_INTERNAL int fmugen_all_finite(const double *v, int n);
 FMUGEN_INTERNAL void fmugen_set_defaults(fmugen_instance *inst);
+static inline int fmugen_range_action(const fmugen_instance *inst) { return inst->s.range_check; }
 
 /* value-reference layout */
 static inline fmi2ValueReference fmugen_vr_der(const fmugen_model_def *m) { return (fmi2ValueReference)m->nx; }

@@ -48,6 +48,14 @@ FMUGEN_INTERNAL double fmugen_error_norm(const fmugen_instance *inst, const doub
 FMUGEN_INTERNAL int fmugen_lu_factor(int n, double *A, int *ipiv);
 FMUGEN_INTERNAL void fmugen_lu_solve(int n, const double *LU, const int *ipiv, double *b);
 
+/* After a communication step that the solver completed (inst->s.time is the
+ * end point): states finite; derivatives and outputs at the end point finite
+ * (one cached model evaluation, which the importer's fmi2GetReal reuses); and
+ * states, inputs and outputs inside the model's validity ranges
+ * (fmugen_model_def.x_min ...).  Returns fmi2OK, fmi2Warning (a value left
+ * its range; logged) or fmi2Discard (reason in msg). */
+FMUGEN_INTERNAL fmi2Status fmugen_check_step_result(fmugen_instance *inst, const char *fn, char *msg, size_t n);
+
 FMUGEN_INTERNAL int fmugen_solve_dopri5(fmugen_ode *ode, double t_end, char *msg, size_t n);
 FMUGEN_INTERNAL int fmugen_solve_rodas3(fmugen_ode *ode, double t_end, char *msg, size_t n);
 FMUGEN_INTERNAL int fmugen_solve_rk4(fmugen_ode *ode, double t_end, char *msg, size_t n);

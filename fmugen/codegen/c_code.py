@@ -102,7 +102,8 @@ _C_MATH = {
 # names the generated functions use for themselves
 _ARGS = {"p", "t", "x", "u", "dx", "y", "dfdx", "dfdu", "dgdx", "dgdu", "status",
          "evaluate", "jacobian", "x_start", "x_nominal", "u_start", "p_start",
-         "x_names", "u_names", "y_names", "p_names", "fmugen_model"}
+         "x_names", "u_names", "y_names", "p_names", "fmugen_model",
+         "x_min", "x_max", "u_min", "u_max", "y_min", "y_max"}
 RESERVED_NAMES = frozenset(_C_KEYWORDS | _C_MATH | _ARGS)
 #: prefixes of names the runtime header, the FMI headers and the C library
 #: (math.h, stddef.h, string.h) may define as macros or identifiers: a model
@@ -792,6 +793,26 @@ def _new_names(model: SymbolicModel, time) -> _Names:
     return names
 
 
+def _bound(v, side: float) -> str:
+    """A validity-range bound as C: the number, or -HUGE_VAL/HUGE_VAL when open."""
+    if v is None:
+        return "-HUGE_VAL" if side < 0 else "HUGE_VAL"
+    return _c_double(v)
+
+
+def _range_arrays(prefix: str, vars_) -> tuple:
+    """``(declarations, min pointer, max pointer)`` of the validity ranges of
+    ``vars_`` (Variable.min/max); NULL pointers when none has a range."""
+    if not any(v.min is not None or v.max is not None for v in vars_):
+        return [], "NULL", "NULL"
+    for v in vars_:
+        if v.min is not None and v.max is not None and not float(v.min) <= float(v.max):
+            raise ValueError(f"variable {v.name!r}: validity range min = {v.min!r} > max = {v.max!r}")
+    lo = _array("double", f"{prefix}_min", [_bound(v.min, -1) for v in vars_])
+    hi = _array("double", f"{prefix}_max", [_bound(v.max, 1) for v in vars_])
+    return [lo, hi], f"{prefix}_min", f"{prefix}_max"
+
+
 def _array(ctype: str, name: str, values: list) -> str:
     if not values:
         return ""
@@ -925,6 +946,11 @@ def generate_c(
         names_array("y_names", model.outputs),
         names_array("p_names", model.parameters),
     ]
+    ranges = {}
+    for prefix, vars_ in (("x", model.states), ("u", model.inputs), ("y", model.outputs)):
+        arrays, lo, hi = _range_arrays(prefix, vars_)
+        decls += arrays
+        ranges[prefix] = (lo, hi)
 
     def ptr(name, n):
         return name if n else "NULL"
@@ -945,6 +971,7 @@ def generate_c(
         f"    .has_jacobian = {1 if has_jac else 0},",
         "    .evaluate = evaluate,",
         f"    .jacobian = {'jacobian' if has_jac else 'NULL'},",
+        *(f"    .{k}_min = {lo}, .{k}_max = {hi}," for k, (lo, hi) in ranges.items()),
         "};",
     ]
     parts = ["\n".join(header), "#include <math.h>\n#include <stddef.h>\n#include <string.h>\n"

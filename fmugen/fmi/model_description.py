@@ -116,6 +116,11 @@ def runtime_parameters() -> tuple:
         RuntimeParameter("solver.stiffness_detected", d["FMUGEN_INT_STIFFNESS_DETECTED"], "Integer", "local",
                          "discrete", "calculated", None, "",
                          "times Dormand-Prince found the problem stiff so far (use solver.method = 2 then)"),
+        RuntimeParameter("solver.range_check", d["FMUGEN_INT_RANGE_CHECK"], "Integer", "parameter", "fixed",
+                         "exact", d["FMUGEN_RANGE_WARN"], "",
+                         "a state, input or output outside its validity range [min, max]: 0 ignored, "
+                         "1 fmi2Warning (default), 2 fmi2Discard",
+                         min=d["FMUGEN_RANGE_IGNORE"], max=d["FMUGEN_RANGE_ERROR"]),
     )
 
 

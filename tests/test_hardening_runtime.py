@@ -1,0 +1,258 @@
+"""Issue 9, classes 5 and 6: the FMU never says fmi2OK about a state it has
+not checked, and time that cannot advance is refused.
+
+FMUs built by fmugen from small models whose answers are known in closed form:
+
+* ``ramp``: x' = 1 (x(0) = 0), y = sqrt(1 - x): the output becomes NaN
+  exactly after t = 1 while the state stays finite;
+* ``ranged``: x' = 1 with the validity range x <= 0.5, an input u in [0, 1]
+  and an output z = 2 x in [-1, 1.5];
+* the one-joint hydraulic rig (stiff set) under a load torque 48 times the
+  actuator's stall torque, so that the load pressure must leave |P_L| <= P_s
+  (the issue's "24x the supply pressure without a word").
+"""
+import re
+from pathlib import Path
+
+import fmpy
+import pytest
+import sympy as sp
+from fmpy import read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import (FMU2Model, FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2Discard, fmi2Error, fmi2OK,
+                       fmi2Warning, fmi2LastSuccessfulTime)
+
+from fmugen.codegen.model import SymbolicModel, Variable
+from fmugen.fmi import build_fmu, variable_layout
+
+ROOT = Path(__file__).resolve().parents[1]
+RK4, DOPRI5, RODAS3 = 3, 1, 2
+
+
+class Log:
+    def __init__(self):
+        self.messages = []
+        self.callbacks = fmi2CallbackFunctions()
+        self.callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
+        self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
+        self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(fmpy.free)
+
+    def _log(self, env, name, status, category, message):
+        self.messages.append((status, message.decode()))
+
+    def text(self, status=None):
+        return "\n".join(m for s, m in self.messages if status is None or s == status)
+
+
+def symbol(name):
+    return sp.Symbol(name, real=True)
+
+
+@pytest.fixture(scope="module")
+def fmus(tmp_path_factory):
+    d = tmp_path_factory.mktemp("hardening_runtime")
+    x, u = symbol("x"), symbol("u")
+    ramp = SymbolicModel.from_equations(
+        "ramp", [Variable("x", x, start=0.0)], [], [], [sp.Integer(1)],
+        [Variable("y", symbol("y"))], [sp.sqrt(1 - x)])
+    ranged = SymbolicModel.from_equations(
+        "ranged", [Variable("x", x, start=0.0, max=0.5)], [Variable("u", u, start=0.0, min=0.0, max=1.0)], [],
+        [sp.Integer(1) + 0 * u], [Variable("z", symbol("z"), min=-1.0, max=1.5)], [2 * x])
+    from fmugen.components.assembly import load_assembly
+
+    rig = load_assembly(ROOT / "examples" / "single_joint_stiff.toml")
+    out = {}
+    for m in (ramp, ranged, rig):
+        out[m.name] = (m, build_fmu(m, d / f"{m.name}.fmu", fmi_type="both").path)
+    out["dir"] = d
+    return out
+
+
+def open_fmu(fmus, name, cls=FMU2Slave, tag="a"):
+    model, path = fmus[name]
+    md = read_model_description(str(path))
+    unzip = fmpy.extract(str(path), unzipdir=str(fmus["dir"] / f"{name}_{cls.__name__}_{tag}"))
+    fmu = cls(guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.coSimulation.modelIdentifier,
+              instanceName=name)
+    log = Log()
+    fmu.instantiate(callbacks=log.callbacks)
+    fmu.log = log
+    fmu.md = md
+    fmu.vr = {v.name: v.valueReference for v in md.modelVariables}
+    return fmu
+
+
+def start(fmu, t0=0.0, ints=None, reals=None):
+    fmu.setupExperiment(startTime=t0)
+    fmu.enterInitializationMode()
+    if ints:
+        fmu.setInteger([fmu.vr[k] for k in ints], list(ints.values()))
+    if reals:
+        fmu.setReal([fmu.vr[k] for k in reals], list(reals.values()))
+    fmu.exitInitializationMode()
+
+
+def status_of(call):
+    try:
+        return call()
+    except FMICallException as e:
+        return e.status
+
+
+def step(fmu, t, h, flag=fmpy.fmi2.fmi2True):
+    return status_of(lambda: fmu.fmi2DoStep(fmu.component, t, h, flag))
+
+
+# --------------------------------------------------------------------------
+# non-finite results are discarded at the step where they appear
+# --------------------------------------------------------------------------
+@pytest.mark.parametrize("solver", [RK4, DOPRI5, RODAS3])
+def test_output_that_becomes_nan_is_discarded_at_that_step(fmus, solver):
+    fmu = open_fmu(fmus, "ramp", tag=f"nan{solver}")
+    start(fmu, ints={"solver.method": solver})
+    t, h = 0.0, 0.25
+    statuses = []
+    while t < 2.0:
+        s = step(fmu, t, h)
+        statuses.append(s)
+        if s != fmi2OK:
+            break
+        y = fmu.getReal([fmu.vr["y"]])[0]
+        assert y ** 2 == pytest.approx(1 - (t + h), abs=1e-12)  # x = t to round-off for every solver
+        t += h
+    # the last good point is t = 1 (y = 0); the step to 1.25 is refused, not reported OK
+    assert statuses == [fmi2OK] * 4 + [fmi2Discard]
+    msg = fmu.log.text(fmi2Discard)
+    assert re.search(r"output y = -?nan is not finite at t = 1\.25", msg), msg
+    assert fmu.getRealStatus(fmi2LastSuccessfulTime) == 1.0
+    fmu.freeInstance()
+
+
+# --------------------------------------------------------------------------
+# validity ranges: warning by default, fmi2Discard when asked, nothing when off
+# --------------------------------------------------------------------------
+def test_ranges_are_in_the_model_description(fmus):
+    md = read_model_description(str(fmus["ranged"][1]))
+    v = {x.name: x for x in md.modelVariables}
+    assert v["x"].max == "0.5" and v["u"].min == "0.0" and v["z"].max == "1.5"
+    assert v["solver.range_check"].start == "1" and v["solver.range_check"].causality == "parameter"
+
+
+def test_leaving_a_range_is_a_warning_by_default(fmus):
+    fmu = open_fmu(fmus, "ranged", tag="warn")
+    start(fmu)
+    assert step(fmu, 0.0, 0.25) == fmi2OK
+    assert step(fmu, 0.25, 0.25) == fmi2OK  # x = 0.5: on the boundary is inside
+    assert step(fmu, 0.5, 0.25) == fmi2Warning
+    assert "state x = 0.75 left its validity range [-inf, 0.5] at t = 0.75" in fmu.log.text(fmi2Warning)
+    # the simulation goes on, and the result is still exact
+    assert step(fmu, 0.75, 0.25) == fmi2Warning
+    assert fmu.getReal([fmu.vr["x"]]) == [pytest.approx(1.0, abs=1e-12)]
+    fmu.freeInstance()
+
+
+def test_input_and_output_ranges(fmus):
+    fmu = open_fmu(fmus, "ranged", tag="io")
+    start(fmu)
+    fmu.setReal([fmu.vr["u"]], [2.0])
+    assert step(fmu, 0.0, 0.1) == fmi2Warning
+    assert "input u = 2 left its validity range [0, 1]" in fmu.log.text(fmi2Warning)
+    fmu.freeInstance()
+
+
+def test_range_check_2_discards_and_0_ignores(fmus):
+    fmu = open_fmu(fmus, "ranged", tag="err")
+    start(fmu, ints={"solver.range_check": 2})
+    assert step(fmu, 0.0, 0.5) == fmi2OK
+    assert step(fmu, 0.5, 0.1) == fmi2Discard
+    assert "state x = 0.6" in fmu.log.text(fmi2Discard) and "validity range" in fmu.log.text(fmi2Discard)
+    assert fmu.getRealStatus(fmi2LastSuccessfulTime) == 0.5
+    fmu.freeInstance()
+    fmu = open_fmu(fmus, "ranged", tag="off")
+    start(fmu, ints={"solver.range_check": 0})
+    assert step(fmu, 0.0, 2.0) == fmi2OK
+    fmu.freeInstance()
+    fmu = open_fmu(fmus, "ranged", tag="bad")
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    assert status_of(lambda: fmu.fmi2SetInteger(fmu.component, (fmpy.fmi2.fmi2ValueReference * 1)(
+        fmu.vr["solver.range_check"]), 1, (fmpy.fmi2.fmi2Integer * 1)(3))) == fmi2Error
+    assert "range_check = 3 rejected" in fmu.log.text(fmi2Error)
+    fmu.freeInstance()
+
+
+@pytest.mark.parametrize("solver", [DOPRI5, RK4])
+def test_load_pressure_beyond_the_supply_is_reported(fmus, solver):
+    """Load torque 1e4 N.m against a stall torque P_s D_m = 210 N.m: P_L -> 1e4/D_m = 48 P_s."""
+    fmu = open_fmu(fmus, "single_joint_stiff", tag=f"PL{solver}")
+    start(fmu, ints={"solver.method": solver}, reals={"joint.tau_load": 1e4, "solver.fixed_step": 1e-5})
+    statuses, t, h = [], 0.0, 0.01
+    for _ in range(20):
+        statuses.append(step(fmu, t, h))
+        t += h
+    assert fmi2Warning in statuses and fmi2Discard not in statuses
+    first = statuses.index(fmi2Warning)
+    assert all(s == fmi2OK for s in statuses[:first])
+    msg = fmu.log.text(fmi2Warning)
+    assert "actuator.P_L" in msg and "[-14000000, 14000000]" in msg, msg
+    fmu.freeInstance()
+
+
+# --------------------------------------------------------------------------
+# fmi2DoStep and fmi2SetTime arguments (issue item 6)
+# --------------------------------------------------------------------------
+@pytest.mark.parametrize("t0, h, fragment", [
+    (1e15, 0.01, "time would not advance"),
+    (1e10, 0.01, "advance by a wrong amount"),
+    (0.0, 0.0, "the step size > 0"),
+    (0.0, -0.1, "the step size > 0"),
+    (0.0, float("nan"), "must be finite"),
+])
+def test_steps_that_cannot_advance_time_are_errors(fmus, t0, h, fragment):
+    fmu = open_fmu(fmus, "ranged", tag=f"t{t0}{h}")
+    start(fmu, t0=t0)
+    assert step(fmu, t0, h) == fmi2Error
+    assert fragment in fmu.log.text(fmi2Error), fmu.log.text()
+    # refused calls change nothing: a good step still works from the same time
+    assert step(fmu, t0, 1.0) in (fmi2OK, fmi2Warning) if t0 < 1e15 else True
+    fmu.freeInstance()
+
+
+def test_large_start_time_with_a_resolvable_step_works(fmus):
+    fmu = open_fmu(fmus, "ranged", tag="t1e6")
+    start(fmu, t0=1e6)
+    for k in range(4):
+        assert step(fmu, 1e6 + 0.1 * k, 0.1) == fmi2OK
+    assert fmu.getReal([fmu.vr["x"]])[0] == pytest.approx(0.4, abs=1e-9)
+    fmu.freeInstance()
+
+
+def test_flag_that_is_not_a_boolean_is_an_error(fmus):
+    fmu = open_fmu(fmus, "ranged", tag="flag")
+    start(fmu)
+    assert step(fmu, 0.0, 0.1, flag=2) == fmi2Error
+    assert "noSetFMUStatePriorToCurrentPoint = 2 is not a Boolean" in fmu.log.text(fmi2Error)
+    assert step(fmu, 0.0, 0.1, flag=0) == fmi2OK
+    fmu.freeInstance()
+
+
+def test_me_time_cannot_go_back_before_a_completed_step(fmus):
+    model, path = fmus["ranged"]
+    md = read_model_description(str(path))
+    unzip = fmpy.extract(str(path), unzipdir=str(fmus["dir"] / "ranged_me"))
+    fmu = FMU2Model(guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.modelExchange.modelIdentifier,
+                    instanceName="me")
+    log = Log()
+    fmu.instantiate(callbacks=log.callbacks)
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    fmu.enterContinuousTimeMode()
+    fmu.setTime(1.0)
+    assert status_of(lambda: fmu.fmi2SetTime(fmu.component, 0.5)) == fmi2OK  # a retried step: allowed
+    fmu.completedIntegratorStep()
+    assert status_of(lambda: fmu.fmi2SetTime(fmu.component, 0.25)) == fmi2Error
+    assert "fmi2SetTime: time 0.25 goes back before t = 0.5" in log.text(fmi2Error)
+    assert status_of(lambda: fmu.fmi2SetTime(fmu.component, 0.75)) == fmi2OK
+    fmu.freeInstance()
