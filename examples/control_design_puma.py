@@ -23,8 +23,12 @@ What a control engineer does with fmugen, end to end:
 6. the same gains on the **nonlinear** monolithic model (scipy's Radau with
    the exact Jacobian A(x, u) - B(x, u) K) for a reference step of
    ``--step`` rad on joint ``--joint``, overlaid on the linear prediction; the
-   largest difference is printed (it shrinks like step^2 when the
-   linearisation is right).
+   largest difference is printed.  It shrinks like step^2 while no servo
+   spool crosses its null (PUMA, joint 2: steps up to ~5e-4 rad).  Beyond,
+   the orifice law's kink at null -- the flow gain is proportional to
+   sqrt(P_s - P_L) on one side and sqrt(P_s + P_L) on the other -- leaves a
+   part proportional to the step: ~0.3 % of it on the PUMA at its holding
+   pressures, a property of the valve, not of the linearisation.
 
 ``--scene examples/scenes/single_joint_split.toml --positions joint.theta
 --at joint.tau_load=50 --pose 0.2`` runs the same on the one-joint rig.
@@ -96,7 +100,7 @@ def control_name(fmi_name):
     return signal_name(fmi_name)
 
 
-def simulate_nonlinear(d, r_step, t_end, t_eval):
+def simulate_nonlinear(d, r_step, t_end, t_eval, rtol=1e-8):
     """q(t) of the nonlinear plant under u = u0 - K (x - x0) + N r_step (scipy Radau, exact Jacobian)."""
     from scipy.integrate import solve_ivp
 
@@ -117,14 +121,14 @@ def simulate_nonlinear(d, r_step, t_end, t_eval):
         A, B, _, _ = ev.jacobians(t, x, inputs(x))
         return A - B[:, ic] @ K
 
-    sol = solve_ivp(f, (0.0, t_end), x0, method="Radau", jac=jac, t_eval=t_eval, rtol=1e-8,
-                    atol=1e-10 * np.maximum(np.abs(x0), 1.0))
+    sol = solve_ivp(f, (0.0, t_end), x0, method="Radau", jac=jac, t_eval=t_eval, rtol=rtol,
+                    atol=1e-2 * rtol * np.maximum(np.abs(x0), 1.0))
     if not sol.success:
         raise RuntimeError(f"nonlinear simulation failed: {sol.message}")
     return sol.y[d["pos_index"]].T
 
 
-def compare(d, joint, step, t_end=1.0, n=501):
+def compare(d, joint, step, t_end=1.0, n=501, rtol=1e-8):
     """Linear prediction and nonlinear response for a step of ``step`` on position ``joint`` (1-based)."""
     import control
 
@@ -133,7 +137,7 @@ def compare(d, joint, step, t_end=1.0, n=501):
     r[joint - 1] = step
     lin = control.forced_response(d["sys_cl"], t, np.outer(r, np.ones_like(t)), squeeze=False).outputs.T
     q0 = d["op"].x[d["pos_index"]]
-    nl = simulate_nonlinear(d, r, t_end, t) - q0
+    nl = simulate_nonlinear(d, r, t_end, t, rtol) - q0
     return t, lin, nl
 
 
