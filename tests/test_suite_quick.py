@@ -55,8 +55,8 @@ def test_stiff_sets_accurate_with_error_control_and_stiffness_said(stiff_rows):
 def test_rk4_inside_limit_accurate_outside_detected_with_the_number(stiff_rows):
     _, rows = stiff_rows
     for case in ("stiff_P", "stiff_PI_opamp"):
-        inside = [r for r in by(rows, case, "RK4") if "(0.50 h_lim)" in r.method]
-        outside = [r for r in by(rows, case, "RK4") if "(1.20 h_lim)" in r.method]
+        inside = [r for r in by(rows, case, "RK4") if "(0.5 h_lim)" in r.method]
+        outside = [r for r in by(rows, case, "RK4") if "(1.2 h_lim)" in r.method]
         assert inside[0].outcome == ACCURATE and inside[0].error < 1e-6
         assert outside[0].outcome == DETECTED
         assert "exceeds the RK4 stability limit" in outside[0].message

@@ -38,7 +38,7 @@ class Method:
             return f"{name} tol {self.tol:.0e}"
         if h is None:
             return f"{name} {self.rk4_factor:g} h_lim" if self.rk4_factor else f"{name} h {self.rk4_step:.3g}"
-        ratio = f" ({h / h_limit:.2f} h_lim)" if h_limit and h_limit < float("inf") else ""
+        ratio = f" ({h / h_limit:.2g} h_lim)" if h_limit and h_limit < float("inf") else ""
         return f"{name} h {h:.3g}{ratio}"
 
 

@@ -65,6 +65,7 @@ def add_parser(sub) -> None:
     p.add_argument("--quick", action="store_true", help="the quick subset, fewer solver settings per case")
     p.add_argument("--out", default="suite_out", help="directory for suite.csv, the plots and the FMUs")
     p.add_argument("--no-plots", action="store_true", help="skip the plots")
+    p.add_argument("--repeat", type=int, default=1, help="runs per setting, median wall time reported (default 1)")
     p.set_defaults(func=command)
 
 
@@ -72,7 +73,8 @@ def command(args) -> int:
     from .run import run_suite
 
     cases = [scene_case(Path(args.file), args.quick)] if args.file else None
-    rows = run_suite(args.cases, quick=args.quick, out=args.out, plots=not args.no_plots, cases=cases)
+    rows = run_suite(args.cases, quick=args.quick, out=args.out, plots=not args.no_plots, cases=cases,
+                     repeats=args.repeat)
     print(f"wrote {Path(args.out) / 'suite.csv'}")
     # a silent failure is a failure of the command
     return 1 if any(r.outcome == "SILENT" for r in rows) else 0

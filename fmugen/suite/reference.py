@@ -103,6 +103,17 @@ def reference(s: Setup, t: np.ndarray, stiff: bool) -> Reference:
     return Reference(t, vals, np.max(np.abs(vals - conf), axis=0), nf, nj, wall)
 
 
+def sensitivity(s: Setup, t: np.ndarray, columns, ref: Reference, stiff: bool, rel: float = 1e-6) -> float:
+    """G = max over t of |y(t; x0 + dx0) - y(t; x0)| / |dx0|, dx0 = rel x nominal
+    along every state at once (in units of the nominals): how much the motion
+    amplifies an error made early on.  Solved at rtol 1e-10, so G is good to
+    ~1e-4 relative.  >= 1 by convention (a decaying motion still carries the
+    last step's error)."""
+    pert = Setup(s.ev, s.x0 + rel * s.nominal, s.u, s.nominal, s.names)
+    vals, *_ = _solve(pert, t, "Radau" if stiff else "DOP853", 1e-10)
+    return max(1.0, float(np.max(np.abs(vals[:, columns] - ref.values[:, columns]))) / rel)
+
+
 def work_precision_radau(s: Setup, t: np.ndarray, column: int, ref: Reference, rtols=(1e-4, 1e-6, 1e-8)):
     """scipy Radau's error, f and Jacobian evaluations and wall time over rtols
     (for the comparison with the FMU's implicit solver at equal error)."""

@@ -35,7 +35,7 @@ def print_table(rows, log=print) -> None:
 
 
 def cheapest(rows, goal: float) -> dict:
-    """Per trajectory case: (cheapest accurate run meeting ``goal``, [(other, time ratio)])."""
+    """Per trajectory case: (cheapest accurate run meeting ``goal``, [(other run meeting it, time ratio)])."""
     out = {}
     for case in dict.fromkeys(r.case for r in rows):
         ok = [r for r in rows if r.case == case and r.outcome == "accurate" and r.error <= goal
@@ -43,8 +43,7 @@ def cheapest(rows, goal: float) -> dict:
         if not ok:
             continue
         best = min(ok, key=lambda r: r.wall)
-        others = [(r.method, r.wall / best.wall) for r in rows
-                  if r.case == case and r is not best and r.wall > 0 and r.outcome == "accurate"]
+        others = [(r.method, r.wall / best.wall) for r in ok if r is not best]
         out[case] = (best, others)
     return out
 

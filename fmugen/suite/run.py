@@ -14,7 +14,7 @@ import numpy as np
 from . import classify as cl
 from .cases import CASES, RK4, Case, Method, get_case
 from .fmu_run import Unpacked, run
-from .reference import reference, setup
+from .reference import reference, sensitivity, setup
 
 GOAL = 1e-6  # rad (or m): the accuracy a user asks of a joint angle
 
@@ -39,9 +39,10 @@ class SuiteRow:
 class Context:
     """Where FMUs and outputs go; FMUs built once per model key."""
 
-    def __init__(self, out: Path, log: Callable):
+    def __init__(self, out: Path, log: Callable, repeats: int = 1):
         self.out = out
         self.log = log
+        self.repeats = repeats
         self.fmus = {}
         (out / "fmus").mkdir(parents=True, exist_ok=True)
 
@@ -91,6 +92,7 @@ def _trajectory_case(ctx: Context, case: Case, methods, plots: bool) -> list:
     y_ref = ref.values[:, cols]
     scale = float(np.max(np.abs(y_ref)))
     unc = float(np.max(ref.uncertainty[cols]))
+    G = sensitivity(s, t, cols, ref, case.stiff)
     checks = list(case.validity)
     record = list(case.compare) + [c.variable for c in checks if c.variable not in case.compare]
     h_lim = rk4_limit(s)
@@ -98,22 +100,32 @@ def _trajectory_case(ctx: Context, case: Case, methods, plots: bool) -> list:
     for m in methods:
         h = rk4_step(case, m, h_lim) if m.solver == RK4 else 0.0
         r = run(fmu, m, case.start, case.stop, case.H, record, rk4_h=h)
+        r.wall = _median_wall(r, ctx.repeats, lambda: run(fmu, m, case.start, case.stop, case.H, record, rk4_h=h))
         n = len(r.t)
         err = float(np.max(np.abs(r.values[:, :len(cols)] - y_ref[:n]))) if n else np.inf
         if not np.isfinite(err):
             err = np.inf
-        allowed = cl.promise(m, scale, unc)
+        allowed = cl.promise(m, scale, unc, G)
         outcome, msg = cl.classify(r.completed, r.failure_message(), r.warnings(), err, allowed,
                                    cl.violations(r.values, record, checks))
+        if outcome == cl.ACCURATE and G > 10 and not msg:
+            msg = f"sensitivity of the motion G = {G:.3g} (error amplification), promise scaled by it"
         rows.append(SuiteRow(case.name, m.label(h or None, h_lim), outcome, err, allowed, msg, r.steps,
                              r.rejected, r.f_evals, r.jac_evals, r.stiffness_detected, r.wall,
-                             {"ref_uncertainty": unc, "rk4_limit": h_lim, "t_end": float(r.t[-1]) if n else 0.0}))
+                             {"ref_uncertainty": unc, "rk4_limit": h_lim, "sensitivity": G,
+                              "t_end": float(r.t[-1]) if n else 0.0}))
         runs.append((rows[-1].method, r))
     if plots:
         from .report import plot_trajectories
 
         plot_trajectories(ctx.out / f"{case.name}.png", case, ref.t, y_ref, runs)
     return rows
+
+
+def _median_wall(first, repeats: int, again: Callable) -> float:
+    """Median wall time over ``repeats`` runs (the first one included)."""
+    walls = [first.wall] + [again().wall for _ in range(max(0, repeats - 1))]
+    return float(np.median(walls))
 
 
 def _energy(arm, q, qd) -> np.ndarray:
@@ -204,16 +216,18 @@ RUNNERS = {"trajectory": _trajectory_case, "energy": _energy_case, "thesis": _th
 
 
 def run_suite(names: Optional[Sequence[str]] = None, quick: bool = False, out="suite_out", plots: bool = True,
-              log: Callable = print, cases: Optional[Sequence[Case]] = None) -> list:
+              log: Callable = print, cases: Optional[Sequence[Case]] = None, repeats: int = 1) -> list:
     """Run the named cases (default: all, or the quick subset) and write
     ``out/suite.csv`` and ``out/<case>.png``; returns the rows.
 
-    ``quick`` also runs each case with its shorter list of methods.
+    ``quick`` also runs each case with its shorter list of methods;
+    ``repeats``: runs per trajectory-case setting, the median wall time is
+    reported (the outcome is that of the first, runs are deterministic).
     """
     from .report import print_table, summary, write_csv
 
     out = Path(out)
-    ctx = Context(out, log)
+    ctx = Context(out, log, repeats)
     if cases is None:
         chosen = [get_case(n) for n in names] if names else [c for c in CASES if c.quick or not quick]
     else:
