@@ -4,6 +4,7 @@
 * :func:`linearize` -- ``control.StateSpace`` at that point, exact Jacobians;
 * :func:`linearize_fmu` -- the same matrices from a built FMU through
   ``fmi2GetDirectionalDerivative`` (what any other FMI tool would see);
+* :func:`scene_model` -- a scene closed as written, or opened (controllers removed);
 * :mod:`.names` -- the naming rule (FMI names; '.' written '_' for python-control).
 
 Every function takes a SymbolicModel or a scene (an object with
@@ -12,8 +13,9 @@ Every function takes a SymbolicModel or a scene (an object with
 from .names import signal_name
 from .linearize import linearize
 from .trim import OperatingPoint, TrimError, trim
+from .scene import scene_model
 
-__all__ = ["trim", "linearize", "linearize_fmu", "OperatingPoint", "TrimError", "signal_name"]
+__all__ = ["trim", "linearize", "linearize_fmu", "scene_model", "OperatingPoint", "TrimError", "signal_name"]
 
 
 def __getattr__(name):
