@@ -6,6 +6,8 @@
     fmugen info FILE.toml
     fmugen build SCENE.toml -o DIR [--set NAME=VALUE ...] [--no-prune] [--no-cache]
     fmugen suite [FILE.toml] [--cases NAME ...] [--quick] --out DIR   (stiff and extreme cases, fmugen/suite)
+    fmugen linearize FILE.toml [--at NAME=VALUES ...] [--trim NAMES] [--inputs ...] [--outputs ...]
+                     [--set ...] [--without INSTANCES] --out FILE.npz   (operating point, A B C D, fmugen/control)
 
 FILE is a robot file (a ``[robot]`` table), an assembly of actuator-chain
 components (an ``[assembly]`` table) or a scene (a ``[scene]`` table: one FMU
