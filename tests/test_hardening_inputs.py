@@ -350,3 +350,22 @@ def test_cli_deep_expression_and_bad_assembly_exit_2(tmp_path):
     a = assembly(tmp_path, 'name = "single_joint_stiff"', 'name = "r\u00e9sum\u00e9"')
     r = cli("build", a, "--fmi-type", "cs", "-o", tmp_path / "y.fmu")
     assert r.returncode == 2 and "must be a C identifier" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_bad_unit_of_a_table_trajectory_names_file_and_component(tmp_path):
+    p = assembly(tmp_path, extra='\n[components.path]\ntype = "table_trajectory"\ntimes = [0.0, 1.0]\n'
+                                 'values = [0.0, 1.0]\nunit = "furlong"\n')
+    load_refused(p, "[components.path]", "furlong")
+
+
+@pytest.mark.parametrize("name, fragment", [("\u00e4\u00e4\u00f6", "no ASCII letters or digits"),
+                                            ("a" * 300, "at most 64 characters")])
+def test_build_refuses_names_that_make_no_model_identifier(tmp_path, name, fragment):
+    import dataclasses
+
+    from fmugen.components.joint import joint_inertia
+    from fmugen.fmi import build_fmu
+
+    model = dataclasses.replace(joint_inertia(), name=name)
+    with pytest.raises(FmugenError, match=fragment):
+        build_fmu(model, tmp_path / "x.fmu")

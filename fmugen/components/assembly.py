@@ -69,6 +69,19 @@ def _str_list(val, where):
     return val
 
 
+def _check_units(model: SymbolicModel, where: str) -> None:
+    """Every unit must be one modelDescription.xml can declare: refused here,
+    with the file and the component, not at build time."""
+    from ..fmi.units import base_units
+
+    for v in model.states + model.inputs + model.outputs + model.parameters:
+        if v.unit:
+            try:
+                base_units(v.unit)
+            except ValueError as exc:
+                raise InputFileError(f"{where}: variable {v.name}: {exc}") from None
+
+
 def load_assembly(path: Union[str, Path]) -> SymbolicModel:
     """Read an assembly file and return the assembled SymbolicModel."""
     path = Path(path)
@@ -151,6 +164,7 @@ def load_assembly(path: Union[str, Path]) -> SymbolicModel:
         except (ValueError, KeyError, TypeError) as exc:
             text = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
             raise InputFileError(f"{src}: {where}: {text}") from None
+        _check_units(components[inst], f"{src}: {where}")
     conns = asm.get("connections", [])
     if not isinstance(conns, list):
         raise ValueError(f"{src}: [assembly] connections must be a list of [source, target] pairs")

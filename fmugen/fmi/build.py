@@ -29,6 +29,7 @@ from typing import Optional, Sequence, Union
 from .. import __version__
 from ..codegen.c_code import GUID_PLACEHOLDER, c_identifier, deterministic_guid, generate_c
 from ..codegen.model import SymbolicModel
+from ..errors import IDENTIFIER_PATTERN, MAX_IDENTIFIER_LENGTH, FmugenError
 from .model_description import model_description_xml
 
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
@@ -81,6 +82,18 @@ def platform_binary() -> tuple:
     from fmpy import platform, sharedLibraryExtension
 
     return platform, sharedLibraryExtension
+
+
+def _check_identifier(ident: str, name: str, given: bool) -> None:
+    """The model identifier names the shared library and the FMU file: ASCII,
+    at most MAX_IDENTIFIER_LENGTH characters, and never a silent replacement
+    of a name that had no ASCII characters to keep."""
+    if not given and not any(c.isascii() and c.isalnum() for c in name):
+        raise FmugenError(f"model name {name!r} has no ASCII letters or digits to make a model identifier "
+                          f"from; give model_identifier=")
+    if len(ident) > MAX_IDENTIFIER_LENGTH or not IDENTIFIER_PATTERN.match(ident):
+        raise FmugenError(f"model identifier {ident[:80]!r} must be a C identifier of at most "
+                          f"{MAX_IDENTIFIER_LENGTH} characters (it names the shared library and the .fmu file)")
 
 
 def _fold(model: SymbolicModel, fold_parameters) -> SymbolicModel:
@@ -172,6 +185,7 @@ def build_fmu(
     t0 = time.perf_counter()
     model = _fold(model, fold_parameters)
     ident = model_identifier or c_identifier(model.name)
+    _check_identifier(ident, model.name, model_identifier is not None)
     rt, fmi_h = runtime_dir(), fmi_headers_dir()
     platform, suffix = platform_binary()
 
