@@ -118,3 +118,17 @@ def test_cli_runs_a_named_case_and_an_assembly_file(tmp_path, capsys):
         get_case("no_such_case")
     rc = fmugen_main(["suite", "--cases", "no_such_case", "--out", str(tmp_path / "b")])
     assert rc == 2 and "unknown suite case" in capsys.readouterr().err
+
+
+def test_cli_runs_a_users_assembly_file(tmp_path, capsys):
+    """fmugen suite FILE.toml: the user's own model, judged the same way."""
+    from pathlib import Path
+
+    f = Path(__file__).resolve().parents[1] / "examples" / "single_joint_stiff.toml"
+    rc = fmugen_main(["suite", str(f), "--quick", "--out", str(tmp_path), "--no-plots", "--set", "amp.theta_ref=0.1"])
+    table = list(csv.DictReader(open(tmp_path / "suite.csv")))
+    assert rc == 0 and len(table) == 4
+    assert {t["outcome"] for t in table} <= {ACCURATE, DETECTED}
+    assert any(t["outcome"] == DETECTED and "stability limit" in t["message"] for t in table)
+    rc = fmugen_main(["suite", str(f), "--out", str(tmp_path), "--set", "amp.theta_ref"])
+    assert rc == 2 and "NAME=NUMBER" in capsys.readouterr().err

@@ -185,6 +185,10 @@ CASES = (
     Case("puma_wrist_singularity", "thesis PUMA, wrist swept through q5 = 0 at 20 rad/s (end-effector outputs)",
          puma, dict(PUMA_POSE, **{"q[5]": 0.4, "qd[5]": -20.0, "qd[4]": 5.0}), 0.1, 0.002, compare=Q + P_EE,
          methods=PUMA_METHODS, quick_methods=PUMA_QUICK, stiff=False, model_key="puma"),
+    Case("puma_shoulder_singularity", "thesis PUMA, arm upright, swept at 5 rad/s through the shoulder "
+         "singularity (wrist centre at distance d_3 from the base axis, p_ee[1] = 0)", puma,
+         {"q[2]": -1.5707963267948966 + 0.2, "q[3]": 1.5707963267948966, "q[5]": 0.5, "qd[2]": -5.0}, 0.1, 0.002,
+         compare=Q + P_EE, methods=PUMA_METHODS, quick_methods=PUMA_QUICK, stiff=False, model_key="puma"),
     Case("puma_gravity_x10", "thesis PUMA falling under 10 g", puma, dict(PUMA_POSE, **{"g_z": -98.1}), 1.0,
          0.01, compare=Q + P_EE, methods=PUMA_METHODS, stiff=False, model_key="puma"),
     Case("puma_mass_extremes", "thesis PUMA with the flange mass 1e-6 kg (inertias 1e-6 x k^2) and the upper "

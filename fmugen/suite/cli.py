@@ -15,8 +15,23 @@ from pathlib import Path
 from .cases import CASES, QUICK_METHODS, TOLERANCE_METHODS, Case, Method, RK4_METHODS, Validity
 
 
-def scene_case(path: Path, quick: bool) -> Case:
-    """A case from a user's file (scene, robot or assembly)."""
+def parse_sets(items) -> dict:
+    """``["amp.theta_ref=0.1", ...]`` -> {name: float}; a clear error otherwise."""
+    out = {}
+    for item in items or ():
+        name, sep, value = item.partition("=")
+        try:
+            if not sep or not name.strip():
+                raise ValueError
+            out[name.strip()] = float(value)
+        except ValueError:
+            raise ValueError(f"fmugen suite --set {item!r}: expected NAME=NUMBER, e.g. amp.theta_ref=0.1") from None
+    return out
+
+
+def scene_case(path: Path, quick: bool, sets=None) -> Case:
+    """A case from a user's file (scene, robot or assembly); ``sets`` gives
+    start values of parameters, inputs (held) and states by FMI name."""
     import tomllib
 
     from ..errors import InputFileError, read_text_file
@@ -34,7 +49,11 @@ def scene_case(path: Path, quick: bool) -> Case:
         start = dict(scene.initial.values)
         states = {v.name for v in model.states}
         outputs = {v.name for v in model.outputs}
-        compare = tuple(r for r in scene.spec.record if r in states or r in outputs) or \
+        units = {v.name: v.unit for v in (*model.states, *model.outputs)}
+        recorded = [r for r in scene.spec.record if r in states or r in outputs]
+        # one error in one unit: the recorded angles (or positions) when there are any
+        compare = tuple(r for r in recorded if units.get(r) == "rad") or \
+            tuple(r for r in recorded if units.get(r) == "m") or tuple(recorded[:1]) or \
             tuple(v.name for v in model.states)[:1]
         p_s = max((v.start for v in model.parameters if v.name.endswith(".P_s") and v.start), default=None)
         checks = tuple(Validity(v.name, -p_s, p_s, "the load pressure cannot exceed the supply pressure")
@@ -46,10 +65,11 @@ def scene_case(path: Path, quick: bool) -> Case:
 
         model = symbolic_model(path)
         start = {}
-        compare = tuple(v.name for v in model.states)[: max(1, len(model.states) // 2)]
+        compare = tuple(v.name for v in model.states if v.unit == "rad") or (model.states[0].name,)
         checks, stop, H = (), 1.0, 0.01
         name, title = model.name, f"{path.name}: free run from the start values"
     methods = QUICK_METHODS if quick else TOLERANCE_METHODS + RK4_METHODS
+    start.update(sets or {})
     return Case(name, title, lambda: model, start, stop, H, compare=compare, methods=methods,
                 quick_methods=methods, validity=checks, model_key=name)
 
@@ -65,6 +85,8 @@ def add_parser(sub) -> None:
     p.add_argument("--quick", action="store_true", help="the quick subset, fewer solver settings per case")
     p.add_argument("--out", default="suite_out", help="directory for suite.csv, the plots and the FMUs")
     p.add_argument("--no-plots", action="store_true", help="skip the plots")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="with FILE: a start value of a parameter, input (held) or state, e.g. amp.theta_ref=0.1")
     p.add_argument("--repeat", type=int, default=1, help="runs per setting, median wall time reported (default 1)")
     p.set_defaults(func=command)
 
@@ -72,7 +94,10 @@ def add_parser(sub) -> None:
 def command(args) -> int:
     from .run import run_suite
 
-    cases = [scene_case(Path(args.file), args.quick)] if args.file else None
+    sets = parse_sets(args.set)
+    if sets and not args.file:
+        raise ValueError("fmugen suite --set applies to a FILE.toml run; the named cases fix their own values")
+    cases = [scene_case(Path(args.file), args.quick, sets)] if args.file else None
     rows = run_suite(args.cases, quick=args.quick, out=args.out, plots=not args.no_plots, cases=cases,
                      repeats=args.repeat)
     print(f"wrote {Path(args.out) / 'suite.csv'}")
