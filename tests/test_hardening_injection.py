@@ -186,3 +186,28 @@ def test_the_fmu_runs_with_macro_named_parameters(hostile):
         r = simulate_fmu(str(res.path), fmi_type="CoSimulation", stop_time=0.2, output_interval=0.1,
                          start_values={"tau[1]": 1.0, "FMUGEN_OK": ok}, output=["q[1]"])
         assert r["q[1]"][-1] == pytest.approx(0.2 ** 2 / (2 * J), rel=1e-6)
+
+
+def test_assembly_description_cannot_escape_its_comment(tmp_path):
+    """The [assembly] description reaches model.c and the XML the same way."""
+    from fmugen.components.assembly import load_assembly
+    from fmugen.fmi.model_description import model_description_xml
+
+    root = __import__("pathlib").Path(__file__).resolve().parents[1]
+    text = (root / "examples" / "single_joint_stiff.toml").read_text()
+    line = "description = " + toml_basic_string(" ".join(PAYLOADS))
+    text = re.sub(r'^description = ".*"$', lambda m: line, text, count=1, flags=re.M)
+    p = tmp_path / "rig.toml"
+    p.write_text(text, encoding="utf-8")
+    model = load_assembly(p)
+    assert model.description == " ".join(PAYLOADS)
+    src = tmp_path / "model.c"
+    src.write_text(generate_c(model).source)
+    runtime = root / "c_runtime"
+    r = subprocess.run(["cc", "-std=c99", "-fsyntax-only", "-Wall", "-Wextra", "-Werror", "-trigraphs",
+                        f"-I{runtime}", str(src)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    import xml.etree.ElementTree as ET
+
+    xml = model_description_xml(model, "{x}", "rig")
+    assert ET.fromstring(xml.split("\n", 1)[1]).get("description") == xml_text(model.description)
