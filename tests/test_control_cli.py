@@ -64,3 +64,19 @@ def test_bad_requests_are_one_line_errors(tmp_path, capsys, argv, message):
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
     assert not (tmp_path / "x.npz").exists()
+
+
+def test_no_trim_and_set(tmp_path):
+    """--no-trim linearises where told (here a moving arm); --set changes a parameter of the file."""
+    out = tmp_path / "moving.npz"
+    rc = main(["linearize", "robots/puma_thesis_com.toml", "--no-trim", "--at", "q=" + ",".join(map(str, Q0)),
+               "--at", "qd=0.5", "--at", "tau=10", "--set", "m_3=7.5", "--out", str(out)])
+    assert rc == 0
+    z = np.load(out)
+    model = fmugen.load_robot("robots/puma_thesis_com.toml").state_space_model(outputs=())
+    ref = linearize(model, np.r_[Q0, np.full(6, 0.5)], np.full(6, 10.0), parameter_values={"m_3": 7.5})
+    assert np.array_equal(z["A"], ref.A) and np.array_equal(z["B"], ref.B)
+    assert np.isnan(z["residual"])
+    rc = main(["linearize", "robots/puma_thesis_com.toml", "--no-trim", "--set", "m_3=heavy",
+               "--out", str(tmp_path / "y.npz")])
+    assert rc == 2

@@ -92,6 +92,10 @@ def load_model(path: Path, sets: dict, robot_outputs=(), formulation="newton_eul
         return scene_model(load_scene(path, set=sets), without), {}
     if without:
         raise FmugenError(f"{path}: --without applies to scenes only")
+    bad = {k: v for k, v in sets.items() if isinstance(v, bool) or not isinstance(v, (int, float))}
+    if bad:
+        raise FmugenError(f"{path}: --set {', '.join(f'{k}={v!r}' for k, v in bad.items())}: a parameter "
+                          f"value must be a number")
     if "robot" in data:
         import fmugen
 
