@@ -137,7 +137,7 @@ PUMA_METHODS = (Method(DOPRI5, 1e-6), Method(DOPRI5, 1e-9), Method(RODAS3, 1e-6)
 PUMA_QUICK = (Method(DOPRI5, 1e-6), Method(RODAS3, 1e-6), Method(RK4, rk4_step=1e-4))
 ENERGY_METHODS = (Method(DOPRI5, 1e-6), Method(DOPRI5, 1e-8), Method(DOPRI5, 1e-10), Method(RODAS3, 1e-6),
                   Method(RODAS3, 1e-8), Method(RK4, rk4_step=1e-3), Method(RK4, rk4_step=2e-4))
-PRESSURE_RANGE = Validity("actuator.P_L", -P_S, P_S, "the load pressure of a valve fed at P_s cannot exceed P_s")
+PRESSURE_RANGE = Validity("actuator.P_L", -P_S, P_S, "the load-pressure form of the valve holds for |P_L| <= P_s")
 
 CASES = (
     Case("stiff_P", "stiff actuator set, P control (stiffness ratio 4.9e3, driver pole -5e4 1/s)",

@@ -56,7 +56,7 @@ def scene_case(path: Path, quick: bool, sets=None) -> Case:
             tuple(r for r in recorded if units.get(r) == "m") or tuple(recorded[:1]) or \
             tuple(v.name for v in model.states)[:1]
         p_s = max((v.start for v in model.parameters if v.name.endswith(".P_s") and v.start), default=None)
-        checks = tuple(Validity(v.name, -p_s, p_s, "the load pressure cannot exceed the supply pressure")
+        checks = tuple(Validity(v.name, -p_s, p_s, "the load-pressure form of the valve holds for |P_L| <= P_s")
                        for v in model.states if p_s and v.name.endswith(".P_L"))
         stop, H = scene.spec.stop - scene.spec.start, scene.spec.step
         name, title = scene.name, f"scene {path.name}: {scene.spec.description}"
