@@ -369,3 +369,22 @@ def test_build_refuses_names_that_make_no_model_identifier(tmp_path, name, fragm
     model = dataclasses.replace(joint_inertia(), name=name)
     with pytest.raises(FmugenError, match=fragment):
         build_fmu(model, tmp_path / "x.fmu")
+
+
+def test_generator_names_the_variable_and_origin_of_a_bad_start(tmp_path):
+    """Reached only through the API (files are refused earlier): the message still says where."""
+    import dataclasses
+
+    from fmugen.codegen.c_code import generate_c
+
+    arm = fmugen.load_robot(robot_file(tmp_path))
+    model = arm.state_space_model()
+    bad = dataclasses.replace(model, parameters=(dataclasses.replace(model.parameters[0], start=float("inf")),)
+                              + model.parameters[1:])
+    with pytest.raises(ValueError, match=rf"from {tmp_path}.*parameter '{model.parameters[0].name}': "
+                                         r"non-finite start value inf"):
+        generate_c(bad)
+    nostart = dataclasses.replace(model, states=(dataclasses.replace(model.states[0], start=None),)
+                                  + model.states[1:])
+    with pytest.raises(ValueError, match=rf"from {tmp_path}.*state 'q\[1\]' has no start value"):
+        generate_c(nostart)

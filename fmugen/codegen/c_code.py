@@ -44,6 +44,7 @@ Example (a pendulum; the count is of the C that is printed):
 from __future__ import annotations
 
 import keyword
+import math
 import re
 import uuid
 from collections import Counter
@@ -795,8 +796,9 @@ def _new_names(model: SymbolicModel, time) -> _Names:
 
 def _bound(v, side: float) -> str:
     """A validity-range bound as C: the number, or -HUGE_VAL/HUGE_VAL when open."""
-    if v is None:
-        return "-HUGE_VAL" if side < 0 else "HUGE_VAL"
+    if v is None or math.isinf(float(v)):
+        return ("-HUGE_VAL" if side < 0 else "HUGE_VAL") if v is None else (
+            "-HUGE_VAL" if float(v) < 0 else "HUGE_VAL")
     return _c_double(v)
 
 
@@ -859,9 +861,19 @@ def generate_c(
     ident = model_identifier or c_identifier(model.name)
     if c_identifier(ident) != ident:
         raise ValueError(f"model identifier {ident!r} is not a valid C identifier")
+    origin = f" (from {model.provenance})" if model.provenance else ""
     for v in model.states:
         if v.start is None:
-            raise ValueError(f"model {model.name!r}: state {v.name!r} has no start value")
+            raise ValueError(f"model {model.name!r}{origin}: state {v.name!r} has no start value")
+    for kind, vars_ in (("state", model.states), ("input", model.inputs), ("parameter", model.parameters)):
+        for v in vars_:
+            for what in ("start", "nominal", "min", "max"):
+                val = getattr(v, what)
+                if val is None or (what in ("min", "max") and math.isinf(float(val))):
+                    continue  # an infinite bound is an open side
+                if not math.isfinite(float(val)):
+                    raise ValueError(f"model {model.name!r}{origin}: {kind} {v.name!r}: non-finite {what} value "
+                                     f"{float(val)!r}")
     known = {v.symbol for v in model.states + model.inputs + model.parameters}
     time = _time_symbol(model, known)
     if time is not None:
