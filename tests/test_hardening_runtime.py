@@ -256,3 +256,55 @@ def test_me_time_cannot_go_back_before_a_completed_step(fmus):
     assert "fmi2SetTime: time 0.25 goes back before t = 0.5" in log.text(fmi2Error)
     assert status_of(lambda: fmu.fmi2SetTime(fmu.component, 0.75)) == fmi2OK
     fmu.freeInstance()
+
+
+TWO_CHAMBER_RIG = """
+[assembly]
+name = "two_chamber_rig"
+parameter_set = "stiff"
+inputs = ["amp.theta_ref", "joint.tau_load"]
+connections = [
+  ["joint.theta", "amp.theta"], ["amp.u", "driver.u"], ["driver.i", "valve.i"],
+  ["actuator.P_A_eff", "valve.P_A"], ["actuator.P_B_eff", "valve.P_B"],
+  ["valve.Q_A", "actuator.Q_A"], ["valve.Q_B", "actuator.Q_B"],
+  ["joint.theta", "actuator.theta"], ["joint.w", "actuator.w"], ["actuator.tau", "joint.tau"],
+]
+[components.amp]
+type = "amplifier"
+[components.driver]
+type = "current_driver"
+kind = "lag"
+[components.valve]
+type = "servo_valve"
+flow = "chambers"
+[components.actuator]
+type = "hydraulic_actuator"
+form = "two_chamber"
+[components.joint]
+type = "joint_inertia"
+"""
+
+
+def test_two_chamber_rig_reports_leaving_the_stroke_its_volumes_allow(tmp_path):
+    """Stiff set: V_t/2 - D_m theta > 0 only for |theta| < 1/3 rad.  The actuator's position input is
+    connected (it disappears from the assembly); the joint angle driving it carries the range instead,
+    and a command of 0.5 rad is reported when the joint passes 1/3 rad -- a word about the stroke,
+    instead of a silent 1e14 Pa."""
+    from fmugen.components.assembly import load_assembly
+
+    p = tmp_path / "rig.toml"
+    p.write_text(TWO_CHAMBER_RIG)
+    model = load_assembly(p)
+    theta = {v.name: v for v in model.states}["joint.theta"]
+    assert theta.max == pytest.approx(1 / 3, rel=1e-15) and theta.min == -theta.max
+    fmus_ = {"dir": tmp_path, "rig": (model, build_fmu(model, tmp_path / "rig.fmu", fmi_type="cs").path)}
+    fmu = open_fmu(fmus_, "rig", tag="stroke")
+    start(fmu, ints={"solver.method": RODAS3}, reals={"amp.theta_ref": 0.5})
+    t, h, statuses = 0.0, 0.01, []
+    while t < 2.0 and fmi2Warning not in statuses:
+        statuses.append(step(fmu, t, h))
+        t += h
+    assert statuses[-1] == fmi2Warning and set(statuses[:-1]) <= {fmi2OK}
+    msg = fmu.log.text(fmi2Warning)
+    assert "state joint.theta = 0.33" in msg and "[-0.333333333, 0.333333333]" in msg, msg
+    fmu.freeInstance()

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+from dataclasses import replace
 from pathlib import Path
 from typing import Union
 
@@ -170,6 +171,48 @@ def load_assembly(path: Union[str, Path]) -> SymbolicModel:
         raise ValueError(f"{src}: [assembly] connections must be a list of [source, target] pairs")
     inputs = _str_list(asm["inputs"], f"{src}: [assembly] inputs") if "inputs" in asm else None
     outputs = _str_list(asm["outputs"], f"{src}: [assembly] outputs") if "outputs" in asm else None
-    return assemble(name, components, [tuple(c) if isinstance(c, list) else c for c in conns],
-                    inputs=inputs, outputs=outputs, description=asm.get("description", ""),
-                    where=src)
+    pairs = [tuple(c) if isinstance(c, list) else c for c in conns]
+    model = assemble(name, components, pairs, inputs=inputs, outputs=outputs,
+                     description=asm.get("description", ""), where=src)
+    return carry_input_ranges(model, components, pairs)
+
+
+def carry_input_ranges(model: SymbolicModel, components: dict, connections) -> SymbolicModel:
+    """Give a connected state or output the validity range of the input it
+    drives (the intersection, when it drives several).
+
+    A connected input disappears from the assembly, and with it the range its
+    component declared (the two-chamber actuator's position, within which its
+    chamber volumes stay positive); the source carries it instead, so that the
+    FMU still reports leaving it.  Only plain ``[source, target]`` connections
+    (no conversion factor) carry a range.
+    """
+    limits: dict = {}
+    for conn in connections:
+        if not isinstance(conn, tuple) or len(conn) != 2 or not all(isinstance(c, str) for c in conn):
+            continue
+        source, target = conn
+        inst, _, var_name = target.partition(".")
+        comp = components.get(inst)
+        if comp is None:
+            continue
+        for v in comp.inputs:
+            if v.name == var_name and (v.min is not None or v.max is not None):
+                lo, hi = limits.get(source, (None, None))
+                if v.min is not None:
+                    lo = v.min if lo is None else max(lo, v.min)
+                if v.max is not None:
+                    hi = v.max if hi is None else min(hi, v.max)
+                limits[source] = (lo, hi)
+    if not limits:
+        return model
+
+    def narrowed(v):
+        if v.name not in limits:
+            return v
+        lo, hi = limits[v.name]
+        lo = lo if v.min is None else (v.min if lo is None else max(lo, v.min))
+        hi = hi if v.max is None else (v.max if hi is None else min(hi, v.max))
+        return replace(v, min=lo, max=hi)
+
+    return replace(model, states=tuple(map(narrowed, model.states)), outputs=tuple(map(narrowed, model.outputs)))
