@@ -308,3 +308,28 @@ def test_two_chamber_rig_reports_leaving_the_stroke_its_volumes_allow(tmp_path):
     msg = fmu.log.text(fmi2Warning)
     assert "state joint.theta = 0.33" in msg and "[-0.333333333, 0.333333333]" in msg, msg
     fmu.freeInstance()
+
+
+@pytest.mark.parametrize("solver", [RK4, DOPRI5, RODAS3])
+def test_no_ok_about_a_blown_up_state(fmus, solver):
+    """The issue's RK4 reproduction: one RK4 step per communication step of 10 ms on the stiff rig
+    (eigenvalues to 5e4 1/s) blows up; every step that answers fmi2OK has |P_L| <= P_s and finite
+    states, and the blow-up is reported (warning or discard) at the step where it happens."""
+    fmu = open_fmu(fmus, "single_joint_stiff", tag=f"blow{solver}")
+    start(fmu, ints={"solver.method": solver}, reals={"amp.theta_ref": 0.1})
+    states = [v.name for v in fmus["single_joint_stiff"][0].states]
+    vrs = [fmu.vr[n] for n in states]
+    t, h, reported = 0.0, 0.01, False
+    for _ in range(30):
+        s = step(fmu, t, h)
+        t += h
+        if s == fmi2OK:
+            x = dict(zip(states, fmu.getReal(vrs)))
+            assert all(abs(v) < 1e300 for v in x.values())
+            assert abs(x["actuator.P_L"]) <= 14e6, (t, x)
+        else:
+            reported = True
+            if s == fmi2Discard:
+                break
+    if solver == RK4:
+        assert reported  # 10 ms is 100x beyond RK4's stability limit here
