@@ -59,9 +59,9 @@ def hydraulic_actuator(form: str = "load_pressure", kind: str = "rotary", P_s: f
     by default the supply pressure of the same parameter set.
     """
     if form not in ("load_pressure", "two_chamber"):
-        raise ValueError(f"hydraulic_actuator: form must be 'load_pressure' or 'two_chamber', not {form!r}")
+        raise FmugenError(f"hydraulic_actuator: form must be 'load_pressure' or 'two_chamber', not {form!r}")
     if kind not in ("rotary", "linear"):
-        raise ValueError(f"hydraulic_actuator: kind must be 'rotary' or 'linear', not {kind!r}")
+        raise FmugenError(f"hydraulic_actuator: kind must be 'rotary' or 'linear', not {kind!r}")
     D_name = "D_m" if kind == "rotary" else "A_p"
     used = [D_name, "V_t", "beta_e"] + (["C_tm"] if form == "load_pressure" else ["C_im", "C_em", "P_cav", "eps_P"])
     p = parameters("hydraulic_actuator", SPECS, used, parameter_set, overrides)

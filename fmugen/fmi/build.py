@@ -102,13 +102,13 @@ def _fold(model: SymbolicModel, fold_parameters) -> SymbolicModel:
     if fold_parameters == "all":
         return model.with_parameters_folded()
     if isinstance(fold_parameters, str):
-        raise ValueError(f"fold_parameters must be None, 'all' or a list of parameter names, "
+        raise FmugenError(f"fold_parameters must be None, 'all' or a list of parameter names, "
                          f"got {fold_parameters!r}")
     names = list(fold_parameters)
     known = {v.name for v in model.parameters}
     unknown = [n for n in names if n not in known]
     if unknown:
-        raise ValueError(f"fold_parameters: {', '.join(unknown)} not parameters of {model.name!r} "
+        raise FmugenError(f"fold_parameters: {', '.join(unknown)} not parameters of {model.name!r} "
                          f"(parameters: {', '.join(sorted(known))})")
     return model.with_parameters_folded(names)
 
@@ -117,7 +117,7 @@ def _fmi_types(fmi_type: str) -> tuple:
     try:
         return {"both": ("me", "cs"), "me": ("me",), "cs": ("cs",)}[fmi_type]
     except KeyError:
-        raise ValueError(f"fmi_type must be 'me', 'cs' or 'both', got {fmi_type!r}") from None
+        raise FmugenError(f"fmi_type must be 'me', 'cs' or 'both', got {fmi_type!r}") from None
 
 
 def _run(cmd: list, cwd: Path, what: str) -> None:

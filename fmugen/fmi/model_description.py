@@ -181,7 +181,7 @@ def variable_layout(model: SymbolicModel) -> VariableLayout:
 
     for i, v in enumerate(model.states):
         if v.start is None:
-            raise ValueError(f"model {model.name!r}: state {v.name!r} has no start value")
+            raise FmugenError(f"model {model.name!r}: state {v.name!r} has no start value")
         add(name=v.name, value_reference=i, type="Real",
             causality="output" if v.output else "local", variability="continuous", initial="exact",
             start=v.start, unit=v.unit, description=v.description, nominal=v.nominal, min=v.min, max=v.max,
@@ -200,7 +200,7 @@ def variable_layout(model: SymbolicModel) -> VariableLayout:
             nominal=v.nominal, min=v.min, max=v.max, kind="output", symbol=v.symbol)
     for i, v in enumerate(model.parameters):
         if v.start is None:
-            raise ValueError(f"model {model.name!r}: parameter {v.name!r} has no start value")
+            raise FmugenError(f"model {model.name!r}: parameter {v.name!r} has no start value")
         add(name=v.name, value_reference=2 * nx + nu + ny + i, type="Real", causality="parameter",
             variability="fixed", initial="exact", start=v.start, unit=v.unit, description=v.description,
             nominal=v.nominal, min=v.min, max=v.max, kind="parameter", symbol=v.symbol)
@@ -212,7 +212,7 @@ def variable_layout(model: SymbolicModel) -> VariableLayout:
     names = [v.name for v in out.variables]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
-        raise ValueError(f"model {model.name!r}: variable names used twice: {', '.join(dup)}")
+        raise FmugenError(f"model {model.name!r}: variable names used twice: {', '.join(dup)}")
     return out
 
 
@@ -293,7 +293,7 @@ def model_description_xml(
     """
     fmi_types = tuple(fmi_types)
     if not fmi_types or any(t not in ("me", "cs") for t in fmi_types):
-        raise ValueError(f"fmi_types must be a non-empty subset of ('me', 'cs'), got {fmi_types!r}")
+        raise FmugenError(f"fmi_types must be a non-empty subset of ('me', 'cs'), got {fmi_types!r}")
     layout = variable_layout(model)
     has_jac = model.jacobian is not None
 
@@ -329,7 +329,7 @@ def model_description_xml(
                 b = base_units(u)
             except ValueError as e:
                 owners = [v.name for v in layout.variables if v.unit == u]
-                raise ValueError(f"model {model.name!r}, variable {owners[0]}: {e}") from None
+                raise FmugenError(f"model {model.name!r}, variable {owners[0]}: {e}") from None
             uel = ET.SubElement(ud, "Unit", name=u)
             bel = ET.SubElement(uel, "BaseUnit")
             _set(bel, **{k: int(x) for k, x in b.exponents().items()})
