@@ -51,8 +51,8 @@ def cheapest(rows, goal: float) -> dict:
 def summary(rows, log=print, goal: float = 1e-6) -> None:
     log(f"\nCheapest method meeting {goal:g} (rad or m) per case, wall time inside fmi2DoStep:")
     for case, (best, others) in cheapest(rows, goal).items():
-        rel = ", ".join(f"{m} {x:.1f}x" for m, x in others)
-        log(f"  {case:24} {best.method:30} {best.wall * 1e3:8.2f} ms  (others: {rel})")
+        rel = ", ".join(f"{m} {x:.1f}x" for m, x in others) or "no other setting meets it"
+        log(f"  {case:24} {best.method:30} {best.wall * 1e3:8.2f} ms  (others meeting it: {rel})")
 
 
 def _plt():
