@@ -16,7 +16,9 @@ import json
 import os
 import shutil
 import sys
+import tempfile
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -132,34 +134,46 @@ def _total_ops(op_counts: dict) -> int:
     return n
 
 
-def build_scene(scene, out_dir, prune: bool = True, progress=None, use_cache: bool = True) -> BuiltScene:
+def build_scene(scene, out_dir, prune: bool = True, progress=None, use_cache: bool = True,
+                jobs: Optional[int] = None) -> BuiltScene:
     """Build every group of ``scene`` into ``out_dir/<group>.fmu`` and return what was built.
 
-    An FMU is written to a temporary name and renamed, so a failed build
-    leaves no half-written FMU; the scene is checked before anything is built.
+    Every group model is derived first, so an error in any of them stops the
+    build before a file is written; the FMUs are then generated and compiled
+    ``jobs`` at a time (default: the number of cores, at most 4) into a
+    staging folder and moved into ``out_dir`` together when all succeeded.
     """
     progress = progress or Progress()
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     progress(f"scene {scene.name}: initial state ({scene.spec.initial})")
     x0 = scene.initial.values
-    reports, paths = {}, {}
     cdir = cache_dir() / "fmus"
+    plan = {}  # group -> (key, model or None when cached, removed)
     for gname, g in scene.groups.items():
         key = _group_key(scene, gname, prune, x0)
-        target = out / f"{gname}.fmu"
-        cached = cdir / f"{key}.fmu"
-        meta = cdir / f"{key}.json"
-        t0 = time.perf_counter()
-        if use_cache and cached.is_file() and meta.is_file():
-            progress(f"{gname}: unchanged, from the cache")
-            shutil.copyfile(cached, target)
-            r = FmuReport(**{**json.loads(meta.read_text()), "path": target, "cached": True,
-                             "build_seconds": 0.0})
-            r.members = tuple(r.members)
+        if use_cache and (cdir / f"{key}.fmu").is_file() and (cdir / f"{key}.json").is_file():
+            plan[gname] = (key, None, [])
         else:
             progress(f"{gname}: derive ({', '.join(g.members)})")
             model, removed = scene.group_model(gname, prune=prune, x0=x0)
+            plan[gname] = (key, model, removed)
+
+    out.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=".building-", dir=out))
+    try:
+        def one(gname):
+            key, model, removed = plan[gname]
+            g = scene.groups[gname]
+            target = stage / f"{gname}.fmu"
+            cached, meta = cdir / f"{key}.fmu", cdir / f"{key}.json"
+            if model is None:
+                shutil.copyfile(cached, target)
+                r = FmuReport(**{**json.loads(meta.read_text()), "path": out / target.name, "cached": True,
+                                 "build_seconds": 0.0})
+                r.members = tuple(r.members)
+                progress(r.line())
+                return r
+            t0 = time.perf_counter()
             progress(f"{gname}: generate and compile ({model.nx} states)")
             tol = g.tolerance or scene.spec.tolerance
             try:
@@ -169,22 +183,31 @@ def build_scene(scene, out_dir, prune: bool = True, progress=None, use_cache: bo
                                                     "stepSize": scene.spec.step, "tolerance": tol})
             except ValueError as exc:
                 raise SceneError(f"{scene.src}: [fmus.{gname}]: {exc}") from None
-            r = FmuReport(group=gname, path=target, members=tuple(g.members), states=model.nx, inputs=model.nu,
-                          outputs=model.ny, parameters=model.np, ops={k: str(v) for k, v in res.op_counts.items()},
-                          total_ops=_total_ops(res.op_counts), library_bytes=_library_size(target),
-                          build_seconds=time.perf_counter() - t0, cached=False,
-                          has_jacobian=model.jacobian is not None, removed=removed)
+            r = FmuReport(group=gname, path=out / target.name, members=tuple(g.members), states=model.nx,
+                          inputs=model.nu, outputs=model.ny, parameters=model.np,
+                          ops={k: str(v) for k, v in res.op_counts.items()}, total_ops=_total_ops(res.op_counts),
+                          library_bytes=_library_size(target), build_seconds=time.perf_counter() - t0,
+                          cached=False, has_jacobian=model.jacobian is not None, removed=removed)
             if use_cache:
                 cdir.mkdir(parents=True, exist_ok=True)
-                tmp = cdir / f"{key}.fmu.part"
+                tmp = cdir / f"{key}.{os.getpid()}.part"
                 shutil.copyfile(target, tmp)
                 os.replace(tmp, cached)
                 d = dataclasses.asdict(r)
                 d.pop("path")
                 meta.write_text(json.dumps(d, default=str))
-        reports[gname] = r
-        paths[gname] = target
-        progress(r.line())
+            progress(r.line())
+            return r
+
+        jobs = jobs or min(4, os.cpu_count() or 1)
+        with ThreadPoolExecutor(max_workers=jobs) as ex:
+            futures = {g: ex.submit(one, g) for g in plan}
+            reports = {g: f.result() for g, f in futures.items()}
+        for g in plan:
+            os.replace(stage / f"{g}.fmu", out / f"{g}.fmu")
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+    paths = {g: out / f"{g}.fmu" for g in plan}
     return BuiltScene(scene, out, reports, scene.cosim_system(paths))
 
 

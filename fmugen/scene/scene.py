@@ -48,6 +48,7 @@ class Scene:
         self.connections = self._checked_connections()
         self._check_record()
         self._check_loops()
+        self._check_undriven_inputs()
 
     # ------------------------------------------------------------------ basics
     @property
@@ -114,6 +115,14 @@ class Scene:
             if kind == "input":
                 raise SceneError(f"{self.src}: [scene] record: {r} is an input; record the state or output "
                                  f"that drives it")
+
+    def _check_undriven_inputs(self) -> None:
+        """An input nothing drives needs a value: its default (start) or one the scene gives."""
+        for inst in self.spec.instances:
+            for v in self.undriven_inputs(inst):
+                if v.start is None:
+                    raise SceneError(f"{self.src}: [instances.{inst}]: input {v.name} is not connected and has no "
+                                     f"default; connect it or give start = {{ {v.name} = ... }}")
 
     def _check_loops(self) -> None:
         """An algebraic loop: a cycle of outputs that depend directly on connected inputs."""
