@@ -7,7 +7,7 @@ output, every input, no folding, the Jacobian always).  Builds bypass the
 cache, so the times are real; they are wall times on a shared machine,
 quote them as ratios.
 
-    python examples/scene_pruning_table.py [--out out/pruning.csv] [SCENE ...]
+    python examples/scene_pruning_table.py [--out out/pruning.csv] [--set NAME=VALUE ...] [SCENE ...]
 """
 from __future__ import annotations
 
@@ -22,10 +22,10 @@ from fmugen.scene.build import Progress
 HERE = Path(__file__).resolve().parent
 
 
-def rows_of(scene_path: Path) -> list:
+def rows_of(scene_path: Path, sets=()) -> list:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        scene = load_scene(scene_path)
+        scene = load_scene(scene_path, set=list(sets))
         built = {p: scene.build(Path(tmp) / str(p), prune=p, use_cache=False, progress=Progress(False))
                  for p in (True, False)}
     for g in built[True].fmus:
@@ -42,9 +42,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("scenes", nargs="*", type=Path, help="scene files (default: every examples/scenes/*.toml)")
     ap.add_argument("--out", type=Path, help="also write the table as CSV")
+    ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                    help="applied to every scene, e.g. fmus.arm.solver=dopri5")
     args = ap.parse_args(argv)
     scenes = args.scenes or sorted((HERE / "scenes").glob("*.toml"))
-    rows = [r for s in scenes for r in rows_of(s)]
+    rows = [r for s in scenes for r in rows_of(s, args.set)]
     cols = ["scene", "fmu", "states", "ops", "library_KiB", "build_s", "jacobian"]
     print("| " + " | ".join(cols) + " |  (pruned / unpruned)")
     print("|" + "---|" * len(cols))

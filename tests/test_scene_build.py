@@ -143,3 +143,20 @@ def test_pruning_leaves_out_what_the_scene_does_not_need(tmp_path):
     arm_u, _ = load_scene(PUMA).group_model("arm", prune=False)
     assert arm_p.ny == 0 and arm_u.ny == 3 + 6
     assert arm_p.operation_count() < arm_u.operation_count()
+
+
+def test_scene_with_a_locked_wrist_builds_an_arm_of_three_joints():
+    sc = load_scene("examples/scenes/puma_wrist_locked.toml")
+    m, removed = sc.group_model("arm")
+    assert [v.name for v in m.states] == ["q[1]", "q[2]", "q[3]", "qd[1]", "qd[2]", "qd[3]"]
+    assert any("locked" in r for r in removed)
+    full, _ = load_scene(PUMA).group_model("arm")
+    assert m.operation_count() < 0.5 * full.operation_count()
+    # at rest the chains hold the arm's gravity torque of the full arm with the wrist at its locked pose
+    init = sc.initial
+    arm = fmugen.load_robot("robots/puma_thesis_com.toml")
+    q = np.r_[[init.values[f"arm.q[{k}]"] for k in (1, 2, 3)], 0.0, 0.5, 0.0]
+    g = arm.bias(q, np.zeros(6))[:3]
+    params = {v.name: v.start for v in init.model.parameters}
+    tau = [params[f"act{k}.D_m"] * init.values[f"act{k}.P_L"] for k in (1, 2, 3)]
+    assert np.allclose(tau, g, rtol=1e-8, atol=1e-6 * np.max(np.abs(g)))
