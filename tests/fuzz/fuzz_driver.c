@@ -165,9 +165,10 @@ static void mutate_blob(fmi2Byte **blob, size_t *n)
 static void run_sequence(int max_calls)
 {
     const int me = rndi(2);
-    const char *names[] = {"fuzz", "%s%n%s%n", "", "inst\n\"<>&"};
-    const char *guid = rndi(20) ? fmugen_model.guid : "{wrong-guid}";
-    fmi2Component c = fmi2Instantiate(names[rndi(4)], me ? fmi2ModelExchange : fmi2CoSimulation, guid, "",
+    const char *names[] = {"fuzz", "%s%n%s%n", "", "inst\n\"<>&", NULL};
+    const char *guid = rndi(20) ? fmugen_model.guid : (rndi(2) ? "{wrong-guid}" : NULL);
+    fmi2Type type = rndi(50) ? (me ? fmi2ModelExchange : fmi2CoSimulation) : (fmi2Type)(2 + rndi(5));
+    fmi2Component c = fmi2Instantiate(names[rndi(30) ? rndi(4) : 4], type, guid, rndi(10) ? "" : NULL,
                                       rndi(30) ? &callbacks : NULL, fmi2False, (fmi2Boolean)rndi(2));
     n_calls++;
     if (!c) return;

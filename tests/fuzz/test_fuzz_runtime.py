@@ -11,7 +11,7 @@ and one model:
 * ``chain`` -- generated model.c of a 2-link spatial arm: a Cholesky solve of
   the mass matrix in every evaluation (parameters set to zero make it fail).
 
-Each driver runs for a bounded CPU time (FUZZ_SECONDS, default 12 s each)
+Each driver runs for a bounded CPU time (FUZZ_SECONDS, default 10 s each)
 with a fixed seed, so a finding is reproduced by rerunning the same command.
 Any sanitizer report aborts the driver (``-fno-sanitize-recover=all``), and
 the driver itself checks the runtime's contract after every call (valid
@@ -33,7 +33,7 @@ from fmugen.codegen.c_code import generate_c
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 RUNTIME = ROOT / "c_runtime"
-SECONDS = float(os.environ.get("FUZZ_SECONDS", "12"))
+SECONDS = float(os.environ.get("FUZZ_SECONDS", "10"))
 SEED = int(os.environ.get("FUZZ_SEED", "20261201"))
 SANITIZE = ["-fsanitize=address,undefined", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer"]
 
