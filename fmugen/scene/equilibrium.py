@@ -52,8 +52,10 @@ def initial_state(scene) -> InitialState:
 
 
 def solve_equilibrium(scene, model, x0, max_iter: int = 60, tol: float = 1e-10,
-                      stall_tol: float = 1e-6) -> InitialState:
-    ev = ModelEvaluator(model)
+                      stall_tol: float = 1e-6, evaluator=None) -> InitialState:
+    # evaluator: a ModelEvaluator of ``model`` to reuse (a sweep changes its parameter vector per point
+    # instead of compiling the model again)
+    ev = ModelEvaluator(model) if evaluator is None else evaluator
     t0 = scene.spec.start
     u = np.array([v.start if v.start is not None else 0.0 for v in model.inputs], dtype=float)
     names = [v.name for v in model.states]

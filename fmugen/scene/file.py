@@ -41,6 +41,7 @@ class InstanceSpec:
     start: dict = field(default_factory=dict)  # start values of states and undriven inputs
     hold: tuple = ()  # states held at their start value when solving for equilibrium
     locked: dict = field(default_factory=dict)  # robots: {joint number: position}
+    keep: tuple = ()  # parameters never folded as zero-valued (a sweep sets them per run; not in files)
 
 
 @dataclass(frozen=True)

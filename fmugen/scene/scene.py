@@ -226,7 +226,7 @@ class Scene:
             raise SceneError(f"{self.src}: [instances.{inst}] fixed: {', '.join(unknown)} not parameters of {inst}"
                              f"{did_you_mean(unknown[0], [v.name for v in m.parameters])}")
         if prune:
-            zeros = [v.name for v in m.parameters if v.start == 0.0 and v.name not in fold]
+            zeros = [v.name for v in m.parameters if v.start == 0.0 and v.name not in fold and v.name not in ins.keep]
             if zeros:
                 removed.append(f"{inst}: terms of zero-valued parameters {', '.join(zeros)} (folded)")
             fold += zeros
@@ -305,6 +305,30 @@ class Scene:
         return initial_state(self)
 
     # ------------------------------------------------------------------ downstream
+    def keeping(self, names) -> "Scene":
+        """This scene with the parameters ``names`` (``inst.param``) never folded as zero-valued.
+
+        A parameter sweep builds the FMUs once and sets the swept values as
+        start values per run, so those parameters must stay parameters of the
+        FMU even where the scene's value is zero.  A parameter the scene lists
+        under ``fixed`` is refused: the file says it is a constant.
+        """
+        keep = {}
+        for name in names:
+            inst, par = self._endpoint(str(name), f"{self.src}: keep parameter {name!r}")
+            params = [v.name for v in self.base_models[inst].parameters]
+            if par not in params:
+                raise SceneError(f"{self.src}: {name}: {inst} has no parameter {par!r}{did_you_mean(par, params)}")
+            fixed = self.spec.instances[inst].fixed
+            if fixed == "all" or par in fixed:
+                raise SceneError(f"{self.src}: [instances.{inst}] fixed: {par} is folded into a constant, so "
+                                 f"{name} cannot change per run; remove it from 'fixed' to vary it")
+            keep.setdefault(inst, []).append(par)
+        instances = {i: replace(ins, keep=tuple(dict.fromkeys(ins.keep + tuple(keep.get(i, ())))))
+                     for i, ins in self.spec.instances.items()}
+        other = Scene(replace(self.spec, instances=instances), self._sets)
+        return other
+
     def build(self, out_dir, prune: bool = True, progress=None, use_cache: bool = True):
         """One FMU per group into ``out_dir`` (see :func:`fmugen.scene.build.build_scene`)."""
         from .build import build_scene
