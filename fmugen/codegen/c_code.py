@@ -55,6 +55,7 @@ import sympy as sp
 from sympy.printing.c import C99CodePrinter
 
 from .model import SymbolicModel, Variable
+from .chain import ChainDynamics, chain_call_lines
 from .program import Assign, Program, SolveSPD
 
 __all__ = [
@@ -420,6 +421,7 @@ class Body:
     solve_ops: OpCount = OpCount()
     reads: set = field(default_factory=set)  # known symbols read (x, u, p, t)
     n_solves: int = 0
+    n_chains: int = 0  # calls of the looped chain dynamics (c_runtime/chain_dynamics.c)
 
     @property
     def function_ops(self) -> FunctionOps:
@@ -496,6 +498,10 @@ def lower(
         if isinstance(st, Assign):
             layout.append(("assign", st, len(pool)))
             pool.append(sp.sympify(st.expr))
+        elif isinstance(st, ChainDynamics):  # a SolveSPD too: test it first
+            b_idx = list(range(len(pool), len(pool) + len(st.B)))
+            pool.extend(sp.sympify(e) for e in st.B)
+            layout.append(("chain", st, [], [(i, 0, idx) for i, idx in enumerate(b_idx)]))
         elif isinstance(st, SolveSPD):
             n, k = st.B.shape
             if st.A.shape != (n, n) or st.X.shape != (n, k):
@@ -588,6 +594,19 @@ def lower(
             defined.add(st.symbol)
             return
         st = ent[1]
+        if ent[0] == "chain":
+            codes = [emit_expr(reduced[idx], out, ind) for _, _, idx in ent[3]]
+            lines, arr, offset, free_line = chain_call_lines(st, body.n_solves, codes, ind)
+            body.n_solves += 1
+            body.n_chains += 1
+            out.extend(lines)
+            for i, xs in enumerate(st.X):
+                if xs in all_need:
+                    out.append(f"{ind}const double {names.add(xs)} = {arr}[{offset + i}];")
+                    defined.add(xs)
+            if free_line:
+                out.append(free_line)
+            return
         n, k = st.B.shape
         a, b = f"spd_A{body.n_solves}", f"spd_B{body.n_solves}"
         body.n_solves += 1
@@ -986,8 +1005,10 @@ def generate_c(
         *(f"    .{k}_min = {lo}, .{k}_max = {hi}," for k, (lo, hi) in ranges.items()),
         "};",
     ]
+    looped = ev.n_chains + (jb.n_chains if has_jac else 0)
     parts = ["\n".join(header), "#include <math.h>\n#include <stddef.h>\n#include <string.h>\n"
-             '#include "fmugen_model.h"',
+             + ("#include <stdlib.h>\n" if looped else "")
+             + '#include "fmugen_model.h"' + ('\n#include "chain_dynamics.h"' if looped else ""),
              "\n".join(d for d in decls if d),
              "/* dx = f(t, x, u, p) and y = g(t, x, u, p) in one pass */\n" + evaluate]
     if has_jac:

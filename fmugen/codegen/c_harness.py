@@ -101,7 +101,8 @@ class CompiledModel:
         lib = work / "libmodel.so"
         cmd = [cc, "-std=c99", "-D_POSIX_C_SOURCE=199309L", *cflags, "-fPIC", "-shared",
                "-Wall", "-Wextra", "-Werror", f"-I{rt}", "-o", str(lib),
-               str(work / "model.c"), str(rt / "linalg.c"), str(work / "harness.c"), "-lm"]
+               str(work / "model.c"), str(rt / "linalg.c"), str(rt / "chain_dynamics.c"),
+               str(work / "harness.c"), "-lm"]
         r = subprocess.run(cmd, capture_output=True, text=True)
         if r.returncode != 0:
             raise RuntimeError(f"compilation failed: {' '.join(cmd)}\n{r.stderr}")

@@ -28,6 +28,7 @@ from typing import Mapping, Optional, Sequence
 import numpy as np
 import sympy as sp
 
+from ..codegen.chain import LOOP_MIN_LINKS, ChainDynamics, link_constants
 from ..codegen.differentiate import differentiate
 from ..codegen.model import SymbolicModel, Variable
 from ..codegen.program import Program
@@ -162,8 +163,19 @@ class Manipulator:
     # ------------------------------------------------------------------
     # the state-space model that becomes an FMU
     def state_space_model(self, outputs: Sequence[str] = ("p_ee",), formulation=None, name=None,
-                          locked: Optional[Mapping[int, float]] = None) -> SymbolicModel:
+                          locked: Optional[Mapping[int, float]] = None,
+                          strategy: str = "auto") -> SymbolicModel:
         """x = [q, qd], u = [tau, external wrenches], x' = [qd, M^{-1}(tau - h)].
+
+        ``strategy``: "straight" derives straight-line code (the formulation's
+        recursion, symbolic, CSE'd: the fastest code for small arms, but its
+        size and compile time grow with n^2..n^3); "loops" derives nothing and
+        lets the generated C call the looped articulated-body algorithm and
+        analytical Newton-Euler derivatives of ``c_runtime/chain_dynamics.c``
+        (:mod:`fmugen.codegen.chain`: code size linear in n, for C only --
+        the Python evaluators need "straight"); "auto" (default) takes
+        "loops" from :data:`~fmugen.codegen.chain.LOOP_MIN_LINKS` links on,
+        for arms without external wrenches or locked joints.
 
         ``outputs``: any of "p_ee" (end-effector position, frame N origin) and
         "qdd" (joint accelerations, which have direct feedthrough from tau).
@@ -181,6 +193,14 @@ class Manipulator:
             raise ValueError(f"unknown outputs {sorted(unknown)}; choose from p_ee, qdd")
         n, robot = self.n, self.robot
         locked = dict(locked or {})
+        if strategy not in ("auto", "straight", "loops"):
+            raise ValueError(f"strategy must be 'auto', 'straight' or 'loops', not {strategy!r}")
+        loopable = not locked and not self.external_links
+        if strategy == "loops" and not loopable:
+            raise ValueError(f"{robot.name}: strategy='loops' does not handle "
+                             f"{'locked joints' if locked else 'external wrenches'}; use strategy='straight'")
+        if strategy == "loops" or (strategy == "auto" and loopable and n >= LOOP_MIN_LINKS):
+            return self._looped_state_space_model(outputs, name)
         bad = [j for j in locked if not (isinstance(j, int) and 1 <= j <= n)]
         if bad:
             raise ValueError(f"{robot.name}: locked joint(s) {bad} do not exist (joints 1..{n})")
@@ -297,6 +317,75 @@ class Manipulator:
         )
         # locked joints leave rows of M and h nobody reads: drop their steps
         return model.pruned() if locked else model
+
+    def _looped_state_space_model(self, outputs: Sequence[str], name=None) -> SymbolicModel:
+        """The state-space model as two calls of the runtime's chain loops (strategy "loops").
+
+        Same variables, names and Jacobian layout as the straight-line model;
+        the program holds one :class:`~fmugen.codegen.chain.ChainDynamics`
+        step (forward dynamics and end-effector position), the Jacobian
+        program another.
+        """
+        n, robot = self.n, self.robot
+        rev = tuple(L.joint == REVOLUTE for L in robot.links)
+        B = sp.Matrix(self.q + self.qd + self.tau
+                      + link_constants(joint_frame_chain(robot), robot.gravity))
+        P = Program("_w")
+        X = sp.Matrix([P.fresh("qdd") for _ in range(n)] + [P.fresh("pee") for _ in range(3)])
+        P.steps.append(ChainDynamics(X, sp.zeros(0, 0), B, kind="fd", revolute=rev))
+        qdd, pee = list(X[:n]), list(X[n:])
+        Jp = Program("_j")
+        nj = n + 3 * n * n + 3 * n
+        XJ = sp.Matrix([Jp.fresh("jd") for _ in range(nj)])
+        Jp.steps.append(ChainDynamics(XJ, sp.zeros(0, 0), B, kind="jacobian", revolute=rev))
+        Y = sp.Matrix(n, 3 * n, list(XJ[n:n + 3 * n * n]))
+        dpee = sp.Matrix(3, n, list(XJ[n + 3 * n * n:]))
+        out_vars, out_exprs = [], []
+        if "p_ee" in outputs:
+            for r in range(3):
+                out_vars.append(Variable(f"p_ee[{r + 1}]", _real(f"p_ee_{r + 1}"), "m",
+                                         f"end-effector position (origin of frame {n}), base {'xyz'[r]}"))
+                out_exprs.append(pee[r])
+        if "qdd" in outputs:
+            for i in range(n):
+                unit = "rad/s2" if robot.links[i].joint == REVOLUTE else "m/s2"
+                out_vars.append(Variable(f"qdd[{i + 1}]", _real(f"qdd_out_{i + 1}"), unit,
+                                         f"acceleration of joint {i + 1} ({robot.links[i].name})"))
+                out_exprs.append(qdd[i])
+        dfdx = sp.zeros(2 * n, 2 * n)
+        dfdx[:n, n:] = sp.eye(n)
+        dfdx[n:, :] = Y[:, :2 * n]
+        dfdu = sp.zeros(2 * n, n)
+        dfdu[n:, :] = Y[:, 2 * n:]
+        dgdx = sp.zeros(len(out_vars), 2 * n)
+        dgdu = sp.zeros(len(out_vars), n)
+        row = 0
+        if "p_ee" in outputs:
+            dgdx[:3, :n] = dpee
+            row = 3
+        if "qdd" in outputs:
+            dgdx[row:row + n, :] = Y[:, :2 * n]
+            dgdu[row:row + n, :] = Y[:, 2 * n:]
+        states = [Variable(f"q[{i + 1}]", self.q[i], "rad" if rev[i] else "m",
+                           f"position of joint {i + 1} ({L.name}, {L.joint})", start=0.0, output=True)
+                  for i, L in enumerate(robot.links)]
+        states += [Variable(f"qd[{i + 1}]", self.qd[i], "rad/s" if rev[i] else "m/s",
+                            f"velocity of joint {i + 1} ({L.name})", start=0.0, output=True)
+                   for i, L in enumerate(robot.links)]
+        inputs = [Variable(f"tau[{i + 1}]", self.tau[i], "N.m" if rev[i] else "N",
+                           f"{'torque' if rev[i] else 'force'} applied by actuator {i + 1}", start=0.0)
+                  for i in range(n)]
+        params = tuple(Variable(p.name, p.symbol, p.unit, p.description, start=p.value)
+                       for p in robot.parameters)
+        return SymbolicModel(
+            name=name or robot.name,
+            description=robot.description or f"{robot.name}: {n}-link manipulator",
+            states=tuple(states), inputs=tuple(inputs), parameters=params, outputs=tuple(out_vars),
+            program=P, derivatives=tuple(self.qd) + tuple(qdd), output_exprs=tuple(out_exprs),
+            jacobian=Jp, dfdx=dfdx, dfdu=dfdu, dgdx=dgdx, dgdu=dgdu,
+            provenance=f"{robot.source or robot.name}; looped articulated-body algorithm and analytical "
+                       f"Newton-Euler derivatives (c_runtime/chain_dynamics.c)",
+        )
 
     def inverse_dynamics_model(self, formulation=None, name=None) -> SymbolicModel:
         """tau = ID(q, qd, qdd, w_ext) as a state-free model (e.g. for computed-torque control).

@@ -1,0 +1,333 @@
+/* chain_dynamics.c -- looped dynamics of a serial chain (see chain_dynamics.h).
+ *
+ * Spatial vectors (Featherstone) in base coordinates, 6 doubles:
+ *   motion m = [omega; v_O]  (v_O: velocity of the body point at the base origin)
+ *   force  f = [n_O; f]      (n_O: moment about the base origin)
+ *   m x y  = [w x wy ; w x vy + v x wy]       (crm)
+ *   m x* f = [w x n + v x f ; w x f]           (crf)
+ * Spatial inertia of a link at the base origin (h = m c, c its COM):
+ *   I = [[I_c + m (c.c 1 - c c^T), [h]x], [[h]x^T, m 1]]
+ * Gravity enters as the base acceleration a_0 = [0; -g].
+ *
+ * Why world coordinates: the articulated-body inertias of the ABA add up
+ * without the 6x6 congruence transform of every link step, and in the
+ * derivatives of Newton-Euler (Carpentier & Mansard, RSS 2018) a change of
+ * q_j rotates the whole subtree about S_j, so every derivative is one
+ * cross product away from a composite sum (the derivation is in
+ * c_runtime/README.md, "Looped chain dynamics").
+ */
+#include <math.h>
+#include <string.h>
+#include "chain_dynamics.h"
+
+static void cross3(const double *a, const double *b, double *o)
+{
+    o[0] = a[1] * b[2] - a[2] * b[1];
+    o[1] = a[2] * b[0] - a[0] * b[2];
+    o[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+static double dot6(const double *a, const double *b)
+{
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4] + a[5] * b[5];
+}
+
+/* o = m x y (motion cross motion) */
+static void crm(const double *m, const double *y, double *o)
+{
+    double t[3];
+    cross3(m, y, o);
+    cross3(m, y + 3, o + 3);
+    cross3(m + 3, y, t);
+    o[3] += t[0]; o[4] += t[1]; o[5] += t[2];
+}
+
+/* o = m x* f (motion cross force) */
+static void crf(const double *m, const double *f, double *o)
+{
+    double t[3];
+    cross3(m, f, o);
+    cross3(m + 3, f + 3, t);
+    o[0] += t[0]; o[1] += t[1]; o[2] += t[2];
+    cross3(m, f + 3, o + 3);
+}
+
+/* o = A x (A 6x6 row-major) */
+static void mv6(const double *A, const double *x, double *o)
+{
+    for (int r = 0; r < 6; r++) o[r] = dot6(A + 6 * r, x);
+}
+
+/* World pose of every joint frame, motion subspaces S_i, link inertias at the
+ * base origin (6x6, row-major) and the end-effector position. */
+static void kinematics(int n, const int *rev, const double *lc, const double *g, const double *q,
+                       double *R, double *p, double *S, double *I, double *p_ee)
+{
+    double Rp[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1}, pp[3] = {0, 0, 0};
+    for (int i = 0; i < n; i++) {
+        const double *L = lc + FMUGEN_CHAIN_NC * i;
+        double ca = L[FMUGEN_CHAIN_COS_ALPHA], sa = L[FMUGEN_CHAIN_SIN_ALPHA];
+        double th = L[FMUGEN_CHAIN_THETA0] + (rev[i] ? q[i] : 0.0);
+        double d = L[FMUGEN_CHAIN_D0] + (rev[i] ? 0.0 : q[i]);
+        double ct = cos(th), st = sin(th);
+        /* Rx(alpha) Rz(theta), and the origin [a, -sa d, ca d] in F_{i-1} */
+        double Rr[9] = {ct, -st, 0.0, ca * st, ca * ct, -sa, sa * st, sa * ct, ca};
+        double pr[3] = {L[FMUGEN_CHAIN_A], -sa * d, ca * d};
+        double *Ri = R + 9 * i, *pi = p + 3 * i;
+        for (int r = 0; r < 3; r++) {
+            pi[r] = pp[r] + Rp[3 * r] * pr[0] + Rp[3 * r + 1] * pr[1] + Rp[3 * r + 2] * pr[2];
+            for (int c = 0; c < 3; c++)
+                Ri[3 * r + c] = Rp[3 * r] * Rr[c] + Rp[3 * r + 1] * Rr[3 + c] + Rp[3 * r + 2] * Rr[6 + c];
+        }
+        /* S: rotation about / translation along z_i through p_i */
+        double z[3] = {Ri[2], Ri[5], Ri[8]};
+        double *Si = S + 6 * i;
+        if (rev[i]) {
+            Si[0] = z[0]; Si[1] = z[1]; Si[2] = z[2];
+            cross3(pi, z, Si + 3);
+        } else {
+            Si[0] = Si[1] = Si[2] = 0.0;
+            Si[3] = z[0]; Si[4] = z[1]; Si[5] = z[2];
+        }
+        /* inertia: COM c = p + R c_i, I_c rotated R I R^T, moved to the origin */
+        if (I) {
+            double m = L[FMUGEN_CHAIN_MASS];
+            const double *cl = L + FMUGEN_CHAIN_COM, *J = L + FMUGEN_CHAIN_INERTIA;
+            double Jl[9] = {J[0], J[3], J[4], J[3], J[1], J[5], J[4], J[5], J[2]};
+            double c[3], RJ[9], Jw[9];
+            for (int r = 0; r < 3; r++)
+                c[r] = pi[r] + Ri[3 * r] * cl[0] + Ri[3 * r + 1] * cl[1] + Ri[3 * r + 2] * cl[2];
+            for (int r = 0; r < 3; r++)
+                for (int k = 0; k < 3; k++)
+                    RJ[3 * r + k] = Ri[3 * r] * Jl[k] + Ri[3 * r + 1] * Jl[3 + k] + Ri[3 * r + 2] * Jl[6 + k];
+            for (int r = 0; r < 3; r++)
+                for (int k = r; k < 3; k++)
+                    Jw[3 * r + k] = Jw[3 * k + r] =
+                        RJ[3 * r] * Ri[3 * k] + RJ[3 * r + 1] * Ri[3 * k + 1] + RJ[3 * r + 2] * Ri[3 * k + 2];
+            double cc = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
+            double h[3] = {m * c[0], m * c[1], m * c[2]};
+            double *Ii = I + 36 * i;
+            for (int r = 0; r < 3; r++)
+                for (int k = 0; k < 3; k++) {
+                    Ii[6 * r + k] = Jw[3 * r + k] + m * ((r == k ? cc : 0.0) - c[r] * c[k]);
+                    Ii[6 * (r + 3) + k + 3] = r == k ? m : 0.0;
+                }
+            /* [h]x top right, its transpose bottom left */
+            double hx[9] = {0.0, -h[2], h[1], h[2], 0.0, -h[0], -h[1], h[0], 0.0};
+            for (int r = 0; r < 3; r++)
+                for (int k = 0; k < 3; k++) {
+                    Ii[6 * r + k + 3] = hx[3 * r + k];
+                    Ii[6 * (k + 3) + r] = hx[3 * r + k];
+                }
+        }
+        memcpy(Rp, Ri, sizeof Rp);
+        memcpy(pp, pi, sizeof pp);
+    }
+    if (p_ee) {
+        double ea = g[3];
+        for (int r = 0; r < 3; r++) p_ee[r] = pp[r] + Rp[3 * r] * ea;
+    }
+}
+
+int fmugen_chain_fd(int n, const int *rev, const double *lc, const double *g, const double *q,
+                    const double *qd, const double *tau, double *qdd, double *p_ee, double *work)
+{
+    double *R = work, *p = R + 9 * n, *S = p + 3 * n, *IA = S + 6 * n, *v = IA + 36 * n;
+    double *c = v + 6 * n, *pA = c + 6 * n, *U = pA + 6 * n, *D = U + 6 * n, *u = D + n;
+    kinematics(n, rev, lc, g, q, R, p, S, IA, p_ee);
+    /* pass 1: velocities, velocity-product accelerations c_i = v_i x S_i qd_i, bias forces */
+    double vp[6] = {0, 0, 0, 0, 0, 0};
+    for (int i = 0; i < n; i++) {
+        double *vi = v + 6 * i, *Si = S + 6 * i, h[6];
+        for (int k = 0; k < 6; k++) vi[k] = vp[k] + Si[k] * qd[i];
+        crm(vi, Si, c + 6 * i);
+        for (int k = 0; k < 6; k++) c[6 * i + k] *= qd[i];
+        mv6(IA + 36 * i, vi, h);
+        crf(vi, h, pA + 6 * i);
+        memcpy(vp, vi, sizeof vp);
+    }
+    /* pass 2: articulated inertias and bias forces, tip to base */
+    for (int i = n - 1; i >= 0; i--) {
+        const double *L = lc + FMUGEN_CHAIN_NC * i;
+        double *Ii = IA + 36 * i, *Si = S + 6 * i, *Ui = U + 6 * i, *pi = pA + 6 * i;
+        mv6(Ii, Si, Ui);
+        D[i] = dot6(Si, Ui) + L[FMUGEN_CHAIN_ROTOR];
+        if (!(D[i] > 0.0) || !isfinite(D[i])) return FMUGEN_NOT_POSITIVE_DEFINITE;
+        u[i] = tau[i] - L[FMUGEN_CHAIN_DAMPING] * qd[i] - dot6(Si, pi);
+        if (i > 0) {
+            double *Ip = IA + 36 * (i - 1), *pp = pA + 6 * (i - 1), Ic[6];
+            double inv = 1.0 / D[i], uD = u[i] * inv;
+            for (int r = 0; r < 6; r++)
+                for (int k = 0; k < 6; k++) Ii[6 * r + k] -= Ui[r] * Ui[k] * inv;
+            mv6(Ii, c + 6 * i, Ic);
+            for (int k = 0; k < 36; k++) Ip[k] += Ii[k];
+            for (int k = 0; k < 6; k++) pp[k] += pi[k] + Ic[k] + Ui[k] * uD;
+        }
+    }
+    /* pass 3: accelerations, base to tip */
+    double a[6] = {0.0, 0.0, 0.0, -g[0], -g[1], -g[2]};
+    for (int i = 0; i < n; i++) {
+        double *Si = S + 6 * i;
+        for (int k = 0; k < 6; k++) a[k] += c[6 * i + k];
+        qdd[i] = (u[i] - dot6(U + 6 * i, a)) / D[i];
+        for (int k = 0; k < 6; k++) a[k] += Si[k] * qdd[i];
+    }
+    for (int i = 0; i < n; i++)
+        if (!isfinite(qdd[i])) return FMUGEN_NOT_FINITE;
+    return FMUGEN_OK;
+}
+
+/* A += K where K = -(I crm(v) + (I crm(v))^T): the velocity term of
+ * d(I a + v x* I v) summed over a subtree (symmetric, see the file head). */
+static void add_K(double *K, const double *I, const double *v)
+{
+    double A[36];
+    for (int k = 0; k < 6; k++) { /* column k of I crm(v) = I (v x e_k) */
+        double e[6] = {0, 0, 0, 0, 0, 0}, m[6], col[6];
+        e[k] = 1.0;
+        crm(v, e, m);
+        mv6(I, m, col);
+        for (int r = 0; r < 6; r++) A[6 * r + k] = col[r];
+    }
+    for (int r = 0; r < 6; r++)
+        for (int k = 0; k < 6; k++) K[6 * r + k] -= A[6 * r + k] + A[6 * k + r];
+}
+
+/* Cholesky of the SPD matrix A (n x n, lower triangle) in place, then
+ * X = A^{-1} B for B n x k, both substitutions row by row (each row of B a
+ * contiguous vector the compiler can vectorise). */
+static int spd_solve_rows(int n, int k, double *A, double *B)
+{
+    for (int j = 0; j < n; j++) {
+        double d = A[j * n + j];
+        for (int m = 0; m < j; m++) d -= A[j * n + m] * A[j * n + m];
+        if (!(d > 0.0) || !isfinite(d)) return FMUGEN_NOT_POSITIVE_DEFINITE;
+        d = sqrt(d);
+        A[j * n + j] = d;
+        for (int i = j + 1; i < n; i++) {
+            double s = A[i * n + j];
+            for (int m = 0; m < j; m++) s -= A[i * n + m] * A[j * n + m];
+            A[i * n + j] = s / d;
+        }
+    }
+    for (int i = 0; i < n; i++) { /* L Z = B */
+        double *Bi = B + (size_t)i * k;
+        for (int m = 0; m < i; m++) {
+            double l = A[i * n + m];
+            const double *Bm = B + (size_t)m * k;
+            for (int c = 0; c < k; c++) Bi[c] -= l * Bm[c];
+        }
+        double inv = 1.0 / A[i * n + i];
+        for (int c = 0; c < k; c++) Bi[c] *= inv;
+    }
+    for (int i = n - 1; i >= 0; i--) { /* L^T X = Z */
+        double *Bi = B + (size_t)i * k;
+        for (int m = i + 1; m < n; m++) {
+            double l = A[m * n + i];
+            const double *Bm = B + (size_t)m * k;
+            for (int c = 0; c < k; c++) Bi[c] -= l * Bm[c];
+        }
+        double inv = 1.0 / A[i * n + i];
+        for (int c = 0; c < k; c++) Bi[c] *= inv;
+    }
+    return FMUGEN_OK;
+}
+
+int fmugen_chain_fd_jacobian(int n, const int *rev, const double *lc, const double *g, const double *q,
+                             const double *qd, const double *tau, double *qdd, double *dqdd, double *dp_ee,
+                             double *work)
+{
+    /* forward dynamics first: the derivatives are those of ID at qdd = FD */
+    int st = fmugen_chain_fd(n, rev, lc, g, q, qd, tau, qdd, NULL, work);
+    if (st != FMUGEN_OK) return st;
+    double *R = work, *p = R + 9 * n, *S = p + 3 * n, *I = S + 6 * n, *v = I + 36 * n;
+    double *a = v + 6 * n, *h = a + 6 * n, *f = h + 6 * n, *dv = f + 6 * n, *w = dv + 6 * n;
+    double *uu = w + 6 * n, *al = uu + 6 * n, *bg = al + 6 * n, *P = bg + 6 * n, *Q = P + 6 * n;
+    double *M = Q + 6 * n, *B = M + n * n, *IC = B + 3 * n * n, *K = IC + 36, *HC = K + 36, *F = HC + 6;
+    double p_ee[3];
+    kinematics(n, rev, lc, g, q, R, p, S, I, p_ee);
+    /* forward: v_i, a_i, momenta h_i = I_i v_i, forces f_i = I_i a_i + v_i x* h_i, and per joint j
+     * dv_j = S_j x v_{j-1}, w_j = S_j x a_{j-1} - dv_j x v_{j-1}, u_j = 2 v_{j-1} x S_j */
+    double vp[6] = {0, 0, 0, 0, 0, 0}, ap[6] = {0.0, 0.0, 0.0, -g[0], -g[1], -g[2]};
+    for (int i = 0; i < n; i++) {
+        double *Si = S + 6 * i, *vi = v + 6 * i, *ai = a + 6 * i, t[6], t2[6];
+        crm(Si, vp, dv + 6 * i);
+        crm(Si, ap, t);
+        crm(dv + 6 * i, vp, t2);
+        for (int k = 0; k < 6; k++) {
+            w[6 * i + k] = t[k] - t2[k];
+            uu[6 * i + k] = -2.0 * dv[6 * i + k];
+        }
+        for (int k = 0; k < 6; k++) vi[k] = vp[k] + Si[k] * qd[i];
+        crm(vi, Si, t);
+        for (int k = 0; k < 6; k++) ai[k] = ap[k] + Si[k] * qdd[i] + t[k] * qd[i];
+        mv6(I + 36 * i, vi, h + 6 * i);
+        mv6(I + 36 * i, ai, t);
+        crf(vi, h + 6 * i, f + 6 * i);
+        for (int k = 0; k < 6; k++) f[6 * i + k] += t[k];
+        memcpy(vp, vi, sizeof vp);
+        memcpy(ap, ai, sizeof ap);
+    }
+    /* backward: composite sums IC, K, HC, F over the subtree i..n-1; row
+     * vectors alpha_i = IC_i S_i, bg_i = K_i S_i + gamma_i with
+     * S_i . (x x* HC_i) = gamma_i . x; column vectors P_i, Q_i */
+    memset(IC, 0, (36 + 36 + 6 + 6) * sizeof(double));
+    int k3 = 3 * n;
+    for (int i = n - 1; i >= 0; i--) {
+        const double *L = lc + FMUGEN_CHAIN_NC * i;
+        double *Si = S + 6 * i, *Ii = I + 36 * i, t[6], t2[6];
+        for (int k = 0; k < 36; k++) IC[k] += Ii[k];
+        add_K(K, Ii, v + 6 * i);
+        for (int k = 0; k < 6; k++) {
+            HC[k] += h[6 * i + k];
+            F[k] += f[6 * i + k];
+        }
+        double *ali = al + 6 * i, *bgi = bg + 6 * i;
+        mv6(IC, Si, ali);
+        mv6(K, Si, bgi);
+        /* gamma = [hn x s_w + hf x s_v ; hf x s_w] */
+        cross3(HC, Si, t);
+        cross3(HC + 3, Si + 3, t2);
+        bgi[0] += t[0] + t2[0]; bgi[1] += t[1] + t2[1]; bgi[2] += t[2] + t2[2];
+        cross3(HC + 3, Si, t);
+        bgi[3] += t[0]; bgi[4] += t[1]; bgi[5] += t[2];
+        /* P_i = IC u_i + K S_i + S_i x* HC ; Q_i = S_i x* F - (IC w_i + K dv_i + dv_i x* HC) */
+        double *Pi = P + 6 * i, *Qi = Q + 6 * i, t3[6];
+        mv6(IC, uu + 6 * i, Pi);
+        mv6(K, Si, t);
+        crf(Si, HC, t2);
+        for (int k = 0; k < 6; k++) Pi[k] += t[k] + t2[k];
+        crf(Si, F, Qi);
+        mv6(IC, w + 6 * i, t);
+        mv6(K, dv + 6 * i, t2);
+        crf(dv + 6 * i, HC, t3);
+        for (int k = 0; k < 6; k++) Qi[k] -= t[k] + t2[k] + t3[k];
+        /* row i of dID: columns j <= i from alpha_i, bg_i; columns j > i from P_j, Q_j */
+        double *Bi = B + (size_t)i * k3;
+        for (int j = 0; j <= i; j++) {
+            Bi[j] = dot6(ali, w + 6 * j) + dot6(bgi, dv + 6 * j);
+            Bi[n + j] = -(dot6(ali, uu + 6 * j) + dot6(bgi, S + 6 * j));
+            M[i * n + j] = dot6(ali, S + 6 * j);
+        }
+        Bi[n + i] -= L[FMUGEN_CHAIN_DAMPING];
+        M[i * n + i] += L[FMUGEN_CHAIN_ROTOR];
+        for (int j = i + 1; j < n; j++) {
+            Bi[j] = -dot6(Si, Q + 6 * j);
+            Bi[n + j] = -dot6(Si, P + 6 * j);
+        }
+        for (int j = 0; j < n; j++) Bi[2 * n + j] = (j == i) ? 1.0 : 0.0;
+    }
+    st = spd_solve_rows(n, k3, M, B);
+    if (st != FMUGEN_OK) return st;
+    memcpy(dqdd, B, (size_t)n * k3 * sizeof(double));
+    for (int k = 0; k < n * k3; k++)
+        if (!isfinite(dqdd[k])) return FMUGEN_NOT_FINITE;
+    if (dp_ee) { /* point velocity of S_j at p_ee: v_O + w x p_ee */
+        for (int j = 0; j < n; j++) {
+            double t[3], *Sj = S + 6 * j;
+            cross3(Sj, p_ee, t);
+            for (int r = 0; r < 3; r++) dp_ee[r * n + j] = Sj[3 + r] + t[r];
+        }
+    }
+    return FMUGEN_OK;
+}

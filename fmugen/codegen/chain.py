@@ -1,0 +1,124 @@
+"""Looped dynamics for large arms: a program step that calls ``c_runtime/chain_dynamics.c``.
+
+Straight-line code for the forward dynamics of an N-link arm has O(N^2)
+statements and its exact Jacobian O(N^2) to O(N^3): at N = 24 the generated
+``model.c`` is 63,000 lines that gcc -O2 needs a quarter of an hour for.
+Past :data:`LOOP_MIN_LINKS` links the arm's model therefore holds no
+dynamics at all: one :class:`ChainDynamics` step evaluates the link
+constants (17 numbers per link, expressions of the parameters) and calls the
+hand-written loops of the runtime -- Featherstone's articulated-body algorithm
+for the forward dynamics (O(N)) and the analytical derivatives of recursive
+Newton-Euler with one Cholesky solve for its Jacobian.  The generated file
+grows linearly with N (the constants, and one copy per Jacobian entry), so
+deriving, generating and compiling take seconds at N = 60.
+
+A :class:`ChainDynamics` is a :class:`~fmugen.codegen.program.SolveSPD`
+(solution symbols ``X``, an empty ``A`` and the inputs ``B``), so everything
+that reasons about a program's dependencies -- the ``<ModelStructure>`` of
+modelDescription.xml, pruning, folding parameters into constants -- treats
+it as an opaque step coupling all of X to all of B, which it is.  Only the C
+generator (:func:`fmugen.codegen.c_code.lower`) knows how to print it; the
+Python evaluators refuse it with a message naming the way back
+(``state_space_model(strategy="straight")``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import sympy as sp
+
+from .program import SolveSPD
+
+__all__ = ["ChainDynamics", "LOOP_MIN_LINKS", "NC", "NG", "link_constants", "chain_work_doubles"]
+
+#: Arms with at least this many links get the looped dynamics by default
+#: (``state_space_model(strategy="auto")``).  Measured with
+#: ``examples/bench_large_models.py`` on a 2-core machine: the straight-line
+#: FMU of an 8-link chain already takes ~40 s to build (12 links: several
+#: minutes) while the looped one builds in ~3 s at any size; the straight-line
+#: forward dynamics is faster per call only up to about 8 links.
+LOOP_MIN_LINKS = 9
+
+#: per-link constants (layout of c_runtime/chain_dynamics.h)
+NC = 17
+#: global constants: gravity (3), end_a
+NG = 4
+
+
+def chain_work_doubles(n: int, kind: str) -> int:
+    """Work space of the runtime call, in doubles (``FMUGEN_CHAIN_WORK`` for the Jacobian)."""
+    return n * (160 + 4 * n) + 64 if kind == "jacobian" else 80 * n + 16
+
+
+@dataclass(frozen=True)
+class ChainDynamics(SolveSPD):
+    """``X = chain(B)``: the forward dynamics (``kind="fd"``) or its Jacobian of an n-link chain.
+
+    ``B`` (column) = [q (n), qd (n), tau (n), link constants (n x NC, row by
+    row), global constants (NG)]; ``A`` is empty.  ``X`` (column):
+
+    * ``fd``:        [qdd (n), p_ee (3)]
+    * ``jacobian``:  [qdd (n), dqdd (n x 3n, row-major: d/dq, d/dqd, d/dtau), dp_ee/dq (3 x n)]
+
+    ``revolute`` holds one bool per joint (False: prismatic).
+    """
+
+    kind: str = "fd"
+    revolute: tuple = ()
+
+    @property
+    def n(self) -> int:
+        return len(self.revolute)
+
+    def outputs_size(self) -> int:
+        n = self.n
+        return n + 3 if self.kind == "fd" else n + 3 * n * n + 3 * n
+
+
+def link_constants(chain, gravity: Sequence) -> list:
+    """The NC constants of every link and the NG globals as sympy expressions.
+
+    ``chain`` is :func:`fmugen.dynamics.joint_frames.joint_frame_chain` of the
+    robot (payload merged into the last link, inertial data in joint frames).
+    """
+    out = []
+    for L in chain:
+        I = L.inertia_com
+        out += [sp.cos(L.alpha), sp.sin(L.alpha), L.a, L.theta0, L.d0, L.mass, *L.com,
+                I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2], L.rotor_inertia, L.damping]
+    out += [sp.sympify(g) for g in gravity] + [chain[-1].end_a]
+    return [sp.sympify(e) for e in out]
+
+
+def chain_call_lines(st: ChainDynamics, index: int, b_code: list, ind: str) -> tuple:
+    """C statements of one step: ``(lines, output array name, offset of X[0])``.
+
+    ``b_code`` are the printed entries of B.  The forward dynamics works in
+    local arrays; the Jacobian's arrays (O(n^2)) are taken from the heap and
+    freed by the caller's ``free_line`` after X is read.
+    """
+    n = st.n
+    tag = f"chain{index}"
+    rev = ", ".join("1" if r else "0" for r in st.revolute)
+    nb = 3 * n + NC * n + NG
+    nx = st.outputs_size()
+    lines = [f"{ind}/* {'forward dynamics' if st.kind == 'fd' else 'Jacobian of the forward dynamics'} "
+             f"of the {n}-link chain: loops of c_runtime/chain_dynamics.c */",
+             f"{ind}static const int {tag}_rev[{n}] = {{{rev}}};",
+             f"{ind}double {tag}_in[{nb}];"]
+    lines += [f"{ind}{tag}_in[{k}] = {c};" for k, c in enumerate(b_code)]
+    q, lc, g = f"{tag}_in", f"{tag}_in + {3 * n}", f"{tag}_in + {3 * n + NC * n}"
+    args = f"{n}, {tag}_rev, {lc}, {g}, {q}, {q} + {n}, {q} + {2 * n}"
+    if st.kind == "fd":
+        lines += [f"{ind}double {tag}_x[{nx}], {tag}_w[{chain_work_doubles(n, 'fd')}];",
+                  f"{ind}status = fmugen_chain_fd({args}, {tag}_x, {tag}_x + {n}, {tag}_w);",
+                  f"{ind}if (status != FMUGEN_OK) return status;"]
+        return lines, f"{tag}_x", 0, None
+    w = chain_work_doubles(n, "jacobian")
+    lines += [f"{ind}double *{tag}_w = (double *)malloc(sizeof(double) * {w + nx});",
+              f"{ind}if ({tag}_w == NULL) return FMUGEN_NOT_FINITE; /* out of memory */",
+              f"{ind}status = fmugen_chain_fd_jacobian({args}, {tag}_w + {w}, {tag}_w + {w + n}, "
+              f"{tag}_w + {w + n + 3 * n * n}, {tag}_w);",
+              f"{ind}if (status != FMUGEN_OK) {{ free({tag}_w); return status; }}"]
+    return lines, f"{tag}_w", w, f"{ind}free({tag}_w);"
