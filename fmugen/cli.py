@@ -8,6 +8,8 @@
     fmugen suite [FILE.toml] [--cases NAME ...] [--quick] --out DIR   (stiff and extreme cases, fmugen/suite)
     fmugen linearize FILE.toml [--at NAME=VALUES ...] [--trim NAMES] [--inputs ...] [--outputs ...]
                      [--set ...] [--without INSTANCES] --out FILE.npz   (operating point, A B C D, fmugen/control)
+    fmugen sweep SCENE.toml --grid NAME=v1,v2,... | --sample NAME=dist(...) -n N --seed S [--metrics ...]
+                 --out DIR [--scheduler ADDRESS] [--workers K]   (parameter studies on Dask, fmugen/sweep)
 
 FILE is a robot file (a ``[robot]`` table), an assembly of actuator-chain
 components (an ``[assembly]`` table) or a scene (a ``[scene]`` table: one FMU
@@ -91,7 +93,7 @@ def _cmd_equations(args) -> int:
 def _cmd_build_scene(args) -> int:
     from .scene import load_scene
 
-    scene = load_scene(args.file, set=args.set)
+    scene = load_scene(args.file, set=args.set, allow_factories=args.allow_factories)
     out = Path(args.output) if args.output else Path(scene.name)
     if out.suffix == ".fmu":
         raise ValueError(f"{args.file}: a scene builds one FMU per group: -o names a folder, not {out}")
@@ -127,7 +129,7 @@ def _cmd_info(args) -> int:
     if _kind(path) == "scene":
         from .scene import load_scene
 
-        scene = load_scene(path, set=args.set)
+        scene = load_scene(path, set=args.set, allow_factories=args.allow_factories)
         print(f"scene {scene.name}: {scene.spec.description}")
         for g in scene.groups:
             m, removed = scene.group_model(g)
@@ -175,12 +177,16 @@ def main(argv=None) -> int:
                    help="set a parameter, start value or option (repeatable), e.g. m=1 or joint.J=5")
     p.add_argument("--no-prune", action="store_true", help="scenes: keep what the scene does not need")
     p.add_argument("--no-cache", action="store_true", help="scenes: rebuild every FMU")
+    p.add_argument("--allow-factories", action="store_true",
+                   help="scenes: allow instances made by a Python factory (runs code named in the file)")
     p.set_defaults(func=_cmd_build)
 
     p = sub.add_parser("info", help="list the variables a file's model will have")
     p.add_argument("file")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="set a parameter, start value or option (repeatable)")
+    p.add_argument("--allow-factories", action="store_true",
+                   help="scenes: allow instances made by a Python factory (runs code named in the file)")
     p.set_defaults(func=_cmd_info)
 
     from .suite.cli import add_parser as add_suite_parser  # fmugen suite: stiff and extreme cases
@@ -190,6 +196,10 @@ def main(argv=None) -> int:
     from .control.cli import add_parser as add_linearize_parser  # fmugen linearize: trim, A B C D
 
     add_linearize_parser(sub)
+
+    from .sweep.cli import add_parser as add_sweep_parser  # fmugen sweep: parameter studies on Dask
+
+    add_sweep_parser(sub)
 
     args = parser.parse_args(argv)
     try:

@@ -116,3 +116,19 @@ def test_equilibrium_refused_above_stall_torque(tmp_path):
                          'initial = "given"': 'initial = "equilibrium"'})
     with pytest.raises(SceneError, match=r"initial = \"equilibrium\".*(stall torque|no state of rest)"):
         load_scene(write(tmp_path, text)).initial
+
+
+def test_user_factory_needs_permission_and_then_works(tmp_path, monkeypatch):
+    (tmp_path / "my_parts.py").write_text(
+        "from fmugen.components import joint_inertia\n"
+        "def heavy_joint(name, parameter_set='default', overrides=None, scale=1.0):\n"
+        "    o = dict(overrides or {}); o.setdefault('J', 2.0 * scale)\n"
+        "    return joint_inertia(parameter_set=parameter_set, overrides=o, name=name)\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    text = scene_text(**{'joint = { type = "joint_inertia" }':
+                         'joint = { factory = "my_parts:heavy_joint", options = { scale = 3.0 } }'})
+    p = write(tmp_path, text)
+    with pytest.raises(SceneError, match=r"factory = 'my_parts:heavy_joint' runs Python code.*--allow-factories"):
+        load_scene(p)
+    sc = load_scene(p, allow_factories=True)
+    assert {v.name: v.start for v in sc.base_models["joint"].parameters}["J"] == 6.0

@@ -12,6 +12,7 @@ are kept (``q[2]``, ``theta``); an FMU of several instances uses
 """
 from __future__ import annotations
 
+import os
 from dataclasses import replace
 from functools import cached_property
 from pathlib import Path
@@ -30,21 +31,33 @@ from .settings import parse_sets
 _MECHANICAL_TYPES = {"joint_inertia", "dc_motor"}
 
 
-def load_scene(path, set=None) -> "Scene":
-    """Read a scene file; ``set`` holds ``--set`` overrides (``{"joint.J": 5}`` or ``["joint.J=5"]``)."""
+def load_scene(path, set=None, allow_factories: bool = False) -> "Scene":
+    """Read a scene file; ``set`` holds ``--set`` overrides (``{"joint.J": 5}`` or ``["joint.J=5"]``).
+
+    A scene file is data: an instance with ``factory = "module:function"``
+    imports and runs Python code, so it is refused unless the caller allows
+    it (``allow_factories=True``, ``--allow-factories``, or the environment
+    variable ``FMUGEN_ALLOW_FACTORIES=1``).
+    """
     path = Path(path)
     sets = parse_sets(set)
     data = read_toml(path)
     deferred = apply_sets(data, sets, str(path))
     spec = parse_scene(data, path)
-    return Scene(spec, deferred)
+    return Scene(spec, deferred, allow_factories=allow_factories)
 
 
 class Scene:
-    def __init__(self, spec, deferred_sets: Optional[dict] = None):
+    def __init__(self, spec, deferred_sets: Optional[dict] = None, allow_factories: bool = False):
         self.spec = spec
         self.src = str(spec.path)
         self._sets = deferred_sets or {}
+        allowed = allow_factories or os.environ.get("FMUGEN_ALLOW_FACTORIES") == "1"
+        for name, ins in spec.instances.items():
+            if ins.kind == "factory" and not allowed:
+                raise SceneError(f"{self.src}: [instances.{name}] factory = {ins.source!r} runs Python code from "
+                                 f"your environment; allow it with --allow-factories (API: allow_factories=True, "
+                                 f"or FMUGEN_ALLOW_FACTORIES=1) if you trust this file")
         self.connections = self._checked_connections()
         self._check_record()
         self._check_loops()
