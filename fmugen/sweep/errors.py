@@ -1,0 +1,8 @@
+"""The error a sweep raises for bad input: a ValueError naming the option or file and the reason."""
+from __future__ import annotations
+
+from ..errors import FmugenError
+
+
+class SweepError(FmugenError):
+    """A sweep specification the sweep refuses (bad ``--grid``/``--sample``, a folded parameter, ...)."""

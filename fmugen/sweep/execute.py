@@ -1,0 +1,300 @@
+"""Run a sweep on Dask: a local cluster by default, or the scheduler a user points at.
+
+    result = fmugen.sweep.sweep("examples/scenes/single_joint_split.toml",
+                                grid=["joint.J=1,2,4"], metrics=["final,peak"], out="out/sweep_J")
+
+Steps: the points (:mod:`.points`); the FMUs built once with the swept
+parameters kept settable (:mod:`.prepare`); each point's start values (the
+state of rest solved on the client where the scene asks for one); the FMUs
+and run settings scattered once to every worker (:mod:`.worker`); one task
+per point; rows appended to the journal as points finish; the table and the
+plot at the end (:mod:`.table`).  ``out`` holds ``sweep.json`` (what was
+asked), ``points.csv`` (the journal), ``results.csv``, ``metrics.png`` and
+``fmus/``.  Running the same sweep into the same ``out`` again skips the
+points already in the journal (failed ones included: their reason is
+recorded); a different sweep into the same folder is refused.
+
+Cluster.  Without ``scheduler`` a ``dask.distributed.LocalCluster`` is
+started with one single-threaded worker process per core (``workers``
+overrides the count; ``processes=False`` gives one process with a thread
+per worker -- the FMUs are thread-safe, but the master's Python loop holds
+the GIL).  With ``scheduler="tcp://host:8786"`` the sweep runs on that
+cluster's workers (``workers`` is then the cluster's business).  The
+dashboard address is printed when the cluster serves one (bokeh installed).
+"""
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import sys
+import time
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional, Sequence
+
+import numpy as np
+
+from ..scene import SceneError
+from . import metrics as _metrics
+from . import table as _table
+from .errors import SweepError
+from .points import make_points, parse_grid, parse_samples, point_key
+from .prepare import SweepPlan, run_options
+from .worker import make_bundle, run_point
+
+
+@dataclass
+class SweepResult:
+    rows: list  # one dict per point, in point order
+    names: tuple  # swept names
+    metric_names: tuple
+    out_dir: Path
+    table: list  # paths of the table(s)
+    plot: Optional[Path]
+    ran: int  # points run by this call
+    skipped: int  # points already in the journal
+    wall_time: float  # of the points run by this call [s]
+
+    @property
+    def failed(self) -> list:
+        return [r for r in self.rows if r["status"] != "ok"]
+
+    def column(self, name: str) -> np.ndarray:
+        return np.array([r[name] for r in self.rows], dtype=float)
+
+
+class Progress:
+    """``12/100 done (1 failed), 3.1 runs/s, ETA 28 s`` on a terminal (rewritten in place), every 10 % otherwise."""
+
+    def __init__(self, total: int, done: int, stream=None, enabled: bool = True):
+        self.total, self.done, self.failed, self.ran = total, done, 0, 0
+        self.stream = stream or sys.stderr
+        self.enabled = enabled
+        self.tty = enabled and getattr(self.stream, "isatty", lambda: False)()
+        self.t0 = time.perf_counter()
+        self._last_decile = -1
+
+    def line(self) -> str:
+        dt = time.perf_counter() - self.t0
+        rate = self.ran / dt if dt > 0 else 0.0
+        left = self.total - self.done
+        eta = f"{left / rate:.0f} s" if rate > 0 else "-"
+        return f"sweep: {self.done}/{self.total} done ({self.failed} failed), {rate:.3g} runs/s, ETA {eta}"
+
+    def update(self, row: Optional[dict] = None) -> None:
+        if row is not None:
+            self.done += 1
+            self.ran += 1
+            self.failed += row["status"] != "ok"
+        if not self.enabled:
+            return
+        if self.tty:
+            self.stream.write("\r" + self.line() + " " * 4)
+            self.stream.flush()
+        else:
+            decile = int(10 * self.done / max(self.total, 1))
+            if decile != self._last_decile:
+                self._last_decile = decile
+                print(self.line(), file=self.stream, flush=True)
+
+    def close(self) -> None:
+        if self.enabled and self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+
+    def say(self, text: str) -> None:
+        if self.enabled:
+            print(("\n" if self.tty and self.ran else "") + text, file=self.stream, flush=True)
+
+
+def _has_bokeh() -> bool:
+    try:
+        import bokeh  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def start_client(scheduler: Optional[str] = None, workers: Optional[int] = None, processes: bool = True):
+    """(client, cluster or None): a LocalCluster sized to the machine, or a client of ``scheduler``."""
+    from dask.distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            return Client(scheduler, timeout="20s"), None
+        except (OSError, TimeoutError) as exc:
+            raise SweepError(f"--scheduler {scheduler}: cannot reach the Dask scheduler ({exc})") from None
+    n = workers or os.cpu_count() or 1
+    if isinstance(n, bool) or int(n) != n or n < 1:
+        raise SweepError(f"--workers: {workers!r} is not a positive integer")
+    kw = dict(dashboard_address=":0" if _has_bokeh() else None, silence_logs=logging.ERROR)
+    if processes:
+        cluster = LocalCluster(n_workers=int(n), threads_per_worker=1, processes=True, **kw)
+    else:
+        cluster = LocalCluster(n_workers=1, threads_per_worker=int(n), processes=False, **kw)
+    return Client(cluster), cluster
+
+
+def _manifest(scene_path, sets, names, points_spec, options, wanted, band) -> dict:
+    import hashlib
+
+    return {"scene": str(Path(scene_path).resolve()),
+            "scene_sha256": hashlib.sha256(Path(scene_path).read_bytes()).hexdigest(),
+            "set": {k: v for k, v in sorted((sets or {}).items())}, "names": list(names), "points": points_spec,
+            "options": {k: options[k] for k in sorted(options)}, "metrics": [f"{c}:{m}" for c, m in wanted],
+            "band": band}
+
+
+def _check_manifest(path: Path, new: dict) -> None:
+    if path.is_file():
+        old = json.loads(path.read_text())
+        diff = [k for k in ("scene", "scene_sha256", "set", "names", "options", "metrics", "band")
+                if json.dumps(old.get(k), sort_keys=True, default=str) != json.dumps(new.get(k), sort_keys=True, default=str)]
+        if diff:
+            raise SweepError(f"{path.parent}: holds another sweep (its {', '.join(diff)} differ); "
+                             f"use another --out folder or remove this one")
+    path.write_text(json.dumps(new, indent=1, default=str))
+
+
+def sweep(scene, grid=None, sample=None, n: Optional[int] = None, seed: Optional[int] = None,
+          metrics: Optional[Sequence[str]] = None, out="sweep", scheduler: Optional[str] = None,
+          workers: Optional[int] = None, processes: bool = True, sets=None, options: Optional[dict] = None,
+          band: float = 0.02, save_runs: bool = False, client=None, progress: Optional[bool] = None,
+          plot: bool = True) -> SweepResult:
+    """Run ``scene`` (a scene file) at every point of a grid or a Monte-Carlo sample; see the module docstring.
+
+    grid: ``["joint.J=1,2,4", ...]`` or ``{"joint.J": [1, 2, 4]}``; sample:
+    ``["actuator.beta_e=normal(1.6e9,5e7)"]`` or a dict, with ``n`` draws and
+    ``seed``; metrics: ``["final,peak", "joint.theta:error"]`` (default
+    final, peak, settling of every recorded column); sets: ``--set``
+    overrides of the base scene; options: keywords of
+    :func:`fmugen.cosim.master.run` over the scene's ``[cosim]`` table;
+    band: settling band (fraction of the final change); save_runs: also
+    write each point's recorded series to ``out/runs/<key>.npz``; client: an
+    existing ``dask.distributed.Client`` (then scheduler and workers are not
+    used); progress: on stderr (default: when stderr is a terminal).
+    """
+    from ..scene import parse_sets
+
+    sets = parse_sets(sets)
+    g, s = parse_grid(grid), parse_samples(sample)
+    points = make_points(g, s, n, seed)
+    names = tuple(g) + tuple(s)
+    if not (isinstance(band, (int, float)) and 0 < band < 1):
+        raise SweepError(f"--band: {band!r} must lie between 0 and 1")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    show = sys.stderr.isatty() if progress is None else bool(progress)
+    say = (lambda t: print(t, file=sys.stderr, flush=True)) if show else (lambda t: None)
+    say(f"sweep: {len(points)} points over {', '.join(names)}; building the FMUs once")
+    try:
+        plan = SweepPlan(scene, names, out / "fmus", sets=sets)
+    except SceneError as exc:
+        raise SweepError(str(exc)) from None
+    opts = run_options(plan.system.settings, options)
+    columns = tuple(r.column for r in plan.system.recorded)
+    wanted = _metrics.parse_metrics(metrics, columns)
+    mnames = tuple(_metrics.metric_names(wanted))
+    spec = {"grid": {k: list(v) for k, v in g.items()}, "sample": {k: str(d) for k, d in s.items()},
+            "n": n, "seed": seed}
+    _check_manifest(out / "sweep.json", _manifest(scene, sets, names, spec, opts, wanted, band))
+    cols = _table.header(names, mnames)
+    journal = _table.Journal(out / "points.csv", cols)
+    keys, order = [], {}
+    for i, p in enumerate(points):
+        k = point_key(p)
+        keys.append(k)
+        order.setdefault(k, i)  # a repeated point runs once
+    todo = [i for i, k in enumerate(keys) if order[k] == i and k not in journal]
+    distinct = len(order)
+    skipped = distinct - len(todo)
+    prog = Progress(distinct, skipped, enabled=show)
+    if skipped:
+        prog.say(f"sweep: {skipped} of {distinct} points already done in {out / 'points.csv'}; running {len(todo)}")
+    runs_dir = out / "runs"
+    if save_runs:
+        runs_dir.mkdir(exist_ok=True)
+
+    def record(row):
+        run = row.pop("run", None)
+        if save_runs and run is not None:
+            t, v, c = run
+            np.savez(runs_dir / f"{row['key']}.npz", time=t, values=v, columns=np.array(c))
+        row.update({nm: points[row["index"]][nm] for nm in names})
+        journal.append(row)
+        prog.update(row)
+
+    tasks = []
+    for i in todo:
+        try:
+            tasks.append(plan.task(i, keys[i], points[i]))
+        except (SceneError, SweepError) as exc:  # no state of rest at this point: recorded, not run
+            record({"index": i, "key": keys[i], "status": "error", "failure": str(exc).replace("\n", " | "),
+                    "wall_time": 0.0, "macro_steps": 0, "worker": "client",
+                    **{m: math.nan for m in mnames}})
+    w0 = time.perf_counter()
+    own = cluster = None
+    try:
+        if tasks:
+            if client is None:
+                client, cluster = start_client(scheduler, workers, processes)
+                own = True
+            try:
+                link = client.dashboard_link if (scheduler or _has_bokeh()) else None
+            except Exception:
+                link = None
+            nw = len(client.scheduler_info().get("workers", {}))
+            prog.say(f"sweep: {len(tasks)} runs on {nw} Dask worker(s) at {client.scheduler.address}"
+                     + (f"; dashboard: {link}" if link else "; no dashboard (install bokeh for one)"))
+            _run_on(client, make_bundle(plan, opts, wanted, band, save_runs), tasks, record, prog)
+    except KeyboardInterrupt:
+        prog.say(f"sweep: interrupted; {len(journal.rows)} points are in {out / 'points.csv'}: "
+                 f"run the same command again to continue")
+        raise
+    finally:
+        prog.close()
+        journal.close()
+        if own:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    wall = time.perf_counter() - w0
+    rows = []
+    for i, k in enumerate(keys):
+        if order[k] != i:
+            continue
+        r = dict(journal.rows[k])
+        r["index"] = i
+        r.update({nm: points[i][nm] for nm in names})
+        rows.append(r)
+    paths = _table.write_table(rows, cols, out)
+    pl = _table.plot(rows, names, mnames, out / "metrics.png", plan.scene.name) if plot and rows else None
+    return SweepResult(rows, names, mnames, out, paths, pl, len(tasks), skipped, wall)
+
+
+def _run_on(client, bundle, tasks, record, prog) -> None:
+    """One Dask task per point; rows recorded as they finish; a lost task is recorded with its reason."""
+    from dask.distributed import as_completed
+
+    shipped = client.scatter(bundle, broadcast=True, hash=False)
+    prog.t0 = time.perf_counter()  # the rate counts runs, not the cluster's start-up
+    tag = uuid.uuid4().hex[:8]
+    futures = {client.submit(run_point, shipped, t, key=f"fmugen-sweep-{t.key}-{tag}", pure=False): t
+               for t in tasks}
+    try:
+        for fut in as_completed(futures):
+            t = futures[fut]
+            try:
+                row = fut.result()
+            except Exception as exc:  # the worker died (a crash in an FMU), or the task was lost
+                row = {"index": t.index, "key": t.key, "status": "error",
+                       "failure": f"{type(exc).__name__}: {exc}".replace("\n", " | "),
+                       "wall_time": math.nan, "macro_steps": 0, "worker": ""}
+            fut.release()
+            record(row)
+    except BaseException:
+        client.cancel(list(futures))
+        raise
