@@ -178,6 +178,7 @@ static void put_scalars(writer *w, const fmugen_scalars *s)
     put_f64(w, s->rk4_first_limit);
     put_f64(w, s->rk4_first_lambda);
     put_f64(w, s->rk4_first_time);
+    put_i64(w, s->rk4_next_estimate);
     put_i64(w, s->range_check);
 }
 
@@ -227,6 +228,7 @@ static void get_scalars(reader *r, fmugen_scalars *s)
     s->rk4_first_limit = get_f64(r);
     s->rk4_first_lambda = get_f64(r);
     s->rk4_first_time = get_f64(r);
+    s->rk4_next_estimate = get_i64(r);
     s->range_check = (int)get_i64(r);
 }
 

@@ -73,6 +73,7 @@ typedef struct fmugen_scalars {
     double rk4_lambda;         /* |lambda| of the dominant eigenvalue [1/s] */
     double rk4_warned_limit;   /* limit of the last warning, 0 = none yet */
     double rk4_first_limit, rk4_first_lambda, rk4_first_time; /* the first warning's numbers, for the failure message */
+    long long rk4_next_estimate; /* n_steps at which RK4 estimates its stability limit again */
     int range_check;           /* FMUGEN_RANGE_*: what leaving a validity range does */
 } fmugen_scalars;
 
