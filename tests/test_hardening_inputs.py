@@ -388,3 +388,9 @@ def test_generator_names_the_variable_and_origin_of_a_bad_start(tmp_path):
                                   + model.states[1:])
     with pytest.raises(ValueError, match=rf"from {tmp_path}.*state 'q\[1\]' has no start value"):
         generate_c(nostart)
+
+
+def test_cli_symbolic_parameter_without_value_names_the_file(tmp_path):
+    r = cli("build", "robots/horn_2link.toml", "--fmi-type", "cs", "-o", tmp_path / "h.fmu")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert "robots/horn_2link.toml" in r.stderr and "parameter 'm' has no start value" in r.stderr, r.stderr

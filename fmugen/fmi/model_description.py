@@ -179,9 +179,10 @@ def variable_layout(model: SymbolicModel) -> VariableLayout:
         (out.real if v.type == "Real" else out.integer)[v.name] = v.value_reference
         return v
 
+    origin = f" (from {model.provenance})" if model.provenance else ""
     for i, v in enumerate(model.states):
         if v.start is None:
-            raise FmugenError(f"model {model.name!r}: state {v.name!r} has no start value")
+            raise FmugenError(f"model {model.name!r}{origin}: state {v.name!r} has no start value")
         add(name=v.name, value_reference=i, type="Real",
             causality="output" if v.output else "local", variability="continuous", initial="exact",
             start=v.start, unit=v.unit, description=v.description, nominal=v.nominal, min=v.min, max=v.max,
@@ -200,7 +201,8 @@ def variable_layout(model: SymbolicModel) -> VariableLayout:
             nominal=v.nominal, min=v.min, max=v.max, kind="output", symbol=v.symbol)
     for i, v in enumerate(model.parameters):
         if v.start is None:
-            raise FmugenError(f"model {model.name!r}: parameter {v.name!r} has no start value")
+            raise FmugenError(f"model {model.name!r}{origin}: parameter {v.name!r} has no start value; give it "
+                              f"a value in the file's [parameters] (or fmugen build --set {v.name}=...)")
         add(name=v.name, value_reference=2 * nx + nu + ny + i, type="Real", causality="parameter",
             variability="fixed", initial="exact", start=v.start, unit=v.unit, description=v.description,
             nominal=v.nominal, min=v.min, max=v.max, kind="parameter", symbol=v.symbol)
