@@ -36,6 +36,7 @@ def test_puma_held_at_a_pose_needs_the_gravity_torque(puma):
     g = puma.bias(Q0, np.zeros(6))
     assert np.abs(g).max() > 10.0  # a pose where gravity matters
     assert np.allclose(op["tau"], g, rtol=1e-12, atol=1e-9 * np.abs(g).max())
+    assert op["tau"].shape == (6,) and op["tau[2]"] == op["tau"][1]
     assert op.max_residual < 1e-12
     assert op.free == [f"tau[{i}]" for i in range(1, 7)] and op.rank == 6
     # the other formulation gives the same torques (parameters by keyword reach the trim)
@@ -127,5 +128,6 @@ def test_a_scene_object_is_a_source():
 
     op = trim(Scene(), at={"amp.theta_ref": 0.2, "joint.tau_load": 50.0})
     assert op["actuator.P_L"] == pytest.approx(50.0 / 1.5e-5, rel=1e-12)
+    assert op["actuator_P_L"] == op["actuator.P_L"]  # python-control spelling reads the same value
     sys = fmugen.linearize(Scene(), op)
     assert sys.nstates == 6

@@ -43,7 +43,7 @@ import numpy as np
 
 from ..codegen.evaluate import ModelEvaluator
 from .linearize import as_model
-from .names import FmugenError, check_signal_names, lookup
+from .names import _ELEMENT, FmugenError, check_signal_names, lookup
 
 
 class TrimError(FmugenError):
@@ -103,8 +103,8 @@ class OperatingPoint:
             for n in names:
                 if name in (n, signal_name(n)):
                     return self._value(n)
-        elems = sorted((int(n[len(name) + 1:-1]), n) for names in (self.states, self.inputs, self.outputs)
-                       for n in names if n.startswith(name + "[") and n[len(name) + 1:-1].isdigit())
+        elems = sorted((int(m.group(2)), n) for names in (self.states, self.inputs, self.outputs) for n in names
+                       for m in [_ELEMENT.match(n)] if m and name in (m.group(1), signal_name(m.group(1))))
         if not elems:
             raise KeyError(f"{self.model_name}: no state, input or output named {name!r}")
         return np.array([self._value(n) for _, n in elems])
