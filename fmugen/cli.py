@@ -103,6 +103,16 @@ def _cmd_build_scene(args) -> int:
     return 0
 
 
+def _bytes(text: str) -> float:
+    """'800M', '1.5G', '512k' or a plain number of bytes."""
+    units = {"K": 2**10, "M": 2**20, "G": 2**30}
+    t = text.strip().upper().rstrip("B").rstrip("I")
+    try:
+        return float(t[:-1]) * units[t[-1]] if t and t[-1] in units else float(t)
+    except ValueError:
+        raise ValueError(f"--budget-memory {text!r}: a size such as 800M, 1.5G or a number of bytes") from None
+
+
 def _cmd_build(args) -> int:
     from .fmi.build import build_fmu
 
@@ -115,7 +125,9 @@ def _cmd_build(args) -> int:
     t1 = time.perf_counter()
     fold = None if args.fold == "none" else ("all" if args.fold == "all" else args.fold.split(","))
     out = Path(args.output) if args.output else Path(f"{model.name}.fmu")
-    result = build_fmu(model, out, fmi_type=args.fmi_type, fold_parameters=fold)
+    result = build_fmu(model, out, fmi_type=args.fmi_type, fold_parameters=fold, budget_start=t0,
+                       budget_seconds=args.budget_seconds,
+                       budget_memory=_bytes(args.budget_memory) if args.budget_memory else None)
     t2 = time.perf_counter()
     print(f"wrote {result.path}  (derive {t1 - t0:.2f} s, generate+compile+zip {t2 - t1:.2f} s)")
     if args.ops:
@@ -173,6 +185,10 @@ def main(argv=None) -> int:
     p.add_argument("--fold", default="none",
                    help="fold parameters into constants: none (default), all, or comma-separated names")
     p.add_argument("--ops", action="store_true", help="print operation counts of the generated functions")
+    p.add_argument("--budget-seconds", type=float, default=None,
+                   help="stop the build (with a message, temporary files removed) after this many seconds")
+    p.add_argument("--budget-memory", default=None,
+                   help="stop the build when it holds more memory than this (e.g. 1G, 800M)")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="set a parameter, start value or option (repeatable), e.g. m=1 or joint.J=5")
     p.add_argument("--no-prune", action="store_true", help="scenes: keep what the scene does not need")

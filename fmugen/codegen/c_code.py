@@ -55,7 +55,7 @@ import sympy as sp
 from sympy.printing.c import C99CodePrinter
 
 from .model import SymbolicModel, Variable
-from .chain import ChainDynamics, chain_call_lines
+from .chain import ChainDynamics, chain_call_lines, chain_ops
 from .program import Assign, Program, SolveSPD
 
 __all__ = [
@@ -175,10 +175,12 @@ class FunctionOps:
 
     expressions: OpCount = OpCount()
     linear_solve: OpCount = OpCount()
+    #: the looped chain dynamics of the runtime (:func:`fmugen.codegen.chain.chain_ops`)
+    loops: OpCount = OpCount()
 
     @property
     def total(self) -> OpCount:
-        return self.expressions + self.linear_solve
+        return self.expressions + self.linear_solve + self.loops
 
     @property
     def mul(self) -> int:
@@ -189,9 +191,12 @@ class FunctionOps:
         return self.total.add
 
     def __str__(self) -> str:
-        if self.linear_solve == OpCount():
-            return str(self.expressions)
-        return f"{self.expressions}; linear solve: {self.linear_solve}"
+        s = str(self.expressions)
+        if self.linear_solve != OpCount():
+            s += f"; linear solve: {self.linear_solve}"
+        if self.loops != OpCount():
+            s += f"; runtime loops: {self.loops}"
+        return s
 
 
 def cholesky_solve_ops(n: int, k: int) -> OpCount:
@@ -419,13 +424,44 @@ class Body:
     lines: list = field(default_factory=list)
     ops: OpCount = OpCount()
     solve_ops: OpCount = OpCount()
+    loop_ops: OpCount = OpCount()
     reads: set = field(default_factory=set)  # known symbols read (x, u, p, t)
     n_solves: int = 0
     n_chains: int = 0  # calls of the looped chain dynamics (c_runtime/chain_dynamics.c)
+    cleanup: list = field(default_factory=list)  # lines before the final return (free())
 
     @property
     def function_ops(self) -> FunctionOps:
-        return FunctionOps(self.ops, self.solve_ops)
+        return FunctionOps(self.ops, self.solve_ops, self.loop_ops)
+
+
+_ELEMENT = re.compile(r"([A-Za-z_]\w*)\[(\d+)\]")
+
+
+def _block_copies(copies: list, ind: str, shortest: int = 4) -> list:
+    """``array[index] = code;`` statements, with runs of plain element copies
+    (``dfdx[k] = w[j]``, ``dfdx[k+1] = w[j+1]``, ...) of at least ``shortest``
+    entries written as one memcpy: a looped model's Jacobian is O(n^2) such
+    copies, which would otherwise be the largest part of its model.c."""
+    out, k = [], 0
+    while k < len(copies):
+        arr, idx, code = copies[k]
+        m = _ELEMENT.fullmatch(code)
+        run = 1
+        if m:
+            src, j = m.group(1), int(m.group(2))
+            while k + run < len(copies):
+                a2, i2, c2 = copies[k + run]
+                if a2 != arr or i2 != idx + run or c2 != f"{src}[{j + run}]":
+                    break
+                run += 1
+        if run >= shortest:
+            out.append(f"{ind}memcpy({arr} + {idx}, {m.group(1)} + {int(m.group(2))}, {run} * sizeof(double));")
+        else:
+            run = 1
+            out.append(f"{ind}{arr}[{idx}] = {code};")
+        k += run
+    return out
 
 
 def _name_pow_bases(repl: list, exprs: list, symbols) -> tuple:
@@ -600,12 +636,14 @@ def lower(
             body.n_solves += 1
             body.n_chains += 1
             out.extend(lines)
+            body.loop_ops = body.loop_ops + chain_ops(st.n, st.kind)
+            # the results stay in the call's array: X[i] prints as arr[offset + i] (no copies;
+            # stores of consecutive entries become memcpy, see _block_copies)
             for i, xs in enumerate(st.X):
-                if xs in all_need:
-                    out.append(f"{ind}const double {names.add(xs)} = {arr}[{offset + i}];")
-                    defined.add(xs)
+                names.map[xs] = f"{arr}[{offset + i}]"
+                defined.add(xs)
             if free_line:
-                out.append(free_line)
+                body.cleanup.append(free_line)
             return
         n, k = st.B.shape
         a, b = f"spd_A{body.n_solves}", f"spd_B{body.n_solves}"
@@ -638,10 +676,11 @@ def lower(
             if li not in emitted:
                 emitted.add(li)
                 emit_step(layout[li], work, work_ind)
-        stores = []
+        copies = []
         for i, s in enumerate(g.sinks):
             code = emit_expr(reduced[start + i], work, work_ind)
-            stores.append(f"{inner}{s.array}[{s.index}] = {code};")
+            copies.append((s.array, s.index, code))
+        stores = _block_copies(copies, inner)
         if g.guard:
             if not (stores or g.preamble or work is not body.lines):
                 continue
@@ -798,6 +837,7 @@ def _function(signature: str, args: Sequence[str], body: Body, reads: list) -> s
         out.append("    int status;")
     out.extend(reads)
     out.extend(body.lines)
+    out.extend(body.cleanup)
     out.append("    return FMUGEN_OK;")
     out.append("}")
     return "\n".join(out)
@@ -960,6 +1000,8 @@ def generate_c(
         header.append(f" *   {fn}: {_comment_safe(str(oc.expressions))}")
         if oc.linear_solve != OpCount():
             header.append(f" *   {' ' * len(fn)}  linear solve: {oc.linear_solve}")
+        if oc.loops != OpCount():
+            header.append(f" *   {' ' * len(fn)}  runtime loops (c_runtime/chain_dynamics.c): {oc.loops}")
     header += [" */"]
 
     def names_array(name, vars_):

@@ -30,7 +30,7 @@ import sympy as sp
 
 from .program import SolveSPD
 
-__all__ = ["ChainDynamics", "LOOP_MIN_LINKS", "NC", "NG", "link_constants", "chain_work_doubles"]
+__all__ = ["ChainDynamics", "LOOP_MIN_LINKS", "NC", "NG", "link_constants", "chain_work_doubles", "chain_ops"]
 
 #: Arms with at least this many links get the looped dynamics by default
 #: (``state_space_model(strategy="auto")``).  Measured with
@@ -92,11 +92,12 @@ def link_constants(chain, gravity: Sequence) -> list:
 
 
 def chain_call_lines(st: ChainDynamics, index: int, b_code: list, ind: str) -> tuple:
-    """C statements of one step: ``(lines, output array name, offset of X[0])``.
+    """C statements of one step: ``(lines, output array, offset of X[0] in it, free line)``.
 
     ``b_code`` are the printed entries of B.  The forward dynamics works in
-    local arrays; the Jacobian's arrays (O(n^2)) are taken from the heap and
-    freed by the caller's ``free_line`` after X is read.
+    local arrays (O(n), free line None); the Jacobian's arrays (O(n^2)) are
+    taken from the heap, and the caller emits the free line before the
+    function returns.
     """
     n = st.n
     tag = f"chain{index}"
@@ -122,3 +123,32 @@ def chain_call_lines(st: ChainDynamics, index: int, b_code: list, ind: str) -> t
               f"{tag}_w + {w + n + 3 * n * n}, {tag}_w);",
               f"{ind}if (status != FMUGEN_OK) {{ free({tag}_w); return status; }}"]
     return lines, f"{tag}_w", w, f"{ind}free({tag}_w);"
+
+
+def chain_ops(n: int, kind: str):
+    """Floating-point operations of one runtime call for n links (:class:`~fmugen.codegen.c_code.OpCount`).
+
+    Counted by hand from the loops of ``c_runtime/chain_dynamics.c`` with the
+    rules of :class:`~fmugen.codegen.c_code.OpCount` (per link: kinematics
+    122 mul / 95 add / sin and cos; ABA passes 260 mul / 241 add / 2 div;
+    the derivative passes 798 mul / 786 add; per pair of joints 18 or 12 mul
+    for the entries of dID and M; the Cholesky factorisation and the
+    substitutions with 3n right-hand sides as in
+    :func:`~fmugen.codegen.c_code.cholesky_solve_ops`), so that looped and
+    straight-line models report comparable figures.
+    """
+    from .c_code import OpCount
+
+    fd = OpCount(mul=382 * n, add=336 * n, div=2 * n, calls=(("cos", n), ("sin", n)))
+    if kind == "fd":
+        return fd
+    k = 3 * n
+    lower, upper = n * (n + 1) // 2, n * (n - 1) // 2
+    chol = (n ** 3 - n) // 6
+    jac = OpCount(
+        mul=(122 + 186 + 612 + 6) * n + 18 * lower + 12 * upper + chol + k * n * (n - 1) + 2 * k * n,
+        add=(95 + 150 + 636 + 6) * n + 16 * lower + 10 * upper + chol + k * n * (n - 1),
+        div=n * (n - 1) // 2 + 2 * n,
+        calls=(("cos", n), ("sin", n), ("sqrt", n)),
+    )
+    return fd + jac

@@ -205,7 +205,8 @@ class SymbolicModel:
                     else:
                         out.steps.append(Assign(st.symbol, e))
                 else:
-                    out.steps.append(SolveSPD(st.X, st.A.xreplace(env), st.B.xreplace(env)))
+                    # replace() keeps the step's class (a ChainDynamics stays a chain call)
+                    out.steps.append(replace(st, A=st.A.xreplace(env), B=st.B.xreplace(env)))
             return out, env
 
         # the Jacobian program runs after the main one and sees its folded constants

@@ -13,6 +13,7 @@ import numpy as np
 import sympy as sp
 from sympy.printing.pycode import PythonCodePrinter
 
+from .chain import ChainDynamics
 from .program import Assign, Program
 
 
@@ -55,6 +56,10 @@ def compile_program(
     for st in program.steps:
         if isinstance(st, Assign):
             lines.append(f"    v_{st.symbol.name} = {pr.doprint(st.expr)}")
+        elif isinstance(st, ChainDynamics):
+            raise ValueError(f"{name}: the model calls the looped chain dynamics of the C runtime "
+                             f"({st.n} links), which has no Python evaluator; derive it with "
+                             f"state_space_model(strategy='straight') for Python evaluation")
         else:
             n, k = st.B.shape
             rowsA = ", ".join("[" + ", ".join(pr.doprint(st.A[i, j]) if j <= i else "0.0" for j in range(n)) + "]"

@@ -8,7 +8,7 @@ One call builds an FMU::
 ``variable_layout(model)`` gives every variable's value reference (the
 layout of c_runtime/fmugen_model.h).
 """
-from .build import BuildError, BuildResult, build_fmu
+from .build import BuildBudgetExceeded, BuildError, BuildInterrupted, BuildResult, build_fmu
 from .model_description import VariableLayout, model_description_xml, variable_layout
 from .units import UnitError, base_units
 

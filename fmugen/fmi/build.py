@@ -17,11 +17,14 @@ from __future__ import annotations
 import os
 import shlex
 import shutil
+import signal
 import subprocess
+import sys
 import tempfile
+import threading
 import time
 import zipfile
-from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional, Sequence, Union
@@ -34,6 +37,8 @@ from .model_description import model_description_xml
 
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 CFLAGS = ("-O2", "-fPIC", "-shared", "-Wall", "-Wextra", "-std=c99")
+#: a generated model.c larger than this compiles with -O1 (see _cflags_for)
+LARGE_SOURCE_BYTES = 2_000_000
 # zip entries get a fixed date so that identical inputs give identical FMUs
 _ZIP_DATE = (2020, 1, 1, 0, 0, 0)
 
@@ -120,17 +125,139 @@ def _fmi_types(fmi_type: str) -> tuple:
         raise FmugenError(f"fmi_type must be 'me', 'cs' or 'both', got {fmi_type!r}") from None
 
 
-def _run(cmd: list, cwd: Path, what: str) -> None:
+class BuildBudgetExceeded(BuildError, FmugenError):
+    """The build went past the time or memory budget the caller gave (``budget_seconds``/``budget_memory``).
+
+    Also a :class:`~fmugen.errors.FmugenError` (a ValueError): the command line prints it as one line."""
+
+
+class BuildInterrupted(BuildError):
+    """The build was stopped by SIGTERM (or SIGINT); its temporary files are gone."""
+
+
+class _Budget:
+    """Wall-clock and memory limits of one build, checked between and during stages.
+
+    Memory is the resident set of this process plus that of every compiler
+    it runs at the moment (read from /proc where there is one), so the
+    figure is what the build holds, not what other programs use.
+    """
+
+    def __init__(self, seconds: Optional[float], memory: Optional[float], t0: float):
+        for what, v in (("budget_seconds", seconds), ("budget_memory", memory)):
+            if v is not None and not (isinstance(v, (int, float)) and v > 0):
+                raise FmugenError(f"{what} must be a positive number, got {v!r}")
+        self.seconds, self.memory, self.t0 = seconds, memory, t0
+        self.peak = 0.0
+
+    def check(self, stage: str, pids: Sequence[int] = ()) -> None:
+        used = time.perf_counter() - self.t0
+        if self.seconds is not None and used > self.seconds:
+            raise BuildBudgetExceeded(f"build stopped: {used:.1f} s exceeds the time budget of "
+                                      f"{self.seconds:g} s (in stage '{stage}')")
+        if self.memory is not None:
+            rss = _rss_bytes(os.getpid()) + sum(_rss_bytes(p) for p in pids)
+            self.peak = max(self.peak, rss)
+            if rss > self.memory:
+                raise BuildBudgetExceeded(f"build stopped: {rss / 2**20:.0f} MiB in use exceeds the memory "
+                                          f"budget of {self.memory / 2**20:.0f} MiB (in stage '{stage}')")
+
+
+def _rss_bytes(pid: int) -> float:
+    """Resident memory of a process, bytes (0 where /proc is not available or the process is gone)."""
     try:
-        r = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True)
-    except OSError as e:
-        raise BuildError(f"cannot run the C compiler: {shlex.join(cmd)}\n(in {cwd})\n{e}") from None
-    if r.returncode != 0:
-        raise BuildError(f"C compiler failed (exit {r.returncode}) building {what!r}:\n"
-                         f"  cd {cwd} && {shlex.join(cmd)}\n{r.stderr.strip()}")
+        with open(f"/proc/{pid}/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return 0.0
 
 
-def _compile(cc: str, extra: list, sources: list, src: Path, lib: Path, what: str) -> list:
+class _Progress:
+    """One line per stage on a terminal ("generate ... 0.6 s"); silent when stderr is not a terminal."""
+
+    def __init__(self, enabled: Optional[bool], name: str):
+        self.on = sys.stderr.isatty() if enabled is None else bool(enabled)
+        self.name = name
+        self.t = None
+
+    def start(self, stage: str, detail: str = "") -> None:
+        self.t = time.perf_counter()
+        if self.on:
+            print(f"fmugen build {self.name}: {stage}{' (' + detail + ')' if detail else ''} ...",
+                  end="", file=sys.stderr, flush=True)
+
+    def done(self) -> None:
+        if self.on and self.t is not None:
+            print(f" {time.perf_counter() - self.t:.1f} s", file=sys.stderr, flush=True)
+        self.t = None
+
+
+@contextmanager
+def _terminate_as_exception():
+    """SIGTERM raises :class:`BuildInterrupted` while the build runs, so every
+    ``with``/``finally`` on the way out removes its files and stops its
+    compilers (a SIGTERM would otherwise end the process on the spot).
+    SIGINT already raises KeyboardInterrupt.  Only in the main thread, where
+    Python can install handlers."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        raise BuildInterrupted(f"build interrupted by signal {signum}; temporary files removed")
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _cflags_for(source: Path) -> list:
+    """Optimisation by size: -O2, but -O1 for a generated file over
+    :data:`LARGE_SOURCE_BYTES`, where gcc -O2's time grows faster than the
+    file (the straight-line code of a large arm; measured in
+    examples/bench_large_models.py)."""
+    if source.name == "model.c" and source.stat().st_size > LARGE_SOURCE_BYTES:
+        return ["-O1"]
+    return []
+
+
+def _run_jobs(jobs: list, cwd: Path, what: str, budget: _Budget, stage: str) -> None:
+    """Run compiler commands, at most one per CPU at a time; the first failure
+    (or an exceeded budget, or an exception such as a SIGTERM) kills the rest."""
+    pending, running = list(jobs), []
+    width = max(1, os.cpu_count() or 1)
+    try:
+        while pending or running:
+            while pending and len(running) < width:
+                cmd = pending.pop(0)
+                try:
+                    proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                            text=True)
+                except OSError as e:
+                    raise BuildError(f"cannot run the C compiler: {shlex.join(cmd)}\n(in {cwd})\n{e}") from None
+                running.append((cmd, proc))
+            time.sleep(0.02)
+            budget.check(stage, [p.pid for _, p in running])
+            for cmd, proc in list(running):
+                if proc.poll() is None:
+                    continue
+                running.remove((cmd, proc))
+                out = proc.stdout.read()
+                proc.stdout.close()
+                if proc.returncode != 0:
+                    raise BuildError(f"C compiler failed (exit {proc.returncode}) building {what!r}:\n"
+                                     f"  cd {cwd} && {shlex.join(cmd)}\n{out.strip()}")
+    finally:
+        for _, proc in running:  # only on the way out through an exception
+            proc.kill()
+            proc.wait()
+            proc.stdout.close()
+
+
+def _compile(cc: str, extra: list, sources: list, src: Path, lib: Path, what: str,
+             budget: _Budget) -> list:
     """Compile each source to an object file in parallel, then link ``lib``.
 
     Equivalent to one ``cc ... -o lib *.c`` call (the command of the README),
@@ -142,12 +269,10 @@ def _compile(cc: str, extra: list, sources: list, src: Path, lib: Path, what: st
     objs[0].parent.mkdir(exist_ok=True)
     # largest first, so the long model.c starts at once
     order = sorted(range(len(sources)), key=lambda i: -(src / sources[i]).stat().st_size)
-    jobs = [[cc, *flags, "-c", sources[i], "-o", str(objs[i])] for i in order]
-    with ThreadPoolExecutor(max_workers=max(1, os.cpu_count() or 1)) as ex:
-        for f in [ex.submit(_run, j, src, what) for j in jobs]:
-            f.result()  # re-raises the first BuildError
+    jobs = [[cc, *flags, *_cflags_for(src / sources[i]), "-c", sources[i], "-o", str(objs[i])] for i in order]
+    _run_jobs(jobs, src, what, budget, "compile")
     link = [cc, "-shared", *extra, "-o", str(lib), *map(str, objs), "-lm"]
-    _run(link, src, what)
+    _run_jobs([link], src, what, budget, "link")
     return link
 
 
@@ -161,6 +286,10 @@ def build_fmu(
     keep_sources: bool = True,
     model_identifier: Optional[str] = None,
     default_experiment: Optional[dict] = None,
+    budget_seconds: Optional[float] = None,
+    budget_memory: Optional[float] = None,
+    progress: Optional[bool] = None,
+    budget_start: Optional[float] = None,
 ) -> BuildResult:
     """Generate, compile and zip ``model`` into an FMI 2.0 FMU.
 
@@ -176,6 +305,18 @@ def build_fmu(
         keep_sources     put ``sources/`` into the FMU
         model_identifier defaults to a C identifier made from the model name
         default_experiment  optional {startTime, stopTime, stepSize, tolerance}
+        budget_seconds   stop with :class:`BuildBudgetExceeded` when the build
+                         (generate, compile, zip) takes longer (wall clock, s)
+        budget_memory    ... or when it holds more memory (bytes: this process
+                         plus the compilers it runs)
+        progress         one line per stage on stderr; None: only when stderr
+                         is a terminal
+        budget_start     time.perf_counter() at which the time budget began
+                         (default: this call), e.g. before deriving the model
+
+    Temporary files are removed on every way out, including SIGINT and
+    SIGTERM (raised as :class:`BuildInterrupted` while the build runs); the
+    .fmu appears only when complete.
 
     Returns a :class:`BuildResult` with the path, GUID, operation counts and
     timings.  Raises :class:`BuildError` (compiler command and its stderr in
@@ -183,6 +324,15 @@ def build_fmu(
     """
     types = _fmi_types(fmi_type)
     t0 = time.perf_counter()
+    budget = _Budget(budget_seconds, budget_memory, t0 if budget_start is None else budget_start)
+    with _terminate_as_exception():
+        return _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_sources,
+                      model_identifier, default_experiment, budget, _Progress(progress, model.name), t0)
+
+
+def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_sources, model_identifier,
+           default_experiment, budget: _Budget, progress: _Progress, t0: float) -> BuildResult:
+    progress.start("generate", f"{model.nx} states")
     model = _fold(model, fold_parameters)
     ident = model_identifier or c_identifier(model.name)
     _check_identifier(ident, model.name, model_identifier is not None)
@@ -202,6 +352,8 @@ def build_fmu(
     guid = deterministic_guid(gen.source, xml)
     c_src, xml = gen.source.replace(GUID_PLACEHOLDER, guid), xml.replace(GUID_PLACEHOLDER, guid)
     t_gen = time.perf_counter() - t0
+    progress.done()
+    budget.check("generate")
 
     out = Path(output_path)
     if out.is_dir():
@@ -223,8 +375,10 @@ def build_fmu(
         lib = bindir / f"{ident}{suffix}"
 
         t1 = time.perf_counter()
-        cmd = _compile(cc, list(extra_cflags), sources, src, lib, model.name)
+        progress.start("compile", f"model.c {c_src.count(chr(10))} lines, {len(sources)} files")
+        cmd = _compile(cc, list(extra_cflags), sources, src, lib, model.name, budget)
         t_cc = time.perf_counter() - t1
+        progress.done()
         portable = shlex.join([cc, *CFLAGS, "-I.", "-o", f"{ident}{suffix}", *sources, "-lm"])
         (src / "README.txt").write_text(
             f"Sources of the FMU {ident} ({model.name}), generated by fmugen {__version__}.\n"
@@ -238,13 +392,17 @@ def build_fmu(
         if keep_sources:
             files += sorted(src.iterdir())
         tmp_zip = out.with_name(out.name + ".part")
-        with zipfile.ZipFile(tmp_zip, "w", zipfile.ZIP_DEFLATED) as zf:
-            for f in files:
-                info = zipfile.ZipInfo(f.relative_to(root).as_posix(), date_time=_ZIP_DATE)
-                info.compress_type = zipfile.ZIP_DEFLATED
-                info.external_attr = (0o755 if f == lib else 0o644) << 16
-                zf.writestr(info, f.read_bytes())
-        os.replace(tmp_zip, out)
+        try:
+            with zipfile.ZipFile(tmp_zip, "w", zipfile.ZIP_DEFLATED) as zf:
+                for f in files:
+                    info = zipfile.ZipInfo(f.relative_to(root).as_posix(), date_time=_ZIP_DATE)
+                    info.compress_type = zipfile.ZIP_DEFLATED
+                    info.external_attr = (0o755 if f == lib else 0o644) << 16
+                    zf.writestr(info, f.read_bytes())
+            budget.check("zip")
+            os.replace(tmp_zip, out)
+        finally:
+            tmp_zip.unlink(missing_ok=True)
         t_zip = time.perf_counter() - t2
 
     return BuildResult(path=out, model_identifier=ident, guid=guid, op_counts=gen.op_counts,

@@ -1,0 +1,294 @@
+"""Large arms (issue 10): looped chain dynamics, build budgets, progress, clean-up on a kill.
+
+The looped forward dynamics (articulated-body algorithm) and its Jacobian
+(analytical Newton-Euler derivatives, one Cholesky solve) of
+``c_runtime/chain_dynamics.c`` are checked against two independent sources:
+Pinocchio's ``aba`` and ``computeABADerivatives`` at N = 24, and fmugen's own
+straight-line code (symbolic Newton-Euler, forward-mode derivatives) on small
+arms with what Pinocchio does not model (joint damping) and with parameters
+changed at run time.  Build times are figures of examples/bench_large_models.py,
+not assertions here.
+"""
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import textwrap
+import time
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sympy as sp
+
+from fmugen.codegen.c_code import generate_c
+from fmugen.codegen.c_harness import CompiledModel
+from fmugen.codegen.chain import LOOP_MIN_LINKS, ChainDynamics
+from fmugen.codegen.evaluate import ModelEvaluator
+from fmugen.dynamics.manipulator import Manipulator
+from fmugen.fmi.build import BuildBudgetExceeded, build_fmu
+from fmugen.robot.chain import chain_to_toml, n_link_chain
+from fmugen.robot.description import Payload
+
+ROOT = Path(__file__).resolve().parents[1]
+RTOL = 1e-10
+
+
+def rel(a, b):
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    return np.max(np.abs(a - b)) / np.max(np.abs(b))
+
+
+def full_featured_chain(n, convention="modified", seed=11):
+    """Prismatic joints, angle offsets, full inertia tensors, rotor inertia, a payload."""
+    robot = n_link_chain(n, "RRP", seed=seed)
+    links = tuple(replace(L, theta=sp.Float(0.07 * (i + 1)), rotor_inertia=sp.Float(0.02 * (i % 4)))
+                  for i, L in enumerate(robot.links))
+    payload = Payload(mass=sp.Float(0.8), com=(sp.Float(0.03), sp.Float(-0.02), sp.Float(0.05)))
+    return replace(robot, links=links, convention=convention, payload=payload)
+
+
+def states(n, count=3, seed=0):
+    rng = np.random.default_rng(seed)
+    return [(rng.uniform(-np.pi, np.pi, n), rng.uniform(-2, 2, n), rng.uniform(-30, 30, n))
+            for _ in range(count)]
+
+
+def p_start(model):
+    return np.array([v.start for v in model.parameters], dtype=float)
+
+
+def test_24_links_equal_pinocchio_aba_and_its_derivatives():
+    pin = pytest.importorskip("pinocchio")
+    from fmugen.codegen.benchmarks import pinocchio_model
+
+    n = 24
+    robot = full_featured_chain(n)
+    model = Manipulator(robot).state_space_model(outputs=("p_ee", "qdd"))
+    assert any(isinstance(st, ChainDynamics) for st in model.program.steps)  # auto chose the loops
+    pm = pinocchio_model(robot)
+    pd = pm.createData()
+    with CompiledModel.build(generate_c(model).source) as cm:
+        for q, qd, tau in states(n):
+            x = np.r_[q, qd]
+            dx, y = cm.evaluate(p_start(model), 0.0, x, tau)
+            qdd = pin.aba(pm, pd, q, qd, tau)
+            assert rel(dx[n:], qdd) < RTOL
+            assert np.array_equal(dx[:n], qd)
+            assert rel(y[3:], qdd) < RTOL
+            pin.forwardKinematics(pm, pd, q)
+            # the end effector: origin of the last DH frame (modified DH: the last joint frame)
+            assert rel(y[:3], pd.oMi[n].translation) < RTOL
+            dfdx, dfdu, dgdx, dgdu = cm.jacobian(p_start(model), 0.0, x, tau)
+            pin.computeABADerivatives(pm, pd, q, qd, tau)
+            minv = np.triu(pd.Minv) + np.triu(pd.Minv, 1).T
+            assert rel(dfdx[n:, :n], pd.ddq_dq) < RTOL
+            assert rel(dfdx[n:, n:], pd.ddq_dv) < RTOL
+            assert rel(dfdu[n:], minv) < RTOL
+            assert np.array_equal(dfdx[:n], np.c_[np.zeros((n, n)), np.eye(n)])
+            assert np.array_equal(dgdx[3:], dfdx[n:]) and np.array_equal(dgdu[3:], dfdu[n:])
+            # d p_ee / dq: the linear rows of Pinocchio's joint Jacobian at the end effector's origin
+            J = pin.computeJointJacobians(pm, pd, q)
+            pin.updateFramePlacements(pm, pd)
+            Jw = pin.getJointJacobian(pm, pd, n, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+            assert rel(dgdx[:3, :n], Jw[:3]) < RTOL and J is not None
+
+
+@pytest.mark.parametrize("convention", ["standard", "modified"])
+def test_loops_equal_straight_line_code_with_damping_and_changed_parameters(convention):
+    """Two derivations that share no code: symbolic Newton-Euler + forward-mode derivatives
+    (straight) and the runtime loops; damping (which Pinocchio lacks), symbolic parameters
+    evaluated at run time, and the same again with the parameters folded."""
+    robot = full_featured_chain(5, convention, seed=3)
+    links = tuple(replace(L, damping=sp.Float(0.1 * (i + 1))) for i, L in enumerate(robot.links))
+    robot = replace(robot, links=links)
+    from fmugen.robot.loader import robot_from_toml
+
+    robot = robot_from_toml(chain_to_toml(robot), source="<test>")  # every quantity a parameter
+    arm = Manipulator(robot)
+    straight = arm.state_space_model(outputs=("p_ee", "qdd"), strategy="straight")
+    looped = arm.state_space_model(outputs=("p_ee", "qdd"), strategy="loops")
+    assert [v.name for v in looped.parameters] == [v.name for v in straight.parameters]
+    assert len(looped.parameters) > 50
+    rng = np.random.default_rng(5)
+    p0 = p_start(looped)
+    p1 = p0 * rng.uniform(0.8, 1.2, p0.size)  # other masses, lengths, inertias, damping
+    with CompiledModel.build(generate_c(straight).source) as cs, \
+            CompiledModel.build(generate_c(looped).source) as cl, \
+            CompiledModel.build(generate_c(looped.with_parameters_folded()).source) as cf:
+        for (q, qd, tau), p in zip(states(5), (p0, p1, p1)):
+            x = np.r_[q, qd]
+            ref_dx, ref_y = cs.evaluate(p, 0.0, x, tau)
+            dx, y = cl.evaluate(p, 0.0, x, tau)
+            assert rel(dx, ref_dx) < RTOL and rel(y, ref_y) < RTOL
+            for a, b in zip(cl.jacobian(p, 0.0, x, tau), cs.jacobian(p, 0.0, x, tau)):
+                assert rel(a, b) < RTOL
+        q, qd, tau = states(5)[0]
+        # folding bakes in the file values: equal to the straight code at p0, not at p1
+        assert rel(cf.evaluate([], 0.0, np.r_[q, qd], tau)[0], cs.evaluate(p0, 0.0, np.r_[q, qd], tau)[0]) < RTOL
+        assert rel(cl.evaluate(p1, 0.0, np.r_[q, qd], tau)[0], cs.evaluate(p0, 0.0, np.r_[q, qd], tau)[0]) > 1e-4
+
+
+def test_strategy_choice_and_its_limits():
+    small, large = n_link_chain(LOOP_MIN_LINKS - 1), n_link_chain(LOOP_MIN_LINKS)
+
+    def looped(m):
+        return any(isinstance(st, ChainDynamics) for st in m.program.steps)
+
+    assert not looped(Manipulator(small).state_space_model(outputs=()))
+    assert looped(Manipulator(large).state_space_model(outputs=()))
+    # what the loops do not model falls back to straight-line code, or is refused when asked for
+    ext = replace(large, links=large.links[:-1] + (replace(large.links[-1], external_wrench=True),))
+    assert not looped(Manipulator(ext).state_space_model(outputs=()))
+    with pytest.raises(ValueError, match="external wrenches.*strategy='straight'"):
+        Manipulator(ext).state_space_model(strategy="loops")
+    with pytest.raises(ValueError, match="locked joints"):
+        Manipulator(small).state_space_model(strategy="loops", locked={1: 0.0})
+    with pytest.raises(ValueError, match="strategy must be"):
+        Manipulator(small).state_space_model(strategy="fast")
+    with pytest.raises(ValueError, match="no Python evaluator.*strategy='straight'"):
+        ModelEvaluator(Manipulator(large).state_space_model())
+
+
+def test_modelstructure_of_a_looped_model_is_dense():
+    """The FD couples every qdd to every q, qd, tau: the XML must say so (exact for a spatial chain)."""
+    from fmugen.fmi.model_description import model_description_xml
+
+    m = Manipulator(n_link_chain(LOOP_MIN_LINKS)).state_space_model(outputs=("qdd",))
+    deps = m.dependencies()
+    n = LOOP_MIN_LINKS
+    want = {v.symbol for v in m.states + m.inputs}
+    assert all(d == want for d in deps["derivatives"][n:]) and all(d == want for d in deps["outputs"])
+    assert "<ModelStructure>" in model_description_xml(m, "{x}", "m", ("me",), ())
+
+
+def test_24_link_fmu_through_fmpy():
+    """ME + CS in one build; fmpy's derivatives equal the harness's; CS integrates."""
+    fmpy = pytest.importorskip("fmpy")
+    from fmpy.validation import validate_fmu
+
+    n = 24
+    robot = n_link_chain(n, seed=1)
+    model = Manipulator(robot).state_space_model()
+    with tempfile.TemporaryDirectory() as tmp:
+        res = build_fmu(model, Path(tmp) / "chain24.fmu", fmi_type="both", progress=False)
+        assert validate_fmu(str(res.path)) == []
+        assert res.op_counts["jacobian"].loops.mul > 0 and res.op_counts["evaluate"].expressions.mul == 0
+        q0 = np.linspace(-0.5, 0.5, n)
+        start = {f"q[{i + 1}]": q0[i] for i in range(n)}
+        out = fmpy.simulate_fmu(str(res.path), fmi_type="CoSimulation", stop_time=0.05, output_interval=0.01,
+                                start_values=start, output=[f"q[{n}]", "p_ee[3]"])
+        assert np.all(np.isfinite(out[f"q[{n}]"]))
+        # the arm falls: with qd(0) = 0, q(t) - q(0) ~ qdd(0) t^2 / 2 from the harness's qdd
+        with CompiledModel.build(generate_c(model).source) as cm:
+            dx, _ = cm.evaluate([], 0.0, np.r_[q0, np.zeros(n)], np.zeros(n))
+        t = out["time"][1]
+        assert out[f"q[{n}]"][1] - q0[-1] == pytest.approx(0.5 * dx[2 * n - 1] * t * t, rel=0.05)
+
+
+def _tiny_model():
+    return Manipulator(n_link_chain(LOOP_MIN_LINKS, seed=2)).state_space_model()
+
+
+def test_budgets_stop_the_build_with_a_message_and_leave_nothing(tmp_path, monkeypatch):
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    out = tmp_path / "out" / "m.fmu"
+    with pytest.raises(BuildBudgetExceeded, match=r"exceeds the time budget of 0.01 s \(in stage"):
+        build_fmu(_tiny_model(), out, budget_seconds=0.01, budget_start=time.perf_counter() - 1.0)
+    with pytest.raises(BuildBudgetExceeded, match=r"MiB in use exceeds the memory budget of 1 MiB"):
+        build_fmu(_tiny_model(), out, budget_memory=2**20)
+    with pytest.raises(ValueError, match="budget_seconds must be a positive number"):
+        build_fmu(_tiny_model(), out, budget_seconds=-1)
+    assert list(tmp_path.iterdir()) == []
+    # a compiler that never ends is stopped in its stage, and killed
+    cc = tmp_path / "slowcc"
+    cc.write_text(SLOW_CC.format(pids=tmp_path / "pids"))
+    cc.chmod(0o755)
+    with pytest.raises(BuildBudgetExceeded, match=r"time budget of 2 s \(in stage 'compile'\)"):
+        build_fmu(_tiny_model(), out, budget_seconds=2, cc=str(cc))
+    for pid in map(int, (tmp_path / "pids").read_text().split()):
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "pids", "slowcc"]
+    assert list((tmp_path / "out").iterdir()) == []
+    # within budget: built, and the budget did not change the result
+    res = build_fmu(_tiny_model(), out, budget_seconds=600, budget_memory=4 * 2**30)
+    assert res.path.is_file()
+
+
+def test_cli_budget_is_one_line_and_exit_2(tmp_path):
+    robot = tmp_path / "chain.toml"
+    robot.write_text(chain_to_toml(n_link_chain(LOOP_MIN_LINKS, seed=1)))
+    r = subprocess.run([sys.executable, "-m", "fmugen.cli", "build", str(robot), "-o", str(tmp_path / "c.fmu"),
+                        "--budget-memory", "1M"], capture_output=True, text=True, cwd=tmp_path)
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.strip().startswith("fmugen: build stopped:") and "memory budget of 1 MiB" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "c.fmu").exists()
+
+
+def test_progress_only_when_asked_or_on_a_terminal(tmp_path, capsys):
+    build_fmu(_tiny_model(), tmp_path / "a.fmu", progress=True)
+    err = capsys.readouterr().err
+    assert "generate (" in err and "compile (model.c" in err and err.count(" s\n") == 2
+    build_fmu(_tiny_model(), tmp_path / "b.fmu")  # stderr is not a terminal under pytest
+    assert capsys.readouterr().err == ""
+
+
+SLOW_CC = """#!/bin/sh
+echo $$ >> "{pids}"
+exec sleep 60
+"""
+
+CHILD = """
+import sys, tempfile
+tempfile.tempdir = {tmp!r}
+from fmugen.dynamics.manipulator import Manipulator
+from fmugen.fmi.build import build_fmu
+from fmugen.robot.chain import n_link_chain
+m = Manipulator(n_link_chain(2)).state_space_model()
+build_fmu(m, {out!r}, cc={cc!r})
+"""
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_a_killed_build_removes_its_files_and_its_compilers(tmp_path, sig):
+    """The issue's 60-link build, killed by the user, left 19 MB behind: not any more."""
+    work, pids = tmp_path / "tmp", tmp_path / "pids"
+    work.mkdir()
+    cc = tmp_path / "slowcc"
+    cc.write_text(SLOW_CC.format(pids=pids))
+    cc.chmod(0o755)
+    out = tmp_path / "m.fmu"
+    proc = subprocess.Popen([sys.executable, "-c", textwrap.dedent(CHILD.format(tmp=str(work), out=str(out),
+                                                                             cc=str(cc)))],
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while not (pids.exists() and pids.read_text().strip()) and time.time() < deadline:
+        time.sleep(0.1)
+    assert any(work.iterdir()), "the build should be compiling in its temporary folder"
+    proc.send_signal(sig)
+    try:
+        _, err = proc.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        raise
+    assert proc.returncode != 0
+    assert "BuildInterrupted" in err or "KeyboardInterrupt" in err
+    assert list(work.iterdir()) == [] and not out.exists() and not out.with_name("m.fmu.part").exists()
+    for pid in map(int, pids.read_text().split()):
+        with pytest.raises(ProcessLookupError):  # the compilers it started are gone
+            os.kill(pid, 0)
+
+
+def test_puma_keeps_straight_line_code():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        from fmugen.robot.loader import load_robot_description
+
+        robot = load_robot_description(ROOT / "robots" / "puma_thesis_com.toml")
+    m = Manipulator(robot).state_space_model()
+    assert not any(isinstance(st, ChainDynamics) for st in list(m.program.steps) + list(m.jacobian.steps))
