@@ -329,18 +329,21 @@ class Scene:
         keep = {}
         for name in names:
             inst, par = self._endpoint(str(name), f"{self.src}: keep parameter {name!r}")
-            params = [v.name for v in self.base_models[inst].parameters]
+            params = {v.name: v.start for v in self.base_models[inst].parameters}
             if par not in params:
                 raise SceneError(f"{self.src}: {name}: {inst} has no parameter {par!r}{did_you_mean(par, params)}")
             fixed = self.spec.instances[inst].fixed
             if fixed == "all" or par in fixed:
                 raise SceneError(f"{self.src}: [instances.{inst}] fixed: {par} is folded into a constant, so "
                                  f"{name} cannot change per run; remove it from 'fixed' to vary it")
-            keep.setdefault(inst, []).append(par)
+            if params[par] == 0.0:  # only zeros are folded: other FMUs stay those of the scene (and its cache)
+                keep.setdefault(inst, []).append(par)
+        if not keep:
+            return self
         instances = {i: replace(ins, keep=tuple(dict.fromkeys(ins.keep + tuple(keep.get(i, ())))))
                      for i, ins in self.spec.instances.items()}
-        other = Scene(replace(self.spec, instances=instances), self._sets)
-        return other
+        # this scene was accepted already (factories included), so its copy is too
+        return Scene(replace(self.spec, instances=instances), self._sets, allow_factories=True)
 
     def build(self, out_dir, prune: bool = True, progress=None, use_cache: bool = True):
         """One FMU per group into ``out_dir`` (see :func:`fmugen.scene.build.build_scene`)."""

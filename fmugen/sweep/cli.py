@@ -46,6 +46,8 @@ def add_parser(sub) -> None:
                    help="do not stop a run whose coupling the master judges divergent")
     p.add_argument("--save-runs", action="store_true", help="also write each point's series to DIR/runs/KEY.npz")
     p.add_argument("--no-plot", action="store_true", help="no DIR/metrics.png")
+    p.add_argument("--allow-factories", action="store_true",
+                   help="run the Python factories the scene names (they are code: only for files you trust)")
     p.set_defaults(func=run)
 
 
@@ -64,7 +66,7 @@ def run(args) -> int:
         r = sweep(args.scene, grid=args.grid, sample=args.sample, n=args.n, seed=args.seed, metrics=args.metrics,
                   out=args.out, scheduler=args.scheduler, workers=args.workers, processes=not args.threads,
                   sets=args.set, options=options, band=args.band, save_runs=args.save_runs, progress=True,
-                  plot=not args.no_plot)
+                  plot=not args.no_plot, allow_factories=args.allow_factories)
     except KeyboardInterrupt:
         return 130
     bad = r.failed

@@ -163,7 +163,7 @@ def sweep(scene, grid=None, sample=None, n: Optional[int] = None, seed: Optional
           metrics: Optional[Sequence[str]] = None, out="sweep", scheduler: Optional[str] = None,
           workers: Optional[int] = None, processes: bool = True, sets=None, options: Optional[dict] = None,
           band: float = 0.02, save_runs: bool = False, client=None, progress: Optional[bool] = None,
-          plot: bool = True) -> SweepResult:
+          plot: bool = True, allow_factories: bool = False) -> SweepResult:
     """Run ``scene`` (a scene file) at every point of a grid or a Monte-Carlo sample; see the module docstring.
 
     grid: ``["joint.J=1,2,4", ...]`` or ``{"joint.J": [1, 2, 4]}``; sample:
@@ -175,7 +175,8 @@ def sweep(scene, grid=None, sample=None, n: Optional[int] = None, seed: Optional
     band: settling band (fraction of the final change); save_runs: also
     write each point's recorded series to ``out/runs/<key>.npz``; client: an
     existing ``dask.distributed.Client`` (then scheduler and workers are not
-    used); progress: on stderr (default: when stderr is a terminal).
+    used); progress: on stderr (default: when stderr is a terminal);
+    allow_factories: run Python factories the scene names (see :func:`fmugen.load_scene`).
     """
     from ..scene import parse_sets
 
@@ -191,7 +192,7 @@ def sweep(scene, grid=None, sample=None, n: Optional[int] = None, seed: Optional
     say = (lambda t: print(t, file=sys.stderr, flush=True)) if show else (lambda t: None)
     say(f"sweep: {len(points)} points over {', '.join(names)}; building the FMUs once")
     try:
-        plan = SweepPlan(scene, names, out / "fmus", sets=sets)
+        plan = SweepPlan(scene, names, out / "fmus", sets=sets, allow_factories=allow_factories)
     except SceneError as exc:
         raise SweepError(str(exc)) from None
     opts = run_options(plan.system.settings, options)

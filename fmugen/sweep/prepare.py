@@ -63,9 +63,10 @@ class SweepPlan:
     sets: ``--set`` overrides of the base scene; fmu_dir: where the FMUs go.
     """
 
-    def __init__(self, scene_path, names: Sequence[str], fmu_dir, sets=None, progress=None):
+    def __init__(self, scene_path, names: Sequence[str], fmu_dir, sets=None, progress=None,
+                 allow_factories: bool = False):
         self.scene_path = Path(scene_path)
-        base = load_scene(self.scene_path, set=sets)
+        base = load_scene(self.scene_path, set=sets, allow_factories=allow_factories)
         self.names = tuple(names)
         params, states = [], []
         for name in self.names:
