@@ -199,3 +199,21 @@ def test_the_command_line_on_a_scheduler_address(client, tmp_path, capsys):
                "1", "--out", str(tmp_path / "x")])
     err = capsys.readouterr().err
     assert rc == 2 and "not a distribution" in err and err.count("\n") == 1
+
+
+def test_the_error_metric_is_against_the_reference_of_the_scene_at_that_point(client, tmp_path):
+    from fmugen.cosim.reference import solve_reference
+
+    opts = dict(OPTS, stop=0.2)
+    r = sweep(SPLIT, grid=["joint.J=3"], out=tmp_path, client=client, options=opts,
+              metrics=["joint.theta:error", "joint.theta:final"], save_runs=True, progress=False)
+    row = r.rows[0]
+    assert row["status"] == "ok"
+    with np.load(tmp_path / "runs" / f"{row['key']}.npz") as z:
+        t, theta = z["time"], z["values"][:, 0]
+    # the reference of the scene written with J = 3 (not the sweep's parameter plumbing), solved here
+    problem = dataclasses.replace(fmugen.load_scene(SPLIT, set={"joint.J": 3.0}).reference_problem(), stop_time=0.2)
+    ref = solve_reference(problem, times=t, cache=False)
+    assert row["joint.theta:error"] == pytest.approx(np.max(np.abs(theta - ref["joint.theta"])), rel=1e-6)
+    # a coupling error well above the reference's own, within 1 % of the 0.1 rad move
+    assert 100 * ref.error_of("joint.theta") < row["joint.theta:error"] < 1e-3
