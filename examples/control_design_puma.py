@@ -365,7 +365,7 @@ def cosim_part(a) -> None:
     ax.set_ylabel("q - q(0) [rad]")
     ax.legend(fontsize=6, ncol=2)
     ax.grid(True)
-    ax.set_title(f"designed amplifier gains, move of {pos}: co-simulation vs linear prediction")
+    ax.set_title(f"designed gains, move of {pos}: co-simulation vs linear", fontsize=10)
     fig.savefig(out / "cosim_vs_linear.png", dpi=120)
     plt.close(fig)
     print(f"wrote {out}/cosim_vs_linear.png")
