@@ -16,6 +16,12 @@
  * cross product away from a composite sum (the derivation is in
  * c_runtime/README.md, "Looped chain dynamics").
  */
+#if defined(__GNUC__) && !defined(__clang__)
+/* the O(n^2) loops below are axpy over contiguous rows: let gcc vectorise
+ * them whatever -O level the FMU is built with (the rest of the runtime
+ * keeps the build's flags) */
+#pragma GCC optimize("O3")
+#endif
 #include <math.h>
 #include <string.h>
 #include "chain_dynamics.h"
@@ -129,16 +135,18 @@ static void kinematics(int n, const int *rev, const double *lc, const double *g,
     }
 }
 
-int fmugen_chain_fd(int n, const int *rev, const double *lc, const double *g, const double *q,
-                    const double *qd, const double *tau, double *qdd, double *p_ee, double *work)
+/* The articulated-body algorithm on world quantities already computed:
+ * S (6n), IA (36n: the link inertias on entry, articulated inertias on
+ * exit); scratch v, c, pA, U (6n each), D, u (n each). */
+static int aba(int n, const double *lc, const double *g, const double *qd, const double *tau,
+               const double *S, double *IA, double *v, double *c, double *pA, double *U, double *D,
+               double *u, double *qdd)
 {
-    double *R = work, *p = R + 9 * n, *S = p + 3 * n, *IA = S + 6 * n, *v = IA + 36 * n;
-    double *c = v + 6 * n, *pA = c + 6 * n, *U = pA + 6 * n, *D = U + 6 * n, *u = D + n;
-    kinematics(n, rev, lc, g, q, R, p, S, IA, p_ee);
     /* pass 1: velocities, velocity-product accelerations c_i = v_i x S_i qd_i, bias forces */
     double vp[6] = {0, 0, 0, 0, 0, 0};
     for (int i = 0; i < n; i++) {
-        double *vi = v + 6 * i, *Si = S + 6 * i, h[6];
+        double *vi = v + 6 * i, h[6];
+        const double *Si = S + 6 * i;
         for (int k = 0; k < 6; k++) vi[k] = vp[k] + Si[k] * qd[i];
         crm(vi, Si, c + 6 * i);
         for (int k = 0; k < 6; k++) c[6 * i + k] *= qd[i];
@@ -148,17 +156,18 @@ int fmugen_chain_fd(int n, const int *rev, const double *lc, const double *g, co
     }
     /* pass 2: articulated inertias and bias forces, tip to base */
     for (int i = n - 1; i >= 0; i--) {
-        const double *L = lc + FMUGEN_CHAIN_NC * i;
-        double *Ii = IA + 36 * i, *Si = S + 6 * i, *Ui = U + 6 * i, *pi = pA + 6 * i;
+        const double *L = lc + FMUGEN_CHAIN_NC * i, *Si = S + 6 * i;
+        double *Ii = IA + 36 * i, *Ui = U + 6 * i, *pi = pA + 6 * i;
         mv6(Ii, Si, Ui);
         D[i] = dot6(Si, Ui) + L[FMUGEN_CHAIN_ROTOR];
         if (!(D[i] > 0.0) || !isfinite(D[i])) return FMUGEN_NOT_POSITIVE_DEFINITE;
         u[i] = tau[i] - L[FMUGEN_CHAIN_DAMPING] * qd[i] - dot6(Si, pi);
         if (i > 0) {
-            double *Ip = IA + 36 * (i - 1), *pp = pA + 6 * (i - 1), Ic[6];
+            double *Ip = IA + 36 * (i - 1), *pp = pA + 6 * (i - 1), Ic[6], Ud[6];
             double inv = 1.0 / D[i], uD = u[i] * inv;
+            for (int k = 0; k < 6; k++) Ud[k] = Ui[k] * inv;
             for (int r = 0; r < 6; r++)
-                for (int k = 0; k < 6; k++) Ii[6 * r + k] -= Ui[r] * Ui[k] * inv;
+                for (int k = 0; k < 6; k++) Ii[6 * r + k] -= Ud[r] * Ui[k];
             mv6(Ii, c + 6 * i, Ic);
             for (int k = 0; k < 36; k++) Ip[k] += Ii[k];
             for (int k = 0; k < 6; k++) pp[k] += pi[k] + Ic[k] + Ui[k] * uD;
@@ -167,7 +176,7 @@ int fmugen_chain_fd(int n, const int *rev, const double *lc, const double *g, co
     /* pass 3: accelerations, base to tip */
     double a[6] = {0.0, 0.0, 0.0, -g[0], -g[1], -g[2]};
     for (int i = 0; i < n; i++) {
-        double *Si = S + 6 * i;
+        const double *Si = S + 6 * i;
         for (int k = 0; k < 6; k++) a[k] += c[6 * i + k];
         qdd[i] = (u[i] - dot6(U + 6 * i, a)) / D[i];
         for (int k = 0; k < 6; k++) a[k] += Si[k] * qdd[i];
@@ -177,26 +186,58 @@ int fmugen_chain_fd(int n, const int *rev, const double *lc, const double *g, co
     return FMUGEN_OK;
 }
 
-/* A += K where K = -(I crm(v) + (I crm(v))^T): the velocity term of
- * d(I a + v x* I v) summed over a subtree (symmetric, see the file head). */
-static void add_K(double *K, const double *I, const double *v)
+int fmugen_chain_fd(int n, const int *rev, const double *lc, const double *g, const double *q,
+                    const double *qd, const double *tau, double *qdd, double *p_ee, double *work)
 {
-    double A[36];
-    for (int k = 0; k < 6; k++) { /* column k of I crm(v) = I (v x e_k) */
-        double e[6] = {0, 0, 0, 0, 0, 0}, m[6], col[6];
-        e[k] = 1.0;
-        crm(v, e, m);
-        mv6(I, m, col);
-        for (int r = 0; r < 6; r++) A[6 * r + k] = col[r];
-    }
-    for (int r = 0; r < 6; r++)
-        for (int k = 0; k < 6; k++) K[6 * r + k] -= A[6 * r + k] + A[6 * k + r];
+    double *R = work, *p = R + 9 * n, *S = p + 3 * n, *IA = S + 6 * n, *v = IA + 36 * n;
+    double *c = v + 6 * n, *pA = c + 6 * n, *U = pA + 6 * n, *D = U + 6 * n, *u = D + n;
+    kinematics(n, rev, lc, g, q, R, p, S, IA, p_ee);
+    return aba(n, lc, g, qd, tau, S, IA, v, c, pA, U, D, u, qdd);
 }
 
-/* Cholesky of the SPD matrix A (n x n, lower triangle) in place, then
- * X = A^{-1} B for B n x k, both substitutions row by row (each row of B a
- * contiguous vector the compiler can vectorise). */
-static int spd_solve_rows(int n, int k, double *A, double *B)
+/* K -= A + A^T with A = I crm(v): the velocity term of d(I a + v x* I v),
+ * summed over a subtree (symmetric).  With I = [[J, H], [H^T, m 1]],
+ * H = [h]x, crm(v) = [[W, 0], [V, W]] (W = [w]x, V = [v_O]x):
+ *   A = [[J W + H V, H W], [H^T W + m V, m W]]
+ * and each product X W (X 3x3) is one cross product per row: row_r(X W) = x_r x w. */
+static void add_K(double *K, const double *I, const double *vel)
+{
+    const double *w = vel, *vo = vel + 3;
+    double A[36];
+    for (int r = 0; r < 3; r++) {
+        double J[3] = {I[6 * r], I[6 * r + 1], I[6 * r + 2]};
+        double H[3] = {I[6 * r + 3], I[6 * r + 4], I[6 * r + 5]};
+        double Ht[3] = {I[6 * (r + 3)], I[6 * (r + 3) + 1], I[6 * (r + 3) + 2]};
+        double a[3], b[3];
+        cross3(J, w, a);
+        cross3(H, vo, b);
+        A[6 * r] = a[0] + b[0]; A[6 * r + 1] = a[1] + b[1]; A[6 * r + 2] = a[2] + b[2];
+        cross3(H, w, a);
+        A[6 * r + 3] = a[0]; A[6 * r + 4] = a[1]; A[6 * r + 5] = a[2];
+        cross3(Ht, w, a);
+        A[6 * (r + 3)] = a[0]; A[6 * (r + 3) + 1] = a[1]; A[6 * (r + 3) + 2] = a[2];
+    }
+    double m = I[21];
+    /* m V and m W: rows of m [x]x */
+    double mV[9] = {0.0, -vo[2], vo[1], vo[2], 0.0, -vo[0], -vo[1], vo[0], 0.0};
+    double mW[9] = {0.0, -w[2], w[1], w[2], 0.0, -w[0], -w[1], w[0], 0.0};
+    for (int r = 0; r < 3; r++)
+        for (int k = 0; k < 3; k++) {
+            A[6 * (r + 3) + k] += m * mV[3 * r + k];
+            A[6 * (r + 3) + k + 3] = m * mW[3 * r + k];
+        }
+    for (int r = 0; r < 6; r++)
+        for (int k = r; k < 6; k++) {
+            double t = A[6 * r + k] + A[6 * k + r];
+            K[6 * r + k] -= t;
+            if (k != r) K[6 * k + r] -= t;
+        }
+}
+
+/* Cholesky A = L L^T in place (lower triangle), then the full symmetric
+ * inverse into Minv (n x n): L^{-1} by forward substitution into T, and
+ * Minv = L^{-T} L^{-1}, the lower triangle computed and mirrored. */
+static int spd_inverse(int n, double *A, double *T, double *Minv)
 {
     for (int j = 0; j < n; j++) {
         double d = A[j * n + j];
@@ -210,26 +251,30 @@ static int spd_solve_rows(int n, int k, double *A, double *B)
             A[i * n + j] = s / d;
         }
     }
-    for (int i = 0; i < n; i++) { /* L Z = B */
-        double *Bi = B + (size_t)i * k;
-        for (int m = 0; m < i; m++) {
+    for (int i = 0; i < n; i++) { /* row i of L^{-1}: T[i][j], j <= i */
+        double *Ti = T + (size_t)i * n;
+        double inv = 1.0 / A[i * n + i];
+        for (int j = 0; j < i; j++) Ti[j] = 0.0;
+        for (int m = 0; m < i; m++) { /* Ti -= L[i][m] T[m] (row m of T is zero beyond m) */
             double l = A[i * n + m];
-            const double *Bm = B + (size_t)m * k;
-            for (int c = 0; c < k; c++) Bi[c] -= l * Bm[c];
+            const double *Tm = T + (size_t)m * n;
+            for (int j = 0; j <= m; j++) Ti[j] -= l * Tm[j];
         }
-        double inv = 1.0 / A[i * n + i];
-        for (int c = 0; c < k; c++) Bi[c] *= inv;
+        for (int j = 0; j < i; j++) Ti[j] *= inv;
+        Ti[i] = inv;
+        for (int j = i + 1; j < n; j++) Ti[j] = 0.0;
     }
-    for (int i = n - 1; i >= 0; i--) { /* L^T X = Z */
-        double *Bi = B + (size_t)i * k;
-        for (int m = i + 1; m < n; m++) {
-            double l = A[m * n + i];
-            const double *Bm = B + (size_t)m * k;
-            for (int c = 0; c < k; c++) Bi[c] -= l * Bm[c];
+    memset(Minv, 0, (size_t)n * n * sizeof(double));
+    for (int k = 0; k < n; k++) { /* Minv += T[k]^T T[k], lower triangle: rows i <= k */
+        const double *Tk = T + (size_t)k * n;
+        for (int i = 0; i <= k; i++) {
+            double t = Tk[i];
+            double *Mi = Minv + (size_t)i * n;
+            for (int j = 0; j <= i; j++) Mi[j] += t * Tk[j];
         }
-        double inv = 1.0 / A[i * n + i];
-        for (int c = 0; c < k; c++) Bi[c] *= inv;
     }
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < i; j++) Minv[(size_t)j * n + i] = Minv[(size_t)i * n + j];
     return FMUGEN_OK;
 }
 
@@ -237,15 +282,18 @@ int fmugen_chain_fd_jacobian(int n, const int *rev, const double *lc, const doub
                              const double *qd, const double *tau, double *qdd, double *dqdd, double *dp_ee,
                              double *work)
 {
-    /* forward dynamics first: the derivatives are those of ID at qdd = FD */
-    int st = fmugen_chain_fd(n, rev, lc, g, q, qd, tau, qdd, NULL, work);
-    if (st != FMUGEN_OK) return st;
-    double *R = work, *p = R + 9 * n, *S = p + 3 * n, *I = S + 6 * n, *v = I + 36 * n;
+    double *R = work, *p = R + 9 * n, *S = p + 3 * n, *I = S + 6 * n, *IA = I + 36 * n, *v = IA + 36 * n;
     double *a = v + 6 * n, *h = a + 6 * n, *f = h + 6 * n, *dv = f + 6 * n, *w = dv + 6 * n;
-    double *uu = w + 6 * n, *al = uu + 6 * n, *bg = al + 6 * n, *P = bg + 6 * n, *Q = P + 6 * n;
-    double *M = Q + 6 * n, *B = M + n * n, *IC = B + 3 * n * n, *K = IC + 36, *HC = K + 36, *F = HC + 6;
-    double p_ee[3];
+    double *uu = w + 6 * n, *al = uu + 6 * n, *P = al + 12 * n, *Q = P + 6 * n;
+    double *c = Q + 6 * n, *pA = c + 6 * n, *U = pA + 6 * n, *D = U + 6 * n, *u = D + n;
+    double *M = u + n, *T = M + (size_t)n * n, *Mi = T + (size_t)n * n;
+    double *G = Mi + (size_t)n * n, *H = G + 12 * n;
+    double IC[36], K[36], HC[6], F[6], p_ee[3];
     kinematics(n, rev, lc, g, q, R, p, S, I, p_ee);
+    /* forward dynamics first: the derivatives are those of ID at qdd = FD */
+    memcpy(IA, I, (size_t)36 * n * sizeof(double));
+    int st = aba(n, lc, g, qd, tau, S, IA, v, c, pA, U, D, u, qdd);
+    if (st != FMUGEN_OK) return st;
     /* forward: v_i, a_i, momenta h_i = I_i v_i, forces f_i = I_i a_i + v_i x* h_i, and per joint j
      * dv_j = S_j x v_{j-1}, w_j = S_j x a_{j-1} - dv_j x v_{j-1}, u_j = 2 v_{j-1} x S_j */
     double vp[6] = {0, 0, 0, 0, 0, 0}, ap[6] = {0.0, 0.0, 0.0, -g[0], -g[1], -g[2]};
@@ -258,8 +306,7 @@ int fmugen_chain_fd_jacobian(int n, const int *rev, const double *lc, const doub
             w[6 * i + k] = t[k] - t2[k];
             uu[6 * i + k] = -2.0 * dv[6 * i + k];
         }
-        for (int k = 0; k < 6; k++) vi[k] = vp[k] + Si[k] * qd[i];
-        crm(vi, Si, t);
+        crm(vi, Si, t); /* v_i as the ABA left it */
         for (int k = 0; k < 6; k++) ai[k] = ap[k] + Si[k] * qdd[i] + t[k] * qd[i];
         mv6(I + 36 * i, vi, h + 6 * i);
         mv6(I + 36 * i, ai, t);
@@ -268,60 +315,96 @@ int fmugen_chain_fd_jacobian(int n, const int *rev, const double *lc, const doub
         memcpy(vp, vi, sizeof vp);
         memcpy(ap, ai, sizeof ap);
     }
-    /* backward: composite sums IC, K, HC, F over the subtree i..n-1; row
-     * vectors alpha_i = IC_i S_i, bg_i = K_i S_i + gamma_i with
-     * S_i . (x x* HC_i) = gamma_i . x; column vectors P_i, Q_i */
-    memset(IC, 0, (36 + 36 + 6 + 6) * sizeof(double));
-    int k3 = 3 * n;
+    /* backward: composite sums IC, K, HC, F over the subtree i..n-1; the
+     * 12-vector al_i = [IC_i S_i ; K_i S_i + gamma_i] (S_i . (x x* HC_i) =
+     * gamma_i . x) gives the entries j <= i of row i of dID, the column
+     * vectors P_i, Q_i the entries i < j of column j; and M (lower) */
+    memset(IC, 0, sizeof IC);
+    memset(K, 0, sizeof K);
+    memset(HC, 0, sizeof HC);
+    memset(F, 0, sizeof F);
     for (int i = n - 1; i >= 0; i--) {
         const double *L = lc + FMUGEN_CHAIN_NC * i;
-        double *Si = S + 6 * i, *Ii = I + 36 * i, t[6], t2[6];
+        double *Si = S + 6 * i, *Ii = I + 36 * i, t[6], t2[6], t3[6];
         for (int k = 0; k < 36; k++) IC[k] += Ii[k];
         add_K(K, Ii, v + 6 * i);
         for (int k = 0; k < 6; k++) {
             HC[k] += h[6 * i + k];
             F[k] += f[6 * i + k];
         }
-        double *ali = al + 6 * i, *bgi = bg + 6 * i;
+        double *ali = al + 12 * i, *bgi = ali + 6, KS[6];
         mv6(IC, Si, ali);
-        mv6(K, Si, bgi);
+        mv6(K, Si, KS);
         /* gamma = [hn x s_w + hf x s_v ; hf x s_w] */
         cross3(HC, Si, t);
         cross3(HC + 3, Si + 3, t2);
-        bgi[0] += t[0] + t2[0]; bgi[1] += t[1] + t2[1]; bgi[2] += t[2] + t2[2];
-        cross3(HC + 3, Si, t);
-        bgi[3] += t[0]; bgi[4] += t[1]; bgi[5] += t[2];
+        cross3(HC + 3, Si, t3);
+        for (int k = 0; k < 3; k++) {
+            bgi[k] = KS[k] + t[k] + t2[k];
+            bgi[3 + k] = KS[3 + k] + t3[k];
+        }
         /* P_i = IC u_i + K S_i + S_i x* HC ; Q_i = S_i x* F - (IC w_i + K dv_i + dv_i x* HC) */
-        double *Pi = P + 6 * i, *Qi = Q + 6 * i, t3[6];
+        double *Pi = P + 6 * i, *Qi = Q + 6 * i;
         mv6(IC, uu + 6 * i, Pi);
-        mv6(K, Si, t);
         crf(Si, HC, t2);
-        for (int k = 0; k < 6; k++) Pi[k] += t[k] + t2[k];
+        for (int k = 0; k < 6; k++) Pi[k] += KS[k] + t2[k];
         crf(Si, F, Qi);
         mv6(IC, w + 6 * i, t);
         mv6(K, dv + 6 * i, t2);
         crf(dv + 6 * i, HC, t3);
         for (int k = 0; k < 6; k++) Qi[k] -= t[k] + t2[k] + t3[k];
-        /* row i of dID: columns j <= i from alpha_i, bg_i; columns j > i from P_j, Q_j */
-        double *Bi = B + (size_t)i * k3;
-        for (int j = 0; j <= i; j++) {
-            Bi[j] = dot6(ali, w + 6 * j) + dot6(bgi, dv + 6 * j);
-            Bi[n + j] = -(dot6(ali, uu + 6 * j) + dot6(bgi, S + 6 * j));
-            M[i * n + j] = dot6(ali, S + 6 * j);
-        }
-        Bi[n + i] -= L[FMUGEN_CHAIN_DAMPING];
+        for (int j = 0; j <= i; j++) M[i * n + j] = dot6(ali, S + 6 * j);
         M[i * n + i] += L[FMUGEN_CHAIN_ROTOR];
-        for (int j = i + 1; j < n; j++) {
-            Bi[j] = -dot6(Si, Q + 6 * j);
-            Bi[n + j] = -dot6(Si, P + 6 * j);
-        }
-        for (int j = 0; j < n; j++) Bi[2 * n + j] = (j == i) ? 1.0 : 0.0;
     }
-    st = spd_solve_rows(n, k3, M, B);
+    st = spd_inverse(n, M, T, Mi);
     if (st != FMUGEN_OK) return st;
-    memcpy(dqdd, B, (size_t)n * k3 * sizeof(double));
-    for (int k = 0; k < n * k3; k++)
-        if (!isfinite(dqdd[k])) return FMUGEN_NOT_FINITE;
+    /* dqdd/dq = -Minv dID/dq, dqdd/dqd = -Minv dID/dqd, column by column, without forming dID:
+     *   dID[i][j] (j <= i) = -al_i . [w_j; dv_j]  (q),   al_i . [u_j; S_j] + b_j delta_ij  (qd)
+     *   dID[i][j] (i < j)  =  S_i . Q_j           (q),   S_i . P_j                        (qd)
+     * so column j of Minv dID is G_j W_j + H_j Q_j with the running sums
+     * G_j = sum_{i >= j} Minv[:, i] al_i^T (n x 12) and H_j = sum_{i < j} Minv[:, i] S_i^T (n x 6). */
+    size_t k3 = 3 * (size_t)n;
+    memset(H, 0, (size_t)6 * n * sizeof(double));
+    for (int j = 0; j < n; j++) { /* upper parts, j ascending; H in registers row by row */
+        const double *Qj = Q + 6 * j, *Pj = P + 6 * j, *Mj = Mi + (size_t)j * n, *Sj = S + 6 * j;
+        for (int r = 0; r < n; r++) {
+            double m = Mj[r], sq = 0.0, sd = 0.0;
+            for (int k = 0; k < 6; k++) {
+                double hk = H[(size_t)k * n + r];
+                sq -= Qj[k] * hk;
+                sd -= Pj[k] * hk;
+                H[(size_t)k * n + r] = hk + Sj[k] * m;
+            }
+            double *row = dqdd + r * k3;
+            row[j] = sq;
+            row[n + j] = sd;
+            row[2 * n + j] = m;
+        }
+    }
+    memset(G, 0, (size_t)12 * n * sizeof(double));
+    for (int j = n - 1; j >= 0; j--) { /* lower parts, j descending */
+        const double *Mj = Mi + (size_t)j * n, *alj = al + 12 * j;
+        double Wq[12], Wd[12], b = -lc[FMUGEN_CHAIN_NC * j + FMUGEN_CHAIN_DAMPING];
+        for (int k = 0; k < 6; k++) {
+            Wq[k] = w[6 * j + k];
+            Wq[6 + k] = dv[6 * j + k];
+            Wd[k] = -uu[6 * j + k];
+            Wd[6 + k] = -S[6 * j + k];
+        }
+        for (int r = 0; r < n; r++) {
+            double m = Mj[r], sq = 0.0, sd = b * m;
+            for (int k = 0; k < 12; k++) {
+                double gk = G[(size_t)k * n + r] + alj[k] * m;
+                G[(size_t)k * n + r] = gk;
+                sq += Wq[k] * gk;
+                sd += Wd[k] * gk;
+            }
+            double *row = dqdd + r * k3;
+            row[j] += sq;
+            row[n + j] += sd;
+        }
+    }
+    /* (finiteness of the Jacobian is checked by the runtime that asked for it) */
     if (dp_ee) { /* point velocity of S_j at p_ee: v_O + w x p_ee */
         for (int j = 0; j < n; j++) {
             double t[3], *Sj = S + 6 * j;

@@ -39,8 +39,9 @@
  * end effector is the origin of F_n Tx(end_a) */
 #define FMUGEN_CHAIN_NG 4
 
-/* doubles of work space for n links (forward dynamics and Jacobian) */
-#define FMUGEN_CHAIN_WORK(n) ((n) * (160 + 4 * (n)) + 64)
+/* doubles of work space for n links: forward dynamics, and its Jacobian */
+#define FMUGEN_CHAIN_FD_WORK(n) (80 * (n) + 16)
+#define FMUGEN_CHAIN_WORK(n) ((n) * (200 + 3 * (n)) + 64)
 
 /* qdd = M(q)^{-1} (tau - h(q, qd)) by the articulated-body algorithm (O(n));
  * p_ee (3, may be NULL): end-effector position.  revolute[i] is 1 for a

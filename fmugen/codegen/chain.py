@@ -47,8 +47,8 @@ NG = 4
 
 
 def chain_work_doubles(n: int, kind: str) -> int:
-    """Work space of the runtime call, in doubles (``FMUGEN_CHAIN_WORK`` for the Jacobian)."""
-    return n * (160 + 4 * n) + 64 if kind == "jacobian" else 80 * n + 16
+    """Work space of the runtime call, in doubles (``FMUGEN_CHAIN_FD_WORK``, ``FMUGEN_CHAIN_WORK`` of chain_dynamics.h)."""
+    return n * (200 + 3 * n) + 64 if kind == "jacobian" else 80 * n + 16
 
 
 @dataclass(frozen=True)
