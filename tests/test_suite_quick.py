@@ -85,14 +85,12 @@ def test_outputs_written(stiff_rows):
 def test_load_above_stall_is_flagged(tmp_path):
     """5000 N.m on the stiff set (stall torque 210 N.m): the load pressure
     reaches ~27 P_s.  The solvers integrate the ODE accurately; the suite
-    must not call that a success -- it names actuator.P_L and the range."""
+    must not call that a success: the FMU's warning names actuator.P_L."""
     rows = run_suite(["load_above_stall"], quick=True, out=tmp_path, plots=False, log=lambda *a: None)
     for r in rows:
-        assert r.outcome in (DETECTED, SILENT)
-        assert "actuator.P_L" in r.message
-    silent = [r for r in rows if r.outcome == SILENT]
-    if silent:  # until the runtime's validity monitors (issue 9) warn about it
-        pytest.xfail("the FMU does not yet warn when actuator.P_L leaves [-P_s, P_s]: " + silent[0].message)
+        # the runtime's validity monitor names the variable and its range
+        assert r.outcome == DETECTED, (r.method, r.message)
+        assert "actuator.P_L" in r.message and "validity range" in r.message
 
 
 def test_classify_rules():
