@@ -217,3 +217,26 @@ def test_the_error_metric_is_against_the_reference_of_the_scene_at_that_point(cl
     assert row["joint.theta:error"] == pytest.approx(np.max(np.abs(theta - ref["joint.theta"])), rel=1e-6)
     # a coupling error well above the reference's own, within 1 % of the 0.1 rad move
     assert 100 * ref.error_of("joint.theta") < row["joint.theta:error"] < 1e-3
+
+
+def test_a_monolithic_scene_runs_its_one_fmu_and_matches_fmpy(client, tmp_path):
+    import fmpy
+
+    sets = {"scene.monolithic": True}
+    r = sweep(SPLIT, grid=["joint.J=1,3"], sets=sets, out=tmp_path, client=client, metrics=["final"],
+              save_runs=True, progress=False)
+    assert [row["status"] for row in r.rows] == ["ok", "ok"]
+    scene = fmugen.load_scene(SPLIT, set=sets)
+    (group,) = scene.groups
+    unit = scene.cosim_system({group: tmp_path / "fmus" / f"{group}.fmu"}).unit(group)
+    row = r.rows[1]
+    # fmpy's own simulation loop over the same FMU, J = 3 given as a start value
+    res = fmpy.simulate_fmu(str(unit.path), validate=False, fmi_type="CoSimulation", output_interval=1e-3,
+                            start_values={**unit.start_values, "joint.J": 3.0},
+                            output=["joint.theta", "actuator.P_L"])
+    with np.load(tmp_path / "runs" / f"{row['key']}.npz") as z:
+        cols = list(z["columns"])
+        assert np.allclose(z["time"], res["time"], rtol=0, atol=1e-12)
+        for c in ("joint.theta", "actuator.P_L"):
+            ref = res[c]
+            assert np.max(np.abs(z["values"][:, cols.index(c)] - ref)) <= 1e-9 * np.max(np.abs(ref))

@@ -128,3 +128,22 @@ def test_metrics_names_are_checked():
         parse_metrics(["fianl"], ("a.y",))
     with pytest.raises(SweepError, match="not recorded"):
         parse_metrics(["x.z:final"], ("a.y",))
+
+
+def test_progress_on_a_terminal_counts_done_failed_and_gives_an_eta():
+    import io
+
+    from fmugen.sweep.execute import Progress
+
+    class Tty(io.StringIO):
+        def isatty(self):
+            return True
+
+    s = Tty()
+    p = Progress(total=10, done=2, stream=s)
+    p.t0 -= 2.0  # two seconds in
+    p.update({"status": "ok"})
+    p.update({"status": "failed"})
+    last = s.getvalue().split("\r")[-1]
+    # 2 runs in ~2 s: 1 run/s, 6 points left
+    assert "4/10 done (1 failed)" in last and "ETA 6 s" in last

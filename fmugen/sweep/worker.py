@@ -84,7 +84,7 @@ def run_point(bundle: Bundle, task: PointTask) -> dict:
     w0 = time.perf_counter()
     try:
         system = point_system(local_system(bundle), task)
-        res = run(system, **bundle.options)
+        res = run(system, **bundle.options) if system.couplings else run_alone(system, **bundle.options)
         row["macro_steps"] = res.summary.macro_steps
         if bundle.keep_runs:
             row["run"] = (res.time, res.values, res.columns)
@@ -110,3 +110,49 @@ def _reference_values(problem, task: PointTask, times: np.ndarray) -> np.ndarray
 
     p = replace(problem, x0=np.asarray(task.x0, dtype=float), stop_time=float(times[-1]))
     return solve_reference(p, times=times, parameter_values=task.parameter_values).values
+
+
+def run_alone(system, step=None, stop=None, **_ignored):
+    """A system of one FMU and no couplings (a monolithic scene): fmi2DoStep at the communication step.
+
+    An adapter until :func:`fmugen.cosim.master.run` accepts systems without couplings (it fails on
+    them); the FMU is driven through the master's own unit wrapper, so start values, extraction once
+    per process and failure messages are the master's.  Coupling options do not apply and are ignored.
+    """
+    from ..cosim.master import CosimResult, FailureReport, Summary
+    from ..cosim.units import STATUS, SlaveUnit, UnitFailure
+
+    (spec,) = system.units
+    t0 = float(system.start_time)
+    stop = float(system.stop_time if stop is None else stop)
+    H = float(system.step if step is None else step)
+    summ = Summary(system.name, "single FMU", "none", False)
+    w0 = time.perf_counter()
+    u = SlaveUnit(spec, t0, stop)
+    try:
+        vrs = [u.variable(r.variable).valueReference for r in system.recorded]
+        T, V = [t0], [u.get_reals(vrs)]
+        t, n = t0, 0
+        while t < stop - 1e-12 * max(1.0, abs(stop)):
+            h = stop - t if (t + H > stop or stop - (t + H) < 1e-3 * H) else H
+            st = u._doStep(u.c, t, h, 1)
+            if st > 1:
+                summ.status = "failed"
+                summ.failure = FailureReport(t, "fmu-failure", f"FMU {u.name!r}: fmi2DoStep(t = {t:.9g}, H = {h:.4g}) "
+                                             f"returned {STATUS[st]}", unit=u.name, fmu_messages=u.messages())
+                break
+            n += 1
+            t = t0 + n * H if h == H else stop
+            T.append(t)
+            V.append(u.get_reals(vrs))
+            summ.step_min, summ.step_max = min(summ.step_min, h), max(summ.step_max, h)
+        summ.macro_steps = n
+    except UnitFailure as e:
+        summ.status = "failed"
+        summ.failure = FailureReport(t0, "fmu-failure", str(e), unit=e.unit, fmu_messages=e.messages)
+        T, V = [], []
+    finally:
+        u.close()
+    summ.wall_time = time.perf_counter() - w0
+    cols = tuple(r.column for r in system.recorded)
+    return CosimResult(np.array(T), np.array(V).reshape(len(T), len(cols)), cols, summ)
