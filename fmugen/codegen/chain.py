@@ -129,26 +129,26 @@ def chain_ops(n: int, kind: str):
     """Floating-point operations of one runtime call for n links (:class:`~fmugen.codegen.c_code.OpCount`).
 
     Counted by hand from the loops of ``c_runtime/chain_dynamics.c`` with the
-    rules of :class:`~fmugen.codegen.c_code.OpCount` (per link: kinematics
-    122 mul / 95 add / sin and cos; ABA passes 260 mul / 241 add / 2 div;
-    the derivative passes 798 mul / 786 add; per pair of joints 18 or 12 mul
-    for the entries of dID and M; the Cholesky factorisation and the
-    substitutions with 3n right-hand sides as in
-    :func:`~fmugen.codegen.c_code.cholesky_solve_ops`), so that looped and
-    straight-line models report comparable figures.
+    rules of :class:`~fmugen.codegen.c_code.OpCount`, so that looped and
+    straight-line models report comparable figures.  Per link: kinematics
+    122 mul / 95 add / sin and cos; the articulated-body algorithm 229 mul /
+    241 add / 2 div.  The Jacobian adds, per link, the forward (180 / 144)
+    and backward (348 / 399) derivative passes; per pair of joints the mass
+    matrix (6 / 5, lower triangle) and the columns of M^-1 dID (55 / 56); and
+    the Cholesky factorisation, L^-1 and M^-1 = L^-T L^-1 (each ~n^3/6).
     """
     from .c_code import OpCount
 
-    fd = OpCount(mul=382 * n, add=336 * n, div=2 * n, calls=(("cos", n), ("sin", n)))
+    fd = OpCount(mul=351 * n, add=336 * n, div=2 * n, calls=(("cos", n), ("sin", n)))
     if kind == "fd":
         return fd
-    k = 3 * n
-    lower, upper = n * (n + 1) // 2, n * (n - 1) // 2
+    tri = n * (n + 1) // 2
     chol = (n ** 3 - n) // 6
-    jac = OpCount(
-        mul=(122 + 186 + 612 + 6) * n + 18 * lower + 12 * upper + chol + k * n * (n - 1) + 2 * k * n,
-        add=(95 + 150 + 636 + 6) * n + 16 * lower + 10 * upper + chol + k * n * (n - 1),
-        div=n * (n - 1) // 2 + 2 * n,
-        calls=(("cos", n), ("sin", n), ("sqrt", n)),
+    linv = (n - 1) * n * (n + 1) // 6
+    minv = n * (n + 1) * (n + 2) // 6
+    return fd + OpCount(
+        mul=(180 + 348) * n + 6 * tri + chol + linv + n * (n - 1) // 2 + minv + 55 * n * n,
+        add=(144 + 399) * n + 5 * tri + chol + linv + minv + 56 * n * n,
+        div=n * (n - 1) // 2 + n,
+        calls=(("sqrt", n),),
     )
-    return fd + jac
