@@ -34,11 +34,14 @@ __all__ = ["ChainDynamics", "LOOP_MIN_LINKS", "NC", "NG", "link_constants", "cha
 
 #: Arms with at least this many links get the looped dynamics by default
 #: (``state_space_model(strategy="auto")``).  Measured with
-#: ``examples/bench_large_models.py`` on a 2-core machine: the straight-line
-#: FMU of an 8-link chain already takes ~40 s to build (12 links: several
-#: minutes) while the looped one builds in ~3 s at any size; the straight-line
-#: forward dynamics is faster per call only up to about 8 links.
-LOOP_MIN_LINKS = 9
+#: ``examples/bench_large_models.py`` on a 2-core machine (CPU µs per call,
+#: chains with random values): straight-line code has the faster forward
+#: dynamics (N = 6: 0.24 against 0.60 µs; Pinocchio's ABA 1.5 µs), but from
+#: N = 6 on the looped Jacobian is faster (2.2 against 2.6 µs; N = 8: 4.9 µs
+#: straight-line, 1.14x Pinocchio's computeABADerivatives) and the
+#: straight-line build costs 21 s (N = 6) and 32 s (N = 8) of wall time
+#: against 8 s.  Six links and fewer -- the PUMA -- keep straight-line code.
+LOOP_MIN_LINKS = 7
 
 #: per-link constants (layout of c_runtime/chain_dynamics.h)
 NC = 17
