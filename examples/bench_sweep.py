@@ -14,7 +14,10 @@ every run is one co-simulation of it with another ``joint.J`` (a grid of
    last result.  Reported: runs/s, speed-up over k = 1 and the parallel
    efficiency (runs/s at k) / (k x runs/s at 1) -- the goal is >= 0.8 up
    to the number of cores; and the per-run overhead of the Dask path,
-   (wall time x k / runs) - serial seconds per run.
+   (wall time x k / runs) - serial seconds per run.  Wall-clock figures
+   need an otherwise idle machine; the CPU seconds per run of the whole
+   Dask path (client, scheduler, nannies, workers) against the serial
+   loop's CPU seconds per run give the overhead whatever else runs.
 3. Memory: resident set size of each worker process after its runs
    (``psutil`` in the worker), and of this client process.
 
@@ -38,6 +41,21 @@ def _rss() -> int:
     import psutil
 
     return psutil.Process().memory_info().rss
+
+
+def _cpu_tree() -> float:
+    """CPU seconds of this process and its children (the local cluster's scheduler runs in this
+    process, its nannies and workers are children): a measure of work that other load does not skew."""
+    import psutil
+
+    me = psutil.Process()
+    total = sum(me.cpu_times()[:2])
+    for c in me.children(recursive=True):
+        try:
+            total += sum(c.cpu_times()[:2])
+        except psutil.Error:
+            pass
+    return total
 
 
 def main(argv=None) -> int:
@@ -74,17 +92,19 @@ def main(argv=None) -> int:
 
     # 1. serial
     run(point_system(plan.system, tasks[0]), **opts)  # warm-up: extract, load the libraries
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     for t in tasks:
         res = run(point_system(plan.system, t), **opts)
         assert res.ok, res.summary
     serial = (time.perf_counter() - t0) / len(tasks)
-    print(f"\nserial loop: {serial * 1e3:.1f} ms per run ({1 / serial:.2f} runs/s)\n")
+    serial_cpu = (time.process_time() - c0) / len(tasks)
+    print(f"\nserial loop: {serial * 1e3:.1f} ms per run ({1 / serial:.2f} runs/s), "
+          f"{serial_cpu * 1e3:.1f} ms CPU per run\n")
 
     # 2. + 3. Dask
     bundle = make_bundle(plan, opts, wanted)
     print(f"{'workers':>7} {'runs/s':>8} {'speed-up':>8} {'efficiency':>10} {'overhead/run':>12} "
-          f"{'worker RSS':>16} {'load':>5}")
+          f"{'CPU/run':>9} {'CPU overhead':>12} {'worker RSS':>16} {'load':>5}")
     rate1 = None
     rows = []
     for k in range(1, args.max_workers + 1):
@@ -95,10 +115,11 @@ def main(argv=None) -> int:
             warm = [client.submit(run_point, shipped, tasks[i % len(tasks)], pure=False,
                                   workers=[w]) for i, w in enumerate(client.scheduler_info()["workers"])]
             wait(warm)
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), _cpu_tree()
             futs = [client.submit(run_point, shipped, t, pure=False) for t in tasks]
             out = client.gather(futs)
             wall = time.perf_counter() - t0
+            cpu = (_cpu_tree() - c0) / len(tasks)  # client + scheduler + nannies + workers, per run
             assert all(r["status"] == "ok" for r in out), [r["failure"] for r in out if r["status"] != "ok"]
             rss = list(client.run(_rss).values())
         rate = len(tasks) / wall
@@ -106,6 +127,7 @@ def main(argv=None) -> int:
         overhead = wall * k / len(tasks) - serial
         rows.append((k, rate, rate / rate1, rate / (k * rate1), overhead, statistics.median(rss)))
         print(f"{k:>7} {rate:>8.2f} {rate / rate1:>8.2f} {rate / (k * rate1):>10.2f} {overhead * 1e3:>9.1f} ms "
+              f"{cpu * 1e3:>6.1f} ms {(cpu - serial_cpu) * 1e3:>9.1f} ms "
               f"{statistics.median(rss) / 2**20:>10.0f} MiB/wk {os.getloadavg()[0]:>5.2f}")
     print(f"\nclient process RSS {_rss() / 2**20:.0f} MiB; serial loop {1 / serial:.2f} runs/s")
     return 0
