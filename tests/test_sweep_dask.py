@@ -153,8 +153,12 @@ def test_monte_carlo_points_are_the_seeded_samples(client, tmp_path):
 def test_the_state_of_rest_is_solved_again_per_point(client, tmp_path):
     # held against a load torque: at rest tau = D_m P_L = tau_load, so P_L = tau_load / D_m
     sets = {"scene.initial": "equilibrium", "joint.tau_load": 50.0, "path.q_end": 0.0}
-    r = sweep(SPLIT, grid=["actuator.D_m=1.5e-5,3e-5"], sets=sets, out=tmp_path, client=client, options=OPTS,
+    r = sweep(SPLIT, grid=["actuator.D_m=1.5e-5,3e-5,3e-6"], sets=sets, out=tmp_path, client=client, options=OPTS,
               metrics=["actuator.P_L:final", "joint.w:peak"], progress=False)
+    # D_m = 3e-6: the stall torque P_s D_m = 42 N.m is below the load: no state of rest, never submitted
+    stalled = r.rows.pop()
+    assert stalled["status"] == "error" and stalled["worker"] == "client"
+    assert "no state of rest" in stalled["failure"] or "stall torque" in stalled["failure"]
     for row in r.rows:
         assert row["status"] == "ok"
         assert abs(row["actuator.P_L:final"] - 50.0 / row["actuator.D_m"]) < 1e-6 * 50.0 / row["actuator.D_m"]
