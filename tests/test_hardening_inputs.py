@@ -394,3 +394,61 @@ def test_cli_symbolic_parameter_without_value_names_the_file(tmp_path):
     r = cli("build", "robots/horn_2link.toml", "--fmi-type", "cs", "-o", tmp_path / "h.fmu")
     assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
     assert "robots/horn_2link.toml" in r.stderr and "parameter 'm' has no start value" in r.stderr, r.stderr
+
+
+# --------------------------------------------------------------------------
+# seeded random mutations of real files: only the project's errors come out
+# --------------------------------------------------------------------------
+MUTATION_VALUES = [
+    "0", "-1", "1e308", '"1e308*10"', "nan", "inf", '"x"', '"m*"', "[]", "[1,2]", "{}", "true", '"\\u0000"',
+    '"exp(exp(10))"', '"sqrt(-1)"', '"log(0)"', '"1/0"', '"0**-1"', '"(-8)**(1/3)"', '"abs(-1e309)"',
+    '"tan(pi/2)"', '"10**64"', '"1e-400"', '"pi**64"', '"q_1"', '"_x"', "[[1,2,3],[4,5,6],[7,8]]", "-0.0",
+    "12345678901234567890123", '""', '"' + "(" * 60 + "1" + ")" * 60 + '"', '"1' + "*1" * 150 + '"',
+    '"' + "x" * 300 + '"', '["a", 1]', '"origin"',
+]
+EXTRA_KEYS = ["massless", "rotor_inertia", "damping", "inertia_about", "external_wrench", "zz", "type", "kind"]
+
+
+def mutated(text, rng):
+    lines = text.splitlines()
+    for _ in range(rng.randint(1, 3)):
+        i = rng.choice([k for k, ln in enumerate(lines) if "=" in ln and not ln.lstrip().startswith("#")])
+        key = lines[i].split("=", 1)[0]
+        r = rng.random()
+        if r < 0.7:
+            lines[i] = f"{key}= {rng.choice(MUTATION_VALUES)}"
+        elif r < 0.8:
+            del lines[i]
+        elif r < 0.9:
+            lines.insert(i, f"{rng.choice(EXTRA_KEYS)} = {rng.choice(MUTATION_VALUES)}")
+        else:
+            lines[i] = lines[i].replace("=", "==", 1)
+    return "\n".join(lines) + "\n"
+
+
+def test_mutated_robot_and_assembly_files_raise_only_fmugen_errors(tmp_path):
+    """300 seeded mutations of robots/stanford_arm.toml and examples/single_joint_stiff.toml (values,
+    types, deleted and added fields, broken syntax): each loads or raises an InputFileError/FmugenError
+    -- found this way and fixed: a list as component type (TypeError), a 300-character set name
+    (OSError), an overflowing mass matrix (LinAlgError)."""
+    import random
+    import warnings
+
+    from fmugen.components.assembly import load_assembly
+
+    rng = random.Random(9)
+    bases = {"robot": (ROOT / "robots" / "stanford_arm.toml").read_text(), "assembly": STIFF.read_text()}
+    outcomes = {"loaded": 0, "refused": 0}
+    for k in range(300):
+        kind = "robot" if rng.random() < 0.6 else "assembly"
+        p = tmp_path / f"m{k}.toml"
+        p.write_text(mutated(bases[kind], rng))
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                (load_robot_description if kind == "robot" else load_assembly)(p)
+            outcomes["loaded"] += 1
+        except FmugenError as exc:
+            assert str(p) in str(exc) or "parameter set" in str(exc), str(exc)
+            outcomes["refused"] += 1
+    assert outcomes["refused"] > 150 and outcomes["loaded"] > 10, outcomes

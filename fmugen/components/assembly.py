@@ -66,7 +66,7 @@ _ASSEMBLY_KEYS = {"name", "parameter_set", "description", "inputs", "outputs", "
 
 def _str_list(val, where):
     if not isinstance(val, list) or not all(isinstance(s, str) for s in val):
-        raise ValueError(f"{where} must be a list of strings")
+        raise InputFileError(f"{where} must be a list of strings")
     return val
 
 
@@ -93,18 +93,18 @@ def load_assembly(path: Union[str, Path]) -> SymbolicModel:
         raise InputFileError(f"{src}: not valid TOML: {exc}") from None
     extra = sorted(set(data) - {"assembly", "components"})
     if extra:
-        raise ValueError(f"{src}: unknown top-level key(s) {', '.join(extra)}; expected [assembly] and [components.*]")
+        raise InputFileError(f"{src}: unknown top-level key(s) {', '.join(extra)}; expected [assembly] and [components.*]")
     asm = data.get("assembly")
     if not isinstance(asm, dict):
-        raise ValueError(f"{src}: missing [assembly] table")
+        raise InputFileError(f"{src}: missing [assembly] table")
     bad = sorted(set(asm) - _ASSEMBLY_KEYS)
     if bad:
-        raise ValueError(f"{src}: [assembly] has unknown key(s) {', '.join(bad)}; known: {', '.join(sorted(_ASSEMBLY_KEYS))}")
+        raise InputFileError(f"{src}: [assembly] has unknown key(s) {', '.join(bad)}; known: {', '.join(sorted(_ASSEMBLY_KEYS))}")
     # the name becomes the model identifier, C identifiers and file names: ASCII, bounded
     name = check_identifier(asm.get("name"), f"{src}: [assembly] name")
     pset_name = asm.get("parameter_set", "default")
     if not isinstance(pset_name, str):
-        raise ValueError(f"{src}: [assembly] parameter_set must be a string")
+        raise InputFileError(f"{src}: [assembly] parameter_set must be a string")
 
     def pset_of(value, where):
         if value.endswith(".toml"):
@@ -113,22 +113,22 @@ def load_assembly(path: Union[str, Path]) -> SymbolicModel:
         try:
             return load_parameter_set(value)
         except (ValueError, FileNotFoundError) as exc:
-            raise ValueError(f"{src}: {where}: {exc}") from None
+            raise InputFileError(f"{src}: {where}: {exc}") from None
 
     default_set = pset_of(pset_name, "[assembly] parameter_set")
     comps_tab = data.get("components")
     if not isinstance(comps_tab, dict) or not comps_tab:
-        raise ValueError(f"{src}: no [components.<name>] tables")
+        raise InputFileError(f"{src}: no [components.<name>] tables")
     components = {}
     for inst, spec in comps_tab.items():
         where = f"[components.{inst}]"
         # instance names prefix every variable name ("valve.x_v") and C identifier
         check_identifier(inst, f"{src}: {where}: the instance name")
         if not isinstance(spec, dict):
-            raise ValueError(f"{src}: {where} must be a table")
+            raise InputFileError(f"{src}: {where} must be a table")
         typ = spec.get("type")
-        if typ not in COMPONENT_TYPES:
-            raise ValueError(f"{src}: {where} type = {typ!r} is not a component type; "
+        if not isinstance(typ, str) or typ not in COMPONENT_TYPES:
+            raise InputFileError(f"{src}: {where} type = {typ!r} is not a component type; "
                              f"known: {', '.join(COMPONENT_TYPES)}")
         factory, options = COMPONENT_TYPES[typ]
         kwargs = {}
@@ -136,17 +136,17 @@ def load_assembly(path: Union[str, Path]) -> SymbolicModel:
             if key in ("type", "parameter_set", "parameters"):
                 continue
             if key not in options:
-                raise ValueError(f"{src}: {where} has unknown option {key!r} for type {typ}; "
+                raise InputFileError(f"{src}: {where} has unknown option {key!r} for type {typ}; "
                                  f"known: {', '.join(options) or '-'}")
             want = options[key]
             if isinstance(val, bool) != (want is bool) or not isinstance(val, want):
-                raise ValueError(f"{src}: {where} {key} = {val!r} must be of type {want.__name__}")
+                raise InputFileError(f"{src}: {where} {key} = {val!r} must be of type {want.__name__}")
             kwargs[key] = val
         if typ != "table_trajectory":
             pset = default_set
             if "parameter_set" in spec:
                 if not isinstance(spec["parameter_set"], str):
-                    raise ValueError(f"{src}: {where} parameter_set must be a string")
+                    raise InputFileError(f"{src}: {where} parameter_set must be a string")
                 pset = pset_of(spec["parameter_set"], f"{where} parameter_set")
             kwargs["parameter_set"] = pset
             over = spec.get("parameters", {})
@@ -159,7 +159,7 @@ def load_assembly(path: Union[str, Path]) -> SymbolicModel:
                     raise InputFileError(f"{src}: {where}.parameters: {key}: non-finite value {val!r}")
             kwargs["overrides"] = over
         elif "parameters" in spec or "parameter_set" in spec:
-            raise ValueError(f"{src}: {where}: a table_trajectory has no parameters (its knots are data)")
+            raise InputFileError(f"{src}: {where}: a table_trajectory has no parameters (its knots are data)")
         try:
             components[inst] = factory(name=inst, **kwargs)
         except (ValueError, KeyError, TypeError) as exc:
@@ -168,7 +168,7 @@ def load_assembly(path: Union[str, Path]) -> SymbolicModel:
         _check_units(components[inst], f"{src}: {where}")
     conns = asm.get("connections", [])
     if not isinstance(conns, list):
-        raise ValueError(f"{src}: [assembly] connections must be a list of [source, target] pairs")
+        raise InputFileError(f"{src}: [assembly] connections must be a list of [source, target] pairs")
     inputs = _str_list(asm["inputs"], f"{src}: [assembly] inputs") if "inputs" in asm else None
     outputs = _str_list(asm["outputs"], f"{src}: [assembly] outputs") if "outputs" in asm else None
     pairs = [tuple(c) if isinstance(c, list) else c for c in conns]

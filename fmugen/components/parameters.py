@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping, Union
 
-from ..errors import InputFileError, read_text_file
+from ..errors import IDENTIFIER_PATTERN, MAX_IDENTIFIER_LENGTH, FmugenError, InputFileError, read_text_file
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
 
@@ -104,14 +104,19 @@ def available_sets() -> list:
 def _resolve(name_or_path: Union[str, Path]) -> Path:
     p = Path(name_or_path)
     if p.suffix == ".toml":
-        if not p.is_file():
+        try:
+            found = p.is_file()
+        except OSError as exc:  # e.g. a name longer than the file system allows
+            raise InputFileError(f"{str(p)[:80]!r}: not a usable file name: {exc.strerror}") from None
+        if not found:
             raise InputFileError(f"{p}: parameter set file not found")
         return p
-    q = DATA_DIR / f"{name_or_path}.toml"
-    if not q.is_file():
-        raise ValueError(f"unknown parameter set {name_or_path!r}; shipped sets: {', '.join(available_sets())} "
-                         f"(or give a path to a .toml file)")
-    return q
+    # a shipped set is named by its file stem: an identifier, never a path
+    if not (isinstance(name_or_path, str) and IDENTIFIER_PATTERN.match(name_or_path)
+            and len(name_or_path) <= MAX_IDENTIFIER_LENGTH) or not (DATA_DIR / f"{name_or_path}.toml").is_file():
+        raise FmugenError(f"unknown parameter set {str(name_or_path)[:80]!r}; shipped sets: "
+                          f"{', '.join(available_sets())} (or give a path to a .toml file)")
+    return DATA_DIR / f"{name_or_path}.toml"
 
 
 def parse_parameter_set(data: Mapping, source: str, name: str = "") -> ParameterSet:

@@ -123,7 +123,7 @@ def inertia_problems(mass: float, inertia_com: np.ndarray, rtol: float = INERTIA
         if np.any(I != 0):
             problems.append("zero mass but non-zero inertia")
         return problems
-    lam = np.linalg.eigvalsh(0.5 * (I + I.T))
+    lam = np.linalg.eigvalsh(0.5 * I + 0.5 * I.T)  # no overflow for entries near the largest double
     tol = rtol * max(np.abs(lam).max(), 1e-300)
     eig_text = ", ".join(f"{x:.6g}" for x in lam)
     if lam[0] < -tol:
@@ -207,7 +207,8 @@ def mass_matrix_numeric(links: list, q, modified: bool, payload=None) -> np.ndar
 
 
 def singular_joint(links: list, modified: bool, payload=None, rtol: float = 1e-10, seed: int = 9):
-    """``(joint index, q)`` at which M(q) is singular, or None.
+    """``(joint index, q)`` at which M(q) is singular, ``(-1, q)`` where it
+    overflows double precision, or None.
 
     M is evaluated at q = 0 and at three seeded random configurations (a
     chain whose M is singular everywhere -- a joint that moves no mass, no
@@ -217,8 +218,14 @@ def singular_joint(links: list, modified: bool, payload=None, rtol: float = 1e-1
     n = len(links)
     rng = np.random.default_rng(seed)
     for q in [np.zeros(n)] + [rng.uniform(-np.pi, np.pi, n) for _ in range(3)]:
-        M = mass_matrix_numeric(links, q, modified, payload)
-        lam, vec = np.linalg.eigh(0.5 * (M + M.T))
-        if lam[0] <= rtol * max(lam[-1], 1e-300):
+        with np.errstate(over="ignore", invalid="ignore"):
+            M = mass_matrix_numeric(links, q, modified, payload)
+        if not np.all(np.isfinite(M)):
+            return -1, q
+        scale = np.abs(M).max()
+        if scale == 0:
+            return 0, q
+        lam, vec = np.linalg.eigh(0.5 * (M / scale + (M / scale).T))
+        if lam[0] <= rtol * lam[-1]:
             return int(np.argmax(np.abs(vec[:, 0]))), q
     return None

@@ -393,6 +393,10 @@ class _Reader:
         if found is None:
             return
         j, q = found
+        if j < 0:
+            raise RobotFileError(
+                f"{self.file}: the mass matrix overflows double precision (at q = "
+                f"[{', '.join(f'{v:.3g}' for v in q)}]): masses, lengths or inertias are too large")
         link = links[j]
         raise RobotFileError(
             f"{where(self.file, j + 1, link.name)}: the mass matrix is singular (at q = "
