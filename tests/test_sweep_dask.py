@@ -244,3 +244,17 @@ def test_a_monolithic_scene_runs_its_one_fmu_and_matches_fmpy(client, tmp_path):
         for c in ("joint.theta", "actuator.P_L"):
             ref = res[c]
             assert np.max(np.abs(z["values"][:, cols.index(c)] - ref)) <= 1e-9 * np.max(np.abs(ref))
+
+
+def test_threads_in_one_process_give_the_same_runs(tmp_path):
+    # a local cluster of its own: one process, two threads (FMU instances are independent per thread)
+    r = sweep(SPLIT, grid=["joint.J=1,3"], out=tmp_path, workers=2, processes=False, options=OPTS,
+              metrics=["final"], save_runs=True, progress=False)
+    scene = fmugen.load_scene(SPLIT)
+    system = scene.cosim_system({g: tmp_path / "fmus" / f"{g}.fmu" for g in scene.groups})
+    for row in r.rows:
+        joint = system.unit("joint")
+        joint = dataclasses.replace(joint, start_values={**joint.start_values, "J": row["joint.J"]})
+        res = run(dataclasses.replace(system, units=(system.unit("chain"), joint)), **OPTS)
+        with np.load(tmp_path / "runs" / f"{row['key']}.npz") as z:
+            assert np.array_equal(z["values"], res.values)
