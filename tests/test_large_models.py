@@ -149,8 +149,32 @@ def test_strategy_choice_and_its_limits():
         Manipulator(small).state_space_model(strategy="loops", locked={1: 0.0})
     with pytest.raises(ValueError, match="strategy must be"):
         Manipulator(small).state_space_model(strategy="fast")
-    with pytest.raises(ValueError, match="no Python evaluator.*strategy='straight'"):
-        ModelEvaluator(Manipulator(large).state_space_model())
+    # composing a looped arm symbolically (a monolithic scene) is refused with the way out
+    from fmugen.codegen.differentiate import differentiate
+    from fmugen.codegen.program import Program
+
+    m = Manipulator(large).state_space_model(outputs=())
+    with pytest.raises(ValueError, match="group of its own.*strategy='straight'"):
+        differentiate([m.program], m.derivatives, [v.symbol for v in m.states], Program("_z"), through_solves=True)
+
+
+def test_python_evaluators_call_the_same_loops():
+    """ModelEvaluator / linearize of a looped model (ctypes into chain_dynamics.c) equal the
+    straight-line model's Python evaluation (numpy, symbolic derivatives)."""
+    import fmugen
+
+    arm = Manipulator(n_link_chain(LOOP_MIN_LINKS, "RRP", seed=4))
+    looped = arm.state_space_model(outputs=("p_ee", "qdd"))
+    straight = arm.state_space_model(outputs=("p_ee", "qdd"), strategy="straight")
+    el, es = ModelEvaluator(looped), ModelEvaluator(straight)
+    rng = np.random.default_rng(2)
+    for _ in range(3):
+        x, u = rng.uniform(-1.5, 1.5, 2 * arm.n), rng.uniform(-10, 10, arm.n)
+        assert rel(el.f(0.0, x, u), es.f(0.0, x, u)) < RTOL and rel(el.g(0.0, x, u), es.g(0.0, x, u)) < RTOL
+        for a, b in zip(el.jacobians(0.0, x, u), es.jacobians(0.0, x, u)):
+            assert rel(a, b) < RTOL
+    sys_l, sys_s = fmugen.linearize(looped, x=x, u=u), fmugen.linearize(straight, x=x, u=u)
+    assert rel(sys_l.A, sys_s.A) < RTOL and rel(sys_l.B, sys_s.B) < RTOL
 
 
 def test_modelstructure_of_a_looped_model_is_dense():

@@ -18,19 +18,29 @@ that reasons about a program's dependencies -- the ``<ModelStructure>`` of
 modelDescription.xml, pruning, folding parameters into constants -- treats
 it as an opaque step coupling all of X to all of B, which it is.  Only the C
 generator (:func:`fmugen.codegen.c_code.lower`) knows how to print it; the
-Python evaluators refuse it with a message naming the way back
-(``state_space_model(strategy="straight")``).
+Python evaluators (:mod:`fmugen.codegen.python_code`: linearisation, trim)
+call the same C loops through ctypes (:func:`evaluate_chain`; the runtime file
+is compiled once per process into a temporary folder).
 """
 from __future__ import annotations
 
+import atexit
+import ctypes
+import shutil
+import subprocess
+import tempfile
+import threading
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Sequence
 
+import numpy as np
 import sympy as sp
 
 from .program import SolveSPD
 
-__all__ = ["ChainDynamics", "LOOP_MIN_LINKS", "NC", "NG", "link_constants", "chain_work_doubles", "chain_ops"]
+__all__ = ["ChainDynamics", "LOOP_MIN_LINKS", "NC", "NG", "link_constants", "chain_work_doubles", "chain_ops",
+           "evaluate_chain"]
 
 #: Arms with at least this many links get the looped dynamics by default
 #: (``state_space_model(strategy="auto")``).  Measured with
@@ -155,3 +165,65 @@ def chain_ops(n: int, kind: str):
         div=n * (n - 1) // 2 + n,
         calls=(("sqrt", n),),
     )
+
+
+# ------------------------------------------------------------ Python access
+_SHIM = """
+#include "chain_dynamics.c"
+/* exported wrappers: the runtime's own symbols are hidden */
+int py_chain_fd(int n, const int *r, const double *lc, const double *g, const double *q, const double *qd,
+                const double *tau, double *out, double *work)
+{ return fmugen_chain_fd(n, r, lc, g, q, qd, tau, out, out + n, work); }
+int py_chain_jac(int n, const int *r, const double *lc, const double *g, const double *q, const double *qd,
+                 const double *tau, double *out, double *work)
+{ return fmugen_chain_fd_jacobian(n, r, lc, g, q, qd, tau, out, out + n, out + n + 3 * n * n, work); }
+"""
+_lib = None
+_lock = threading.Lock()
+
+
+def _library():
+    """chain_dynamics.c compiled into a shared library, once per process."""
+    global _lib
+    with _lock:
+        if _lib is None:
+            rt = Path(__file__).resolve().parents[2] / "c_runtime"
+            work = Path(tempfile.mkdtemp(prefix="fmugen_chain_"))
+            atexit.register(shutil.rmtree, work, True)
+            (work / "shim.c").write_text(_SHIM)
+            cmd = ["cc", "-std=c99", "-O2", "-fPIC", "-shared", f"-I{rt}", "-o", str(work / "chain.so"),
+                   str(work / "shim.c"), "-lm"]
+            r = subprocess.run(cmd, capture_output=True, text=True)
+            if r.returncode != 0:
+                raise RuntimeError(f"cannot compile the chain dynamics for Python: {' '.join(cmd)}\n{r.stderr}")
+            lib = ctypes.CDLL(str(work / "chain.so"))
+            dp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
+            for f in (lib.py_chain_fd, lib.py_chain_jac):
+                f.argtypes = [ctypes.c_int, ip] + [dp] * 7
+                f.restype = ctypes.c_int
+            _lib = lib
+        return _lib
+
+
+def evaluate_chain(kind: str, revolute: Sequence[bool], b: Sequence[float]) -> np.ndarray:
+    """X of a :class:`ChainDynamics` step for the numbers ``b`` (its B), by the runtime's loops."""
+    n = len(revolute)
+    b = np.ascontiguousarray(np.asarray(b, dtype=float))
+    if b.size != 3 * n + NC * n + NG:
+        raise ValueError(f"chain dynamics of {n} links: {b.size} inputs, expected {3 * n + NC * n + NG}")
+    out = np.zeros(n + 3 if kind == "fd" else n + 3 * n * n + 3 * n)
+    work = np.zeros(chain_work_doubles(n, kind))
+    rev = (ctypes.c_int * n)(*[1 if r else 0 for r in revolute])
+    dp = ctypes.POINTER(ctypes.c_double)
+
+    def at(k):
+        return ctypes.cast(b.ctypes.data + 8 * k, dp)
+
+    fn = _library().py_chain_fd if kind == "fd" else _library().py_chain_jac
+    status = fn(n, rev, at(3 * n), at(3 * n + NC * n), at(0), at(n), at(2 * n), out.ctypes.data_as(dp),
+                work.ctypes.data_as(dp))
+    if status == 1:
+        raise np.linalg.LinAlgError("mass matrix is not positive definite")
+    if status != 0:
+        raise FloatingPointError("chain dynamics: a result is NaN or infinite")
+    return out

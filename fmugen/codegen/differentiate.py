@@ -15,6 +15,7 @@ from typing import Sequence
 
 import sympy as sp
 
+from .chain import ChainDynamics
 from .program import Assign, Program, SolveSPD
 
 
@@ -89,6 +90,11 @@ def differentiate(
 
 def _through_solve(st: SolveSPD, grad, deriv: dict, out: Program) -> None:
     """Derivatives of X = A^{-1} B: one solve with A for every (w, column of B)."""
+    if isinstance(st, ChainDynamics):
+        raise ValueError(f"a model with the runtime's looped dynamics of a {st.n}-link arm cannot be "
+                         f"differentiated symbolically (e.g. composed with other components into one "
+                         f"model); give the arm a group of its own, or derive it with "
+                         f"state_space_model(strategy='straight')")
     n, k = st.B.shape
     gA = {(i, j): grad(st.A[i, j]) for i in range(n) for j in range(i + 1)}  # lower triangle is read
     gB = {(i, c): grad(st.B[i, c]) for i in range(n) for c in range(k)}

@@ -13,7 +13,7 @@ import numpy as np
 import sympy as sp
 from sympy.printing.pycode import PythonCodePrinter
 
-from .chain import ChainDynamics
+from .chain import ChainDynamics, evaluate_chain
 from .program import Assign, Program
 
 
@@ -56,10 +56,10 @@ def compile_program(
     for st in program.steps:
         if isinstance(st, Assign):
             lines.append(f"    v_{st.symbol.name} = {pr.doprint(st.expr)}")
-        elif isinstance(st, ChainDynamics):
-            raise ValueError(f"{name}: the model calls the looped chain dynamics of the C runtime "
-                             f"({st.n} links), which has no Python evaluator; derive it with "
-                             f"state_space_model(strategy='straight') for Python evaluation")
+        elif isinstance(st, ChainDynamics):  # the runtime's own loops, through ctypes
+            args = ", ".join(pr.doprint(e) for e in st.B)
+            lines.append(f"    _X = _chain({st.kind!r}, {tuple(bool(r) for r in st.revolute)!r}, [{args}])")
+            lines += [f"    v_{xs.name} = _X[{i}]" for i, xs in enumerate(st.X)]
         else:
             n, k = st.B.shape
             rowsA = ", ".join("[" + ", ".join(pr.doprint(st.A[i, j]) if j <= i else "0.0" for j in range(n)) + "]"
@@ -78,7 +78,7 @@ def compile_program(
             outs.append(f"float({pr.doprint(r)})")
     lines.append(f"    return [{', '.join(outs)}]")
     source = "\n".join(lines)
-    namespace = {"math": math, "_np": np, "_spd_solve": _spd_solve}
+    namespace = {"math": math, "_np": np, "_spd_solve": _spd_solve, "_chain": evaluate_chain}
     exec(compile(source, f"<fmugen:{name}>", "exec"), namespace)  # generated code, see module doc
     fn = namespace[name]
     fn.source = source
