@@ -93,7 +93,7 @@ class SymbolicModel:
         def jm(exprs, wrt):
             if not wrt or len(exprs) == 0:
                 return sp.zeros(len(exprs), len(wrt))
-            return sp.Matrix(len(exprs), len(wrt), lambda i, j: jac.let(sp.diff(exprs[i], wrt[j])))
+            return sp.Matrix(len(exprs), len(wrt), lambda i, j: jac.let(_finite_signs(sp.diff(exprs[i], wrt[j]))))
 
         return SymbolicModel(
             name=name,
@@ -311,6 +311,17 @@ class SymbolicModel:
                 else:
                     n += stp.X.rows ** 3 // 3 + stp.X.rows ** 2 * stp.X.cols
         return n
+
+
+def _finite_signs(expr):
+    """``sign(a)**-k`` -> ``sign(a)**k``: equal wherever a != 0, and finite at a = 0.
+
+    sympy's derivatives of nested ``Abs`` (the smooth rails and stroke limits)
+    can come out as ``1/sign(a)``, which is 0/0 in C exactly at the kink
+    (a spool resting on its stroke limit).
+    """
+    return expr.replace(lambda e: e.is_Pow and isinstance(e.base, sp.sign) and e.exp.is_negative,
+                        lambda e: e.base ** (-e.exp))
 
 
 def _number(x) -> sp.Expr:
