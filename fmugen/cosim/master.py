@@ -71,6 +71,9 @@ from .units import STATUS, ModelUnit, SlaveUnit, UnitFailure, dptr, vr_array
 
 STATUS_NAMES = dict(enumerate(STATUS))
 
+# macro-step controller (Gustafsson PI): safety factor, largest growth, no change inside the dead band
+SAFETY, FAC_MAX, DEAD_BAND, GROW_AFTER = 0.8, 2.0, (0.9, 1.3), 4
+
 SCHEMES = ("jacobi", "gauss-seidel", "iterative", "newton")
 EXTRAPOLATIONS = ("hold", "linear", "quadratic")
 _ALIASES = {"gs": "gauss-seidel", "gauss_seidel": "gauss-seidel", "seidel": "gauss-seidel",
@@ -228,6 +231,9 @@ class Master:
                 else:
                     raise CosimError(f"{system.name}: FMU {u.name!r}: fmi_type must be 'cs' or 'me', not {u.fmi_type!r}")
             self._resolve()
+        except UnitFailure as e:
+            self.close()
+            raise CosimError(f"{system.name}: set-up of FMU {e.unit!r} failed: {e}") from None
         except BaseException:
             self.close()
             raise
@@ -441,6 +447,7 @@ class Master:
             # divergence monitor: window maxima of the scaled defect
             win_len, win_max, win_sig, windows, win_count = 5, 0.0, 0.0, [], 0
             recent = deque(maxlen=8)  # (defect, signal) of the last macro steps
+            grow_votes = deque(maxlen=GROW_AFTER)  # step-size factors the last accepted steps proposed
             J = None
             J_H = None
             while t < stop - 1e-12 * max(1.0, abs(stop)):
@@ -467,66 +474,79 @@ class Master:
                             raise UnitFailure(u.name, "fmi2GetFMUstate", st, u.messages())
                     calls += len(units)
                 # -- the macro step --
-                if not implicit:
-                    if self.scheme == "jacobi":
-                        calls += self._step_jacobi(t, H, ext, any_no_interp, rollback_ok)
-                    else:
-                        calls += self._step_gauss_seidel(t, H, ext, any_no_interp, rollback_ok, U0)
-                    self._coupled(Unew)
-                else:
-                    if J is not None and J_H is not None and abs(H - J_H) > 1e-12 * H:
-                        J = None  # the step's sensitivity depends on H
-                    Vg = Upred[:nu].copy()
-                    it = 0
-                    conv = False
-                    err_c_prev = math.inf
-                    while True:
-                        if it > 0:
-                            for k, u in enumerate(units):
-                                st = u.restore(states[k])
-                                if st > 1:
-                                    raise UnitFailure(u.name, "fmi2SetFMUstate", st, u.messages())
-                            calls += len(units)
-                        Uset[:nu] = U0[:nu]
-                        DUset[:nu] = (Vg - U0[:nu]) / H
-                        calls += self._step_jacobi(t, H, 1, any_no_interp, True)
-                        self._coupled(Unew)
-                        R = Unew[:nu] - Vg
-                        err_c = float(np.max(np.abs(R) / (coupling_tol * np.maximum(scale[:nu], np.abs(Vg)))))\
-                            if nu else 0.0
-                        if err_c <= 1.0:
-                            conv = True
-                            break
-                        if it >= max_iterations or not math.isfinite(err_c):
-                            break
-                        it += 1
-                        if self.scheme == "iterative":
-                            Vg = Unew[:nu].copy()
+                try:
+                    if not implicit:
+                        if self.scheme == "jacobi":
+                            calls += self._step_jacobi(t, H, ext, any_no_interp, rollback_ok)
                         else:
-                            if J is None or err_c > 0.5 * err_c_prev:
-                                J, c2 = self._interface_jacobian(t, H, U0, Vg, Unew, states, scale)
-                                calls += c2
-                                J_H = H
-                                summ.jacobians += 1
-                            Vg = Vg + J @ R
-                        err_c_prev = err_c
-                    summ.iterations += it
-                    if not conv:
-                        j = int(np.argmax(np.abs(R))) if nu else 0
-                        if adaptive and H > Hmin * (1 + 1e-12):
-                            for k, u in enumerate(units):
-                                u.restore(states[k])
-                            calls += len(units)
-                            summ.rollbacks += 1
-                            H = max(Hmin, H / 4)
-                            rejected_last = True
-                            continue
-                        failure = FailureReport(t, "not-converged",
-                                                f"{self.scheme} coupling iteration did not converge in "
-                                                f"{max_iterations} iterations at H = {H:.4g} s "
-                                                f"(residual {err_c:.3g} x coupling_tol)",
-                                                coupling=self.coupling_labels[j] if nu else None)
-                        break
+                            calls += self._step_gauss_seidel(t, H, ext, any_no_interp, rollback_ok, U0)
+                        self._coupled(Unew)
+                    else:
+                        if J is not None and J_H is not None and abs(H - J_H) > 1e-12 * H:
+                            J = None  # the step's sensitivity depends on H
+                        Vg = Upred[:nu].copy()
+                        it = 0
+                        conv = False
+                        err_c_prev = math.inf
+                        while True:
+                            if it > 0:
+                                for k, u in enumerate(units):
+                                    st = u.restore(states[k])
+                                    if st > 1:
+                                        raise UnitFailure(u.name, "fmi2SetFMUstate", st, u.messages())
+                                calls += len(units)
+                            Uset[:nu] = U0[:nu]
+                            DUset[:nu] = (Vg - U0[:nu]) / H
+                            calls += self._step_jacobi(t, H, 1, any_no_interp, True)
+                            self._coupled(Unew)
+                            R = Unew[:nu] - Vg
+                            err_c = float(np.max(np.abs(R) / (coupling_tol * np.maximum(scale[:nu], np.abs(Vg)))))\
+                                if nu else 0.0
+                            if err_c <= 1.0:
+                                conv = True
+                                break
+                            if it >= max_iterations or not math.isfinite(err_c):
+                                break
+                            it += 1
+                            if self.scheme == "iterative":
+                                Vg = Unew[:nu].copy()
+                            else:
+                                if J is None or err_c > 0.5 * err_c_prev:
+                                    J, c2 = self._interface_jacobian(t, H, U0, Vg, Unew, states, scale)
+                                    calls += c2
+                                    J_H = H
+                                    summ.jacobians += 1
+                                Vg = Vg + J @ R
+                            err_c_prev = err_c
+                        summ.iterations += it
+                        if not conv:
+                            j = int(np.argmax(np.abs(R))) if nu else 0
+                            if adaptive and H > Hmin * (1 + 1e-12):
+                                for k, u in enumerate(units):
+                                    u.restore(states[k])
+                                calls += len(units)
+                                summ.rollbacks += 1
+                                H = max(Hmin, H / 4)
+                                rejected_last = True
+                                continue
+                            failure = FailureReport(t, "not-converged",
+                                                    f"{self.scheme} coupling iteration did not converge in "
+                                                    f"{max_iterations} iterations at H = {H:.4g} s "
+                                                    f"(residual {err_c:.3g} x coupling_tol)",
+                                                    coupling=self.coupling_labels[j] if nu else None)
+                            break
+                except UnitFailure as e:
+                    # an FMU refused the step (fmi2Discard): with rollback, retry smaller -- the FMU may
+                    # only have been given inputs that jumped
+                    if not (adaptive and e.status == 2 and H > Hmin * (1 + 1e-12)):
+                        raise
+                    for k, u in enumerate(units):
+                        u.restore(states[k])
+                    calls += len(units)
+                    summ.rollbacks += 1
+                    H = max(Hmin, H / 4)
+                    rejected_last = True
+                    continue
                 # -- defect, error estimate, divergence --
                 np.subtract(Unew[:nu], Upred[:nu], out=d[:nu])
                 if not np.all(np.isfinite(Unew[:nu])):
@@ -552,7 +572,8 @@ class Master:
                                 raise UnitFailure(u.name, "fmi2SetFMUstate", st, u.messages())
                         calls += len(units)
                         summ.rollbacks += 1
-                        H = max(Hmin, H * max(0.2, 0.9 * err ** (-1.0 / p_err)))
+                        grow_votes.clear()
+                        H = max(Hmin, H * max(0.2, SAFETY * err ** (-1.0 / p_err)))
                         rejected_last = True
                         continue
                 # -- accept --
@@ -571,7 +592,7 @@ class Master:
                 T[n_rows] = t
                 V[n_rows] = Y[rec_idx]
                 n_rows += 1
-                if detect_divergence and nu:
+                if detect_divergence and nu and not adaptive:  # adaptive: the step control bounds the defect
                     dn = float(np.max(np.abs(d[:nu]) / scale0[:nu]))
                     sn = float(np.max(absU / scale0[:nu]))
                     if sn > 1e8:
@@ -612,12 +633,21 @@ class Master:
                 # -- next H --
                 if adaptive:
                     err = max(err, 1e-10)
-                    fac = 0.9 * err ** (-0.7 / p_err) * err_prev ** (0.4 / p_err)
-                    fac = min(2.0, max(0.2, fac))
+                    fac = SAFETY * err ** (-0.7 / p_err) * err_prev ** (0.4 / p_err)
+                    fac = min(FAC_MAX, max(0.2, fac))
                     if rejected_last:
                         fac = min(fac, 1.0)
-                    if 1.0 <= fac < 1.2:
-                        fac = 1.0  # dead band: no chattering
+                    grow_votes.append(fac)
+                    if fac > DEAD_BAND[1]:
+                        # grow only when the last GROW_AFTER accepted steps all asked for it, by the least
+                        # they asked: a lightly damped mode makes the defect oscillate step to step
+                        fac = min(grow_votes) if len(grow_votes) == GROW_AFTER else 1.0
+                        if fac <= DEAD_BAND[1]:
+                            fac = 1.0
+                    elif fac >= DEAD_BAND[0]:
+                        fac = 1.0  # dead band: an accepted step is kept unless the change is worth it
+                    if fac != 1.0:
+                        grow_votes.clear()
                     H = min(Hmax, max(Hmin, H * fac))
                     err_prev = err
                     rejected_last = False

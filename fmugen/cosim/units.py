@@ -100,10 +100,11 @@ class _Unit:
         self._freeState = f["fmi2FreeFMUstate"]
         self._dirDer = f["fmi2GetDirectionalDerivative"]
         self._apply_start_values(unit.start_values)
-        st = self.fmu.fmi2SetupExperiment(self.c, 0, 0.0, start_time, 1, stop_time)
-        self.check(st, "fmi2SetupExperiment")
-        self.check(self.fmu.fmi2EnterInitializationMode(self.c), "fmi2EnterInitializationMode")
-        self.check(self.fmu.fmi2ExitInitializationMode(self.c), "fmi2ExitInitializationMode")
+        # the raw C functions return the status (fmpy's wrappers raise without the FMU's message)
+        # no stop time: a run may be continued or given a later stop than the system's
+        self.check(f["fmi2SetupExperiment"](self.c, 0, 0.0, start_time, 0, stop_time), "fmi2SetupExperiment")
+        self.check(f["fmi2EnterInitializationMode"](self.c), "fmi2EnterInitializationMode")
+        self.check(f["fmi2ExitInitializationMode"](self.c), "fmi2ExitInitializationMode")
         self.n_calls = 4
 
     # -- set-up ---------------------------------------------------------------
@@ -119,9 +120,9 @@ class _Unit:
             if not np.isfinite(value):
                 raise CosimError(f"FMU {self.name!r}: start value of {name!r} is not finite: {value}")
             if v.type == "Integer":
-                st = self.fmu.fmi2SetInteger(self.c, (c_uint * 1)(v.valueReference), 1, (c_int * 1)(int(value)))
+                st = self.fmu._functions["fmi2SetInteger"](self.c, (c_uint * 1)(v.valueReference), 1, (c_int * 1)(int(value)))
             elif v.type == "Real":
-                st = self.fmu.fmi2SetReal(self.c, (c_uint * 1)(v.valueReference), 1, (c_double * 1)(value))
+                st = self.fmu._functions["fmi2SetReal"](self.c, (c_uint * 1)(v.valueReference), 1, (c_double * 1)(value))
             else:
                 raise CosimError(f"FMU {self.name!r}: cannot set {v.type} variable {name!r}")
             self.check(st, f"fmi2Set{v.type}({name} = {value})")
@@ -174,7 +175,7 @@ class _Unit:
     def get_integer(self, name: str) -> int:
         v = self.variables[name]
         out = (c_int * 1)()
-        self.check(self.fmu.fmi2GetInteger(self.c, (c_uint * 1)(v.valueReference), 1, out), "fmi2GetInteger")
+        self.check(self.fmu._functions["fmi2GetInteger"](self.c, (c_uint * 1)(v.valueReference), 1, out), "fmi2GetInteger")
         return out[0]
 
     def close(self) -> None:
