@@ -79,7 +79,7 @@ def main(argv=None) -> int:
     from fmugen.sweep.worker import make_bundle, run_point
 
     tmp = Path(tempfile.mkdtemp(prefix="bench_sweep_"))
-    plan = SweepPlan(args.scene, [args.name], tmp / "fmus")
+    plan = SweepPlan(args.scene, [args.name], tmp / "fmus").build()
     opts = run_options(plan.system.settings, {"detect_divergence": False})
     if args.stop:
         opts["stop"] = args.stop

@@ -130,7 +130,8 @@ def start_client(scheduler: Optional[str] = None, workers: Optional[int] = None,
     n = workers or os.cpu_count() or 1
     if isinstance(n, bool) or int(n) != n or n < 1:
         raise SweepError(f"--workers: {workers!r} is not a positive integer")
-    kw = dict(dashboard_address=":0" if _has_bokeh() else None, silence_logs=logging.ERROR)
+    # ":0": the scheduler's HTTP server (the dashboard, with bokeh) on a free port, never a clash on 8787
+    kw = dict(dashboard_address=":0", silence_logs=logging.ERROR)
     if processes:
         cluster = LocalCluster(n_workers=int(n), threads_per_worker=1, processes=True, **kw)
     else:
@@ -190,18 +191,23 @@ def sweep(scene, grid=None, sample=None, n: Optional[int] = None, seed: Optional
     out.mkdir(parents=True, exist_ok=True)
     show = sys.stderr.isatty() if progress is None else bool(progress)
     say = (lambda t: print(t, file=sys.stderr, flush=True)) if show else (lambda t: None)
-    say(f"sweep: {len(points)} points over {', '.join(names)}; building the FMUs once")
     try:
         plan = SweepPlan(scene, names, out / "fmus", sets=sets, allow_factories=allow_factories)
     except SceneError as exc:
         raise SweepError(str(exc)) from None
-    opts = run_options(plan.system.settings, options)
-    columns = tuple(r.column for r in plan.system.recorded)
-    wanted = _metrics.parse_metrics(metrics, columns)
+    # everything that can be refused is refused before the build
+    opts = run_options(plan.scene.spec.cosim, options)
+    wanted = _metrics.parse_metrics(metrics, plan.columns)
     mnames = tuple(_metrics.metric_names(wanted))
     spec = {"grid": {k: list(v) for k, v in g.items()}, "sample": {k: str(d) for k, d in s.items()},
             "n": n, "seed": seed}
     _check_manifest(out / "sweep.json", _manifest(scene, sets, names, spec, opts, wanted, band))
+    say(f"sweep: {len(points)} point{'s' if len(points) != 1 else ''} over {', '.join(names)}; "
+        f"building the FMUs once")
+    try:
+        plan.build()
+    except SceneError as exc:
+        raise SweepError(str(exc)) from None
     cols = _table.header(names, mnames)
     journal = _table.Journal(out / "points.csv", cols)
     keys, order = [], {}

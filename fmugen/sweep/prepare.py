@@ -57,7 +57,8 @@ class PointTask:
 
 
 class SweepPlan:
-    """The scene built once for a sweep over ``names``; :meth:`task` makes each point's :class:`PointTask`.
+    """The scene for a sweep over ``names``, checked; :meth:`build` builds its FMUs once and
+    :meth:`task` makes each point's :class:`PointTask`.
 
     scene: path of the scene file; names: swept scene names (``joint.J``);
     sets: ``--set`` overrides of the base scene; fmu_dir: where the FMUs go.
@@ -83,11 +84,19 @@ class SweepPlan:
                 raise SweepError(f"{self.scene_path}: {name}: {inst} has no parameter or state {var!r}; "
                                  f"parameters: {', '.join(v.name for v in m.parameters)}")
         self.parameters, self.states = tuple(params), tuple(states)
+        self.equilibrium = base.spec.initial == "equilibrium"
+        self._evaluator = None
         try:
             self.scene = base.keeping(params)
         except SceneError as exc:
             raise SweepError(str(exc)) from None
-        self.built = self.scene.build(Path(fmu_dir), progress=progress)
+        self.columns = tuple(self.scene.spec.record)
+        self.fmu_dir, self._progress = Path(fmu_dir), progress
+        self.system = None
+
+    def build(self) -> "SweepPlan":
+        """Build the FMUs (once; from the cache when nothing changed) and check every swept name is settable."""
+        self.built = self.scene.build(self.fmu_dir, progress=self._progress)
         self.system = self.built.system
         self.targets = {}  # scene name -> (group, FMI variable)
         for name in self.names:
@@ -95,9 +104,8 @@ class SweepPlan:
             group, fmi = self.scene.group_of(inst), self.scene.fmu_name(inst, var)
             self._check_settable(name, group, fmi, name in self.states)
             self.targets[name] = (group, fmi)
-        self.equilibrium = self.scene.spec.initial == "equilibrium"
-        self._evaluator = None
         self.digest = hashlib.sha256(b"".join(Path(u.path).read_bytes() for u in self.system.units)).hexdigest()
+        return self
 
     def _check_settable(self, name, group, fmi, is_state) -> None:
         from fmpy import read_model_description
