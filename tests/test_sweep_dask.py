@@ -258,3 +258,28 @@ def test_threads_in_one_process_give_the_same_runs(tmp_path):
         res = run(dataclasses.replace(system, units=(system.unit("chain"), joint)), **OPTS)
         with np.load(tmp_path / "runs" / f"{row['key']}.npz") as z:
             assert np.array_equal(z["values"], res.values)
+
+
+def _lose_J3(bundle, task):
+    """A task the cluster loses (as when a worker process dies): raised, not returned."""
+    from fmugen.sweep.worker import run_point
+
+    if task.values["joint.J"] == 3.0:
+        raise RuntimeError("worker tcp://10.0.0.7:40111 died")
+    return run_point(bundle, task)
+
+
+def test_a_task_the_cluster_loses_is_recorded_with_the_reason(tmp_path, monkeypatch):
+    import fmugen.sweep.execute as execute
+
+    monkeypatch.setattr(execute, "run_point", _lose_J3)
+    r = sweep(SPLIT, grid=["joint.J=1,3"], out=tmp_path, workers=2, processes=False, options=OPTS,
+              metrics=["joint.theta:final"], progress=False)
+    lost = r.rows[1]
+    assert (r.rows[0]["status"], lost["status"]) == ("ok", "error")
+    assert "RuntimeError: worker tcp://10.0.0.7:40111 died" in lost["failure"]
+    assert np.isnan(lost["joint.theta:final"])
+    # recorded as done, like a failed run: a restart skips it
+    r2 = sweep(SPLIT, grid=["joint.J=1,3"], out=tmp_path, workers=2, processes=False, options=OPTS,
+               metrics=["joint.theta:final"], progress=False)
+    assert (r2.ran, r2.skipped, r2.rows[1]["status"]) == (0, 2, "error")

@@ -231,6 +231,8 @@ def sweep(scene, grid=None, sample=None, n: Optional[int] = None, seed: Optional
             t, v, c = run
             np.savez(runs_dir / f"{row['key']}.npz", time=t, values=v, columns=np.array(c))
         row.update({nm: points[row["index"]][nm] for nm in names})
+        for m in mnames:  # a lost task has no metrics
+            row.setdefault(m, math.nan)
         journal.append(row)
         prog.update(row)
 
