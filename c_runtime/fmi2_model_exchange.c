@@ -5,6 +5,7 @@
 #include <math.h>
 #include <string.h>
 #include "fmugen_runtime.h"
+#include "solver.h"
 
 #define INST ((fmugen_instance *)c)
 #define ME_CHECK(mask, fn)                                   \
@@ -87,6 +88,20 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noSetFMUStat
     INST->s.last_successful_time = INST->s.time;
     *enterEventMode = fmi2False;
     *terminateSimulation = fmi2False;
+    /* validity ranges at the accepted point (the Model Exchange counterpart
+     * of the check after fmi2DoStep); range_check = 2 ends the simulation */
+    if (fmugen_range_action(INST) != FMUGEN_RANGE_IGNORE && fmugen_has_ranges(INST->model)) {
+        if (fmugen_evaluate_cached(INST, "fmi2CompletedIntegratorStep") != FMUGEN_OK) return fmi2Error;
+        char msg[512] = "";
+        fmi2Status st = fmugen_check_ranges(INST, "fmi2CompletedIntegratorStep", msg, sizeof msg);
+        if (st == fmi2Discard) {
+            *terminateSimulation = fmi2True;
+            fmugen_log(INST, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "fmi2CompletedIntegratorStep: %s (range_check = 2: "
+                       "the simulation must end)", msg);
+            return fmi2Error;
+        }
+        return st;
+    }
     return fmi2OK;
 }
 

@@ -124,6 +124,10 @@ FMUGEN_INTERNAL const char *fmugen_model_status_text(int code);
 FMUGEN_INTERNAL int fmugen_all_finite(const double *v, int n);
 FMUGEN_INTERNAL void fmugen_set_defaults(fmugen_instance *inst);
 static inline int fmugen_range_action(const fmugen_instance *inst) { return inst->s.range_check; }
+static inline int fmugen_has_ranges(const fmugen_model_def *m)
+{
+    return m->x_min || m->x_max || m->u_min || m->u_max || m->y_min || m->y_max;
+}
 
 /* value-reference layout */
 static inline fmi2ValueReference fmugen_vr_der(const fmugen_model_def *m) { return (fmi2ValueReference)m->nx; }

@@ -55,6 +55,10 @@ FMUGEN_INTERNAL void fmugen_lu_solve(int n, const double *LU, const int *ipiv, d
  * (fmugen_model_def.x_min ...).  Returns fmi2OK, fmi2Warning (a value left
  * its range; logged) or fmi2Discard (reason in msg). */
 FMUGEN_INTERNAL fmi2Status fmugen_check_step_result(fmugen_instance *inst, const char *fn, char *msg, size_t n);
+/* The validity-range part of it alone, at the current point (y_cache must be
+ * valid): fmi2OK, fmi2Warning (logged) or fmi2Discard (range_check = 2; the
+ * reason in msg, not logged). */
+FMUGEN_INTERNAL fmi2Status fmugen_check_ranges(fmugen_instance *inst, const char *fn, char *msg, size_t n);
 
 FMUGEN_INTERNAL int fmugen_solve_dopri5(fmugen_ode *ode, double t_end, char *msg, size_t n);
 FMUGEN_INTERNAL int fmugen_solve_rodas3(fmugen_ode *ode, double t_end, char *msg, size_t n);

@@ -160,9 +160,15 @@ fmi2Status fmugen_check_step_result(fmugen_instance *inst, const char *fn, char 
             return fmi2Discard;
         }
     }
+    return fmugen_check_ranges(inst, fn, msg, n);
+}
+
+fmi2Status fmugen_check_ranges(fmugen_instance *inst, const char *fn, char *msg, size_t n)
+{
     /* validity ranges: reported, by default as a warning (the result may
      * still be what the user wants, e.g. a pressure peak), as a failure when
      * the runtime parameter range_check asks for it */
+    const fmugen_model_def *m = inst->model;
     const int action = fmugen_range_action(inst);
     if (action == FMUGEN_RANGE_IGNORE) return fmi2OK;
     struct { const char *what; const char *const *names; const double *v, *lo, *hi; int n; } groups[3] = {

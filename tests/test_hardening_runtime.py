@@ -333,3 +333,29 @@ def test_no_ok_about_a_blown_up_state(fmus, solver):
                 break
     if solver == RK4:
         assert reported  # 10 ms is 100x beyond RK4's stability limit here
+
+
+def test_me_completed_integrator_step_reports_ranges(fmus):
+    """Model Exchange: a model with ranges declares completedIntegratorStepNotNeeded = false, so fmpy
+    calls fmi2CompletedIntegratorStep at every output point; x = t leaves
+    x <= 0.5 after t = 0.5 -- a logged warning (default), or the end of the simulation (range_check = 2)."""
+    from fmpy import simulate_fmu
+
+    path = str(fmus["ranged"][1])
+    assert read_model_description(path).modelExchange.needsCompletedIntegratorStep
+    assert not read_model_description(str(fmus["ramp"][1])).modelExchange.needsCompletedIntegratorStep
+    seen = []
+
+    def logger(component, instance_name, status, category, message):
+        seen.append((status, message.decode()))
+
+    r = simulate_fmu(path, fmi_type="ModelExchange", stop_time=1.0, output_interval=0.1, logger=logger,
+                     debug_logging=False, output=["x"])
+    assert r["x"][-1] == pytest.approx(1.0, abs=1e-6)
+    warn = [m for s, m in seen if s == fmi2Warning]
+    assert warn and "fmi2CompletedIntegratorStep: state x = 0.6" in warn[0] and "[-inf, 0.5]" in warn[0], seen
+    seen.clear()
+    with pytest.raises(Exception):
+        simulate_fmu(path, fmi_type="ModelExchange", stop_time=1.0, output_interval=0.1, logger=logger,
+                     start_values={"solver.range_check": 2})
+    assert any(s == fmi2Error and "range_check = 2" in m for s, m in seen), seen

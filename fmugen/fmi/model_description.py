@@ -315,7 +315,9 @@ def model_description_xml(
                 ET.SubElement(files, "File", name=f)
 
     if "me" in fmi_types:
-        interface("ModelExchange", completedIntegratorStepNotNeeded=True)
+        # the runtime checks validity ranges in fmi2CompletedIntegratorStep: needed only when there are some
+        ranged = any(v.min is not None or v.max is not None for v in model.states + model.inputs + model.outputs)
+        interface("ModelExchange", completedIntegratorStepNotNeeded=not ranged)
     if "cs" in fmi_types:
         interface("CoSimulation", canHandleVariableCommunicationStepSize=True, canInterpolateInputs=True,
                   maxOutputDerivativeOrder=0, canRunAsynchronuously=False)
