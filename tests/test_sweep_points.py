@@ -147,3 +147,23 @@ def test_progress_on_a_terminal_counts_done_failed_and_gives_an_eta():
     last = s.getvalue().split("\r")[-1]
     # 2 runs in ~2 s: 1 run/s, 6 points left
     assert "4/10 done (1 failed)" in last and "ETA 6 s" in last
+
+
+def test_grid_spacings_are_numpys():
+    g = parse_grid(["joint.J=linspace(1, 4, 7)", "actuator.beta_e=geomspace(1e8,1e10,5)"])
+    assert g["joint.J"] == tuple(np.linspace(1, 4, 7))
+    assert g["actuator.beta_e"] == tuple(np.geomspace(1e8, 1e10, 5))
+    for bad, what in (("linspace(1,4)", "three numbers"), ("linspace(1,4,2.5)", "whole number"),
+                      ("geomspace(0,1,3)", "same sign"), ("linspace(1,4,__import__('os'))", "whole number")):
+        with pytest.raises(SweepError, match=what):
+            parse_grid([f"joint.J={bad}"])
+
+
+def test_statistics_over_the_points_that_ran():
+    from fmugen.sweep.execute import SweepResult
+
+    rows = [{"status": "ok", "a.y:final": v} for v in (1.0, 2.0, 4.0)] + [{"status": "failed", "a.y:final": math.nan}]
+    r = SweepResult(rows, ("x.p",), ("a.y:final",), None, [], None, 4, 0, 0.0)
+    ((name, n, mean, std, lo, med, hi),) = r.statistics()
+    assert (name, n, lo, med, hi) == ("a.y:final", 3, 1.0, 2.0, 4.0)
+    assert mean == pytest.approx(7 / 3) and std == pytest.approx(math.sqrt(((1 - 7/3)**2 + (2 - 7/3)**2 + (4 - 7/3)**2) / 2))

@@ -77,6 +77,12 @@ def run(args) -> int:
         print(f"  failed: {vals}: {row['failure'][:300]}")
     if len(bad) > 5:
         print(f"  ... {len(bad) - 5} more in the table")
+    stats = r.statistics()
+    if stats:
+        w = max(len(s[0]) for s in stats)
+        print(f"{'metric':<{w}} {'n':>5} {'mean':>12} {'std':>11} {'min':>12} {'median':>12} {'max':>12}")
+        for name, n, mean, std, lo, med, hi in stats:
+            print(f"{name:<{w}} {n:>5} {mean:>12.6g} {std:>11.4g} {lo:>12.6g} {med:>12.6g} {hi:>12.6g}")
     print("table: " + ", ".join(str(p) for p in r.table) + (f"; plot: {r.plot}" if r.plot else ""))
     sys.stdout.flush()
     return 0

@@ -65,6 +65,22 @@ class SweepResult:
     def column(self, name: str) -> np.ndarray:
         return np.array([r[name] for r in self.rows], dtype=float)
 
+    def statistics(self) -> list:
+        """Per metric over the points that ran (status ok): (name, count, mean, std, min, median, max).
+
+        The spread of a Monte-Carlo sweep (std: the sample standard deviation, ddof = 1).
+        """
+        out = []
+        for m in self.metric_names:
+            v = np.array([r[m] for r in self.rows if r["status"] == "ok"], dtype=float)
+            v = v[np.isfinite(v)]
+            if len(v):
+                out.append((m, len(v), float(v.mean()), float(v.std(ddof=1)) if len(v) > 1 else math.nan,
+                            float(v.min()), float(np.median(v)), float(v.max())))
+            else:
+                out.append((m, 0) + (math.nan,) * 5)
+        return out
+
 
 class Progress:
     """``12/100 done (1 failed), 3.1 runs/s, ETA 28 s`` on a terminal (rewritten in place), every 10 % otherwise."""

@@ -1,7 +1,8 @@
 """The points of a sweep: a grid (every combination of listed values) or Monte-Carlo samples.
 
-``--grid joint.J=1,2,4`` lists values; several ``--grid`` options span their
-Cartesian product (the first name varies slowest).  ``--sample
+``--grid joint.J=1,2,4`` lists values (or ``linspace(1,4,7)``, ``geomspace(1e8,1e10,5)``:
+numpy's spacings); several ``--grid`` options span their Cartesian product (the first name
+varies slowest).  ``--sample
 actuator.beta_e=normal(1.6e9,5e7) -n 200 --seed 1`` draws ``n`` values per
 name from a distribution; several ``--sample`` options draw independently
 (one column each, in the order given, from one seeded generator), and grid
@@ -123,10 +124,13 @@ def parse_grid(items: Union[Iterable[str], Mapping[str, Sequence[float]], None])
     for name, values in pairs:
         name = parse_name(name, f"--grid {name}")
         where = f"--grid {name}"
-        if isinstance(values, str):
+        if isinstance(values, str) and _SPACE.match(re.sub(r"\s+", "", values)):
+            vals = _spaced(re.sub(r"\s+", "", values), where)
+        elif isinstance(values, str):
             values = [v for v in values.split(",")]
             if not values or any(not v.strip() for v in values):
-                raise SweepError(f"{where}: expected comma-separated numbers, e.g. {name}=1,2,4")
+                raise SweepError(f"{where}: expected comma-separated numbers, e.g. {name}=1,2,4, "
+                                 f"or linspace(a,b,n) / geomspace(a,b,n)")
             vals = tuple(_number(v, where) for v in values)
         else:
             vals = tuple(_finite(v, where) for v in values)
@@ -148,6 +152,24 @@ def _finite(v, where) -> float:
     if not math.isfinite(f):
         raise SweepError(f"{where}: {v!r} is not a finite number")
     return f
+
+
+_SPACE = re.compile(r"^(linspace|geomspace)\((.*)\)$")
+
+
+def _spaced(text: str, where: str) -> tuple:
+    """``linspace(a,b,n)``: n values evenly spaced from a to b; ``geomspace(a,b,n)``: in constant ratio."""
+    kind, inner = _SPACE.match(text).groups()
+    parts = inner.split(",")
+    if len(parts) != 3:
+        raise SweepError(f"{where}: {kind} takes three numbers (first, last, count), got {len(parts)}")
+    a, b = _number(parts[0], f"{where}: {kind} first"), _number(parts[1], f"{where}: {kind} last")
+    if not re.fullmatch(r"[0-9]+", parts[2].strip()) or not 1 <= int(parts[2]) <= 1_000_000:
+        raise SweepError(f"{where}: {kind} count {parts[2]!r} must be a whole number from 1 to 1000000")
+    if kind == "geomspace" and not (a * b > 0):
+        raise SweepError(f"{where}: geomspace needs first and last of the same sign, neither zero")
+    f = np.linspace if kind == "linspace" else np.geomspace
+    return tuple(float(v) for v in f(a, b, int(parts[2])))
 
 
 def parse_samples(items: Union[Iterable[str], Mapping[str, object], None]) -> dict:
