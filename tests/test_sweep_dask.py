@@ -283,3 +283,14 @@ def test_a_task_the_cluster_loses_is_recorded_with_the_reason(tmp_path, monkeypa
     r2 = sweep(SPLIT, grid=["joint.J=1,3"], out=tmp_path, workers=2, processes=False, options=OPTS,
                metrics=["joint.theta:final"], progress=False)
     assert (r2.ran, r2.skipped, r2.rows[1]["status"]) == (0, 2, "error")
+
+
+def test_a_swept_start_value_equals_the_scene_started_there(client, tmp_path):
+    r = sweep(SPLIT, grid=["joint.theta=0.05"], out=tmp_path, client=client, options=OPTS,
+              metrics=["joint.theta:final"], save_runs=True, progress=False)
+    row = r.rows[0]
+    built = fmugen.load_scene(SPLIT, set={"joint.theta": 0.05}).build(tmp_path / "at")
+    res = run(built.system, **OPTS)
+    with np.load(tmp_path / "runs" / f"{row['key']}.npz") as z:
+        assert z["values"][0, 0] == 0.05  # joint.theta at t = 0
+        assert np.array_equal(z["values"], res.values)
