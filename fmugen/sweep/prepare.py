@@ -14,7 +14,7 @@ depends on the parameters (the load pressure that holds a heavier link), so
 it is solved again **on the client**, per point, from the monolithic model
 (Newton with its exact Jacobian, :func:`fmugen.scene.equilibrium.solve_equilibrium`,
 one compiled evaluator whose parameter vector changes per point: milliseconds).
-A point without a state of rest is recorded as failed with the reason and
+A point without a state of rest is recorded as an error with the reason and
 never submitted.  With ``initial = "given"`` the start values are the
 scene's, or the point's for swept states.
 """
@@ -81,7 +81,9 @@ class SweepPlan:
             elif var in {v.name for v in m.states}:
                 states.append(name)
             else:
-                raise SweepError(f"{self.scene_path}: {name}: {inst} has no parameter or state {var!r}; "
+                hint = (" (a zero in a robot file is a structural zero, not a parameter)"
+                        if base.spec.instances[inst].kind == "robot" else "")
+                raise SweepError(f"{self.scene_path}: {name}: {inst} has no parameter or state {var!r}{hint}; "
                                  f"parameters: {', '.join(v.name for v in m.parameters)}")
         self.parameters, self.states = tuple(params), tuple(states)
         self.equilibrium = base.spec.initial == "equilibrium"
