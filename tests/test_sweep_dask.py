@@ -4,8 +4,7 @@ Every point equals the same run done serially with the same FMUs, bit for bit, a
 with that point's values; failed points are recorded with their reason; a restarted sweep skips the points
 done; the state of rest is solved again per point (P_L = tau_load / D_m); folded parameters are refused.
 
-The nominal scene's runs use ``detect_divergence=False``: the master's divergence monitor currently stops
-this scene's well-behaved runs (a defect growing from exactly zero when the path starts).
+Runs use the master's defaults (``OPTS`` is passed to the sweep and to every serial run alike).
 """
 import csv
 import dataclasses
@@ -22,7 +21,7 @@ from fmugen.sweep.metrics import compute, parse_metrics
 from fmugen.sweep.points import parse_samples
 
 SPLIT = Path(__file__).resolve().parents[1] / "examples" / "scenes" / "single_joint_split.toml"
-OPTS = {"detect_divergence": False}
+OPTS = {}
 
 
 @pytest.fixture(scope="module")
