@@ -121,8 +121,12 @@ def _cmd_build(args) -> int:
         return _cmd_build_scene(args)
     t0 = time.perf_counter()
     outputs = tuple(o for o in args.outputs.split(",") if o)
+    if sys.stderr.isatty():  # progress of the first stage; build_fmu reports the others
+        print(f"fmugen build {path.name}: derive ...", end="", file=sys.stderr, flush=True)
     model = symbolic_model(path, outputs, args.formulation, args.model, sets=args.set)
     t1 = time.perf_counter()
+    if sys.stderr.isatty():
+        print(f" {t1 - t0:.1f} s", file=sys.stderr, flush=True)
     fold = None if args.fold == "none" else ("all" if args.fold == "all" else args.fold.split(","))
     out = Path(args.output) if args.output else Path(f"{model.name}.fmu")
     result = build_fmu(model, out, fmi_type=args.fmi_type, fold_parameters=fold, budget_start=t0,

@@ -99,10 +99,11 @@ class CompiledModel:
         (work / "model.c").write_text(source)
         (work / "harness.c").write_text(_SHIM)
         lib = work / "libmodel.so"
+        # the looped chain dynamics only when the model calls them (a large arm)
+        chain = [str(rt / "chain_dynamics.c")] if '#include "chain_dynamics.h"' in source else []
         cmd = [cc, "-std=c99", "-D_POSIX_C_SOURCE=199309L", *cflags, "-fPIC", "-shared",
                "-Wall", "-Wextra", "-Werror", f"-I{rt}", "-o", str(lib),
-               str(work / "model.c"), str(rt / "linalg.c"), str(rt / "chain_dynamics.c"),
-               str(work / "harness.c"), "-lm"]
+               str(work / "model.c"), str(rt / "linalg.c"), *chain, str(work / "harness.c"), "-lm"]
         r = subprocess.run(cmd, capture_output=True, text=True)
         if r.returncode != 0:
             raise RuntimeError(f"compilation failed: {' '.join(cmd)}\n{r.stderr}")
