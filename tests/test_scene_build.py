@@ -160,3 +160,21 @@ def test_scene_with_a_locked_wrist_builds_an_arm_of_three_joints():
     params = {v.name: v.start for v in init.model.parameters}
     tau = [params[f"act{k}.D_m"] * init.values[f"act{k}.P_L"] for k in (1, 2, 3)]
     assert np.allclose(tau, g, rtol=1e-8, atol=1e-6 * np.max(np.abs(g)))
+
+
+def test_the_joint_fmu_carries_the_stroke_its_two_chamber_actuator_allows(tmp_path):
+    text = SPLIT.read_text()
+    for a, b in [('valve = { type = "servo_valve", order = 2 }', 'valve = { type = "servo_valve", order = 2, flow = "chambers" }'),
+                 ('form = "load_pressure"', 'form = "two_chamber"'),
+                 ('parameter_set = "default"', 'parameter_set = "stiff"'),
+                 ('["actuator.P_L", "valve.P_L"],', '["actuator.P_A", "valve.P_A"], ["actuator.P_B", "valve.P_B"], ["joint.theta", "actuator.theta"],'),
+                 ('["valve.Q_L", "actuator.Q_L"],', '["valve.Q_A", "actuator.Q_A"], ["valve.Q_B", "actuator.Q_B"],'),
+                 ('"actuator.tau", "actuator.P_L"]', '"actuator.tau", "actuator.P_L"]')]:
+        assert a in text
+        text = text.replace(a, b)
+    p = tmp_path / "two_chamber.toml"
+    p.write_text(text)
+    m, _ = load_scene(p).group_model("joint")
+    theta = next(v for v in m.states if v.name == "theta")
+    # V_A,B = V_t/2 -+ D_m theta > 0:  |theta| < V_t / (2 D_m) = 1e-5 / 3e-5 rad (stiff set)
+    assert np.isclose(theta.max, 1e-5 / (2 * 1.5e-5)) and np.isclose(theta.min, -1e-5 / (2 * 1.5e-5))

@@ -283,6 +283,7 @@ class Scene:
             m = assemble(group, models, internal, outputs=outputs,
                          description=self.spec.description or f"{group} of scene {self.name}",
                          where=f"{self.src}: [fmus.{group}]")
+        m = self._with_input_ranges(m, members)
         if prune and not self.needs_jacobian(g):
             m = m.without_jacobian()
             removed.append(f"{group}: Jacobian program (explicit internal solver, no directional derivatives)")
@@ -296,6 +297,40 @@ class Scene:
             starts = {k: v for k, v in starts.items() if k in {s.name for s in m.states}}
             m = m.with_starts(starts)
         return m, removed
+
+    def _with_input_ranges(self, m: SymbolicModel, members) -> SymbolicModel:
+        """A state or output that drives inputs carries their validity ranges (the intersection).
+
+        The input vanishes into the connection, possibly into another FMU; its
+        source keeps the range (e.g. the arm's joint angle, the stroke within
+        which a two-chamber actuator's volumes stay positive), so the FMU that
+        owns the source reports leaving it.  Connections with a conversion
+        factor carry none.
+        """
+        limits = {}
+        for si, sv, ti, tv, factor in self.connections:
+            if si not in members or factor is not None:
+                continue
+            v = self._var(ti, tv, self.src)[1]
+            if v.min is None and v.max is None:
+                continue
+            key = self.fmu_name(si, sv)
+            lo, hi = limits.get(key, (None, None))
+            lo = v.min if lo is None else (lo if v.min is None else max(lo, v.min))
+            hi = v.max if hi is None else (hi if v.max is None else min(hi, v.max))
+            limits[key] = (lo, hi)
+        if not limits:
+            return m
+
+        def narrowed(v):
+            if v.name not in limits:
+                return v
+            lo, hi = limits[v.name]
+            lo = lo if v.min is None else (v.min if lo is None else max(lo, v.min))
+            hi = hi if v.max is None else (v.max if hi is None else min(hi, v.max))
+            return replace(v, min=lo, max=hi)
+
+        return replace(m, states=tuple(map(narrowed, m.states)), outputs=tuple(map(narrowed, m.outputs)))
 
     def monolithic_model(self) -> SymbolicModel:
         """The whole scene as one model (names ``instance.variable``), nothing pruned or folded."""
