@@ -38,6 +38,21 @@ static double dot6(const double *a, const double *b)
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4] + a[5] * b[5];
 }
 
+/* sum_k a[k] b[k], k < len, in four partial sums (independent chains of additions) */
+static double dot_n(const double *a, const double *b, int len)
+{
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+    int k = 0;
+    for (; k + 4 <= len; k += 4) {
+        s0 += a[k] * b[k];
+        s1 += a[k + 1] * b[k + 1];
+        s2 += a[k + 2] * b[k + 2];
+        s3 += a[k + 3] * b[k + 3];
+    }
+    for (; k < len; k++) s0 += a[k] * b[k];
+    return (s0 + s1) + (s2 + s3);
+}
+
 /* o = m x y (motion cross motion) */
 static void crm(const double *m, const double *y, double *o)
 {
@@ -240,16 +255,11 @@ static void add_K(double *K, const double *I, const double *vel)
 static int spd_inverse(int n, double *A, double *T, double *Minv)
 {
     for (int j = 0; j < n; j++) {
-        double d = A[j * n + j];
-        for (int m = 0; m < j; m++) d -= A[j * n + m] * A[j * n + m];
+        double d = A[j * n + j] - dot_n(A + j * n, A + j * n, j);
         if (!(d > 0.0) || !isfinite(d)) return FMUGEN_NOT_POSITIVE_DEFINITE;
         d = sqrt(d);
         A[j * n + j] = d;
-        for (int i = j + 1; i < n; i++) {
-            double s = A[i * n + j];
-            for (int m = 0; m < j; m++) s -= A[i * n + m] * A[j * n + m];
-            A[i * n + j] = s / d;
-        }
+        for (int i = j + 1; i < n; i++) A[i * n + j] = (A[i * n + j] - dot_n(A + i * n, A + j * n, j)) / d;
     }
     for (int i = 0; i < n; i++) { /* row i of L^{-1}: T[i][j], j <= i */
         double *Ti = T + (size_t)i * n;
@@ -262,19 +272,15 @@ static int spd_inverse(int n, double *A, double *T, double *Minv)
         }
         for (int j = 0; j < i; j++) Ti[j] *= inv;
         Ti[i] = inv;
-        for (int j = i + 1; j < n; j++) Ti[j] = 0.0;
     }
-    memset(Minv, 0, (size_t)n * n * sizeof(double));
-    for (int k = 0; k < n; k++) { /* Minv += T[k]^T T[k], lower triangle: rows i <= k */
-        const double *Tk = T + (size_t)k * n;
-        for (int i = 0; i <= k; i++) {
-            double t = Tk[i];
-            double *Mi = Minv + (size_t)i * n;
-            for (int j = 0; j <= i; j++) Mi[j] += t * Tk[j];
-        }
-    }
+    /* Minv[i][j] = sum_{k >= i} T[k][i] T[k][j] (j <= i): dot products of the
+     * rows of T^T (stored in A, whose factor is no longer needed) */
     for (int i = 0; i < n; i++)
-        for (int j = 0; j < i; j++) Minv[(size_t)j * n + i] = Minv[(size_t)i * n + j];
+        for (int k = i; k < n; k++) A[(size_t)i * n + k] = T[(size_t)k * n + i];
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j <= i; j++)
+            Minv[(size_t)i * n + j] = Minv[(size_t)j * n + i] =
+                dot_n(A + (size_t)i * n + i, A + (size_t)j * n + i, n - i);
     return FMUGEN_OK;
 }
 

@@ -22,6 +22,7 @@ from typing import Optional, Sequence
 
 import sympy as sp
 
+from .chain import ChainDynamics, chain_ops
 from .program import Assign, Program, SolveSPD
 
 
@@ -308,6 +309,9 @@ class SymbolicModel:
             for stp in prog.steps:
                 if isinstance(stp, Assign):
                     n += sp.count_ops(stp.expr)
+                elif isinstance(stp, ChainDynamics):  # the runtime's loops
+                    ops = chain_ops(stp.n, stp.kind)
+                    n += ops.mul + ops.add + ops.div + ops.n_calls
                 else:
                     n += stp.X.rows ** 3 // 3 + stp.X.rows ** 2 * stp.X.cols
         return n
