@@ -366,8 +366,10 @@ class Master:
         return calls
 
     def _coupled(self, out: np.ndarray) -> np.ndarray:
-        np.take(self.Y, self.S, out=out)
-        out *= self.F
+        nu = self.nu
+        if nu:
+            np.take(self.Y, self.S, out=out[:nu])
+            out[:nu] *= self.F
         return out
 
     # -- the run ----------------------------------------------------------------
@@ -431,7 +433,8 @@ class Master:
             calls += self._read_all()
             self._coupled(U_hist[0])
             np.abs(U_hist[0], out=scale)
-            np.maximum(scale, self.u_nominal, out=scale)
+            np.maximum(scale[:nu], self.u_nominal, out=scale[:nu])
+            scale[nu:] = 1.0
             scale0 = scale.copy()
             T[0] = t
             V[0] = Y[rec_idx]

@@ -1,0 +1,187 @@
+"""The ``fmugen cosim``, ``fmugen reference`` and ``fmugen report`` subcommands.
+
+    fmugen cosim SCENE.toml [--scheme jacobi|gauss-seidel|iterative|newton] [--extrapolation hold|linear|quadratic]
+                 [--step H] [--adaptive --tol E] [--stop T] [--set NAME=VALUE ...] --out DIR
+    fmugen reference SCENE.toml [--stop T] [--points N] [--set ...] --out DIR
+    fmugen report SCENE.toml [--steps H1,H2,...] [--schemes jacobi/hold,...] [--repeats 5] [--target 1e-4]
+                  [--no-monolithic] [--stop T] [--set ...] --out DIR
+
+``cosim`` writes DIR/results.csv (``time``, then every recorded column),
+DIR/results.npz (a structured array ``results`` and the summary), DIR/results.png
+and DIR/summary.txt; the exit status is 0 on success, 1 with the failure
+report when the run failed (the results up to the failure are written).
+"""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+
+def _load(args):
+    import fmugen
+    from fmugen.scene import parse_sets
+
+    kw = {"allow_factories": True} if getattr(args, "allow_factories", False) else {}
+    try:
+        return fmugen.load_scene(args.scene, set=parse_sets(args.set), **kw)
+    except TypeError:  # an API without allow_factories
+        return fmugen.load_scene(args.scene, set=parse_sets(args.set))
+
+
+def _common(p) -> None:
+    p.add_argument("scene", help="scene TOML file")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="set a parameter, start value or option (repeatable)")
+    p.add_argument("--stop", type=float, default=None, help="stop time [s] (default: the scene's)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--allow-factories", action="store_true",
+                   help="allow instances made by a Python factory (runs code named in the file)")
+
+
+def add_cosim_commands(subparsers) -> None:
+    """Register ``cosim``, ``reference`` and ``report`` on an argparse subparsers object."""
+    p = subparsers.add_parser("cosim", help="co-simulate a scene's FMUs (results.csv, .npz, plot, summary)")
+    _common(p)
+    p.add_argument("--scheme", default=None, help="jacobi | gauss-seidel | iterative | newton "
+                   "(default: the scene's [cosim] scheme, else gauss-seidel)")
+    p.add_argument("--extrapolation", default=None, help="hold | linear | quadratic (default: the scene's, else linear)")
+    p.add_argument("--step", type=float, default=None, help="macro step H [s] (default: the scene's step)")
+    p.add_argument("--adaptive", action="store_true", help="control H by the interface defect (with --tol)")
+    p.add_argument("--tol", type=float, default=1e-4, help="adaptive: tolerance relative to each coupled signal")
+    p.set_defaults(func=cmd_cosim)
+
+    p = subparsers.add_parser("reference", help="solve a scene as one model with Radau at 1e-12 (reference.csv)")
+    _common(p)
+    p.add_argument("--points", type=int, default=2001, help="points of the uniform output grid (>= 1001)")
+    p.set_defaults(func=cmd_reference)
+
+    p = subparsers.add_parser("report", help="error against wall time over schemes and macro steps")
+    _common(p)
+    p.add_argument("--steps", default=None, help="comma-separated macro steps [s] (default: the scene's step "
+                   "times 8, 4, 2, 1, 1/2)")
+    p.add_argument("--schemes", default=None, help="comma-separated scheme/extrapolation pairs "
+                   "(default: jacobi/hold, jacobi/linear, gauss-seidel/hold, gauss-seidel/linear, newton/linear)")
+    p.add_argument("--repeats", type=int, default=5, help="timed runs per setting after a warm-up (median)")
+    p.add_argument("--target", type=float, default=1e-4, help="error target for the coarsest-setting summary")
+    p.add_argument("--no-monolithic", action="store_true", help="leave out the monolithic FMU row")
+    p.set_defaults(func=cmd_report)
+
+
+def _plot(result, path, title) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = len(result.columns)
+    fig, axes = plt.subplots(n, 1, figsize=(8, 1.8 * n + 1), sharex=True, squeeze=False)
+    for ax, c in zip(axes[:, 0], result.columns):
+        ax.plot(result.time, result[c], lw=1)
+        ax.set_ylabel(c, fontsize=8)
+        ax.grid(True, alpha=0.3)
+    axes[-1, 0].set_xlabel("time [s]")
+    axes[0, 0].set_title(title, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_results(result, out_dir) -> dict:
+    """results.csv, results.npz, results.png and summary.txt (also after a failure)."""
+    import numpy as np
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {k: out / v for k, v in (("csv", "results.csv"), ("npz", "results.npz"), ("plot", "results.png"),
+                                     ("summary", "summary.txt"))}
+    np.savetxt(paths["csv"], np.column_stack([result.time, result.values]), delimiter=",",
+               header=",".join(["time", *result.columns]), comments="", fmt="%.17g")
+    np.savez(paths["npz"], results=result.structured(), summary=json.dumps(result.summary.as_dict()))
+    paths["summary"].write_text(str(result.summary) + "\n")
+    if len(result.time) > 1:
+        s = result.summary
+        _plot(result, paths["plot"], f"{s.system}: {s.scheme}/{s.extrapolation}, {s.status}")
+    return paths
+
+
+def cmd_cosim(args) -> int:
+    from .master import run
+
+    scene = _load(args)
+    out = Path(args.out)
+    built = scene.build(out / "fmus")
+    system = built.system
+    st = dict(system.settings or {})
+    scheme = args.scheme or st.get("scheme", "gauss-seidel")
+    ext = args.extrapolation or st.get("extrapolation", "linear")
+    result = run(system, scheme, ext, step=args.step, adaptive=args.adaptive, tol=args.tol, stop=args.stop)
+    paths = write_results(result, out)
+    print(result.summary)
+    print(f"wrote {paths['csv']}, {paths['npz']}, {paths['plot']}, {paths['summary']}")
+    if not result.ok:
+        print("fmugen cosim: " + str(result.summary.failure).splitlines()[0], file=sys.stderr)
+        return 1
+    return 0
+
+
+def cmd_reference(args) -> int:
+    import numpy as np
+
+    from .reference import solve_reference, write_reference_csv
+    from .system import ReferenceProblem
+
+    scene = _load(args)
+    p = scene.reference_problem()
+    if args.stop is not None:
+        p = ReferenceProblem(p.model, p.x0, p.u, p.columns, p.start_time, float(args.stop), p.nominals)
+    ref = solve_reference(p, times=np.linspace(p.start_time, p.stop_time, max(int(args.points), 1001)))
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_reference_csv(ref, out / "reference.csv")
+    lines = [f"{scene.name}: reference, {ref.settings['method']} rtol {ref.settings['rtol']:g}, "
+             f"atol {ref.settings['atol']}, {ref.settings['steps']} steps" + (" (cached)" if ref.cached else ""),
+             "confirmed by: " + "; ".join(ref.settings["confirm"]),
+             "error estimate per column (max difference between the solves):"]
+    lines += [f"  {c:<28} {e:.3g}" for c, e in zip(ref.columns, ref.error)]
+    (out / "reference.txt").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    print(f"wrote {out / 'reference.csv'}")
+    return 0
+
+
+def cmd_report(args) -> int:
+    import fmugen
+
+    from .report import DEFAULT_SCHEMES, make_report, write_report
+    from .system import CosimSystem, Recorded, Unit
+
+    scene = _load(args)
+    out = Path(args.out)
+    built = scene.build(out / "fmus")
+    system = built.system
+    H = float(system.step)
+    steps = [float(h) for h in args.steps.split(",")] if args.steps else [8 * H, 4 * H, 2 * H, H, H / 2]
+    schemes = [tuple(s.split("/", 1)) if "/" in s else (s, "hold") for s in args.schemes.split(",")] \
+        if args.schemes else DEFAULT_SCHEMES
+    problem = scene.reference_problem()
+    extra = []
+    if not args.no_monolithic:
+        # the same scene as one CS FMU, run as a one-unit system (no couplings) at the same steps
+        mono_path = out / "fmus" / "monolithic.fmu"
+        model = scene.monolithic_model()
+        if not mono_path.is_file():
+            fmugen.build_fmu(model, mono_path, fmi_type="cs")
+        tol = min(float(u.start_values.get("solver.rtol", 1e-10)) for u in system.units)
+        starts = {v.name: float(x) for v, x in zip(model.states, problem.x0)}
+        starts.update({"solver.method": 2, "solver.rtol": tol, "solver.atol": tol})
+        unit = Unit("monolithic", mono_path, "cs", starts)
+        rec = tuple(Recorded(r.column, "monolithic", r.column, r.physical_unit) for r in system.recorded)
+        extra.append(("monolithic FMU", CosimSystem(system.name + "_monolithic", (unit,), (), rec,
+                                                     system.start_time, system.stop_time, system.step)))
+    rep = make_report(system, problem, steps, schemes, repeats=args.repeats, target=args.target, extra_rows=extra,
+                      stop=args.stop, progress=lambda s: print("  " + s, file=sys.stderr, flush=True))
+    paths = write_report(rep, out)
+    print(rep.table())
+    print(f"wrote {paths['table']}, {paths['csv']}, {paths['plot']}")
+    return 0

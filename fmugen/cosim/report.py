@@ -1,0 +1,281 @@
+"""Error against run time: co-simulation schemes x macro steps against the reference.
+
+For every setting (scheme, extrapolation, macro step H) the system is run
+once to warm up and ``repeats`` times to time it (median wall time), and its
+recorded columns are compared with the reference
+(:func:`fmugen.cosim.reference.solve_reference`, solved once on the grid of
+the smallest H so that every communication point of every run is a reference
+point):
+
+* ``err_final``: |error| at the stop time;
+* ``err_linf``, ``err_rms``: max and RMS |error| at the communication points
+  (the coupling error; the reference is solved at every one of them);
+* ``err_dense``: max |error| on a dense grid of >= 1000 points with the run
+  interpolated linearly between its communication points -- what a user of
+  the result sees, interpolation included;
+* ``digits``: correct digits, -log10 max |err| / (atol + |y_ref|) with
+  atol = 1e-3 max |y_ref|;
+* ``order``: observed order over the halving H -> H/2 of the same scheme.
+
+The error measure is the largest over the columns in radians (joint angles)
+when there are any, else over all columns relative to each column's range.
+An error closer than 100x to the reference's own estimate is not reported
+(``below_reference`` = True, error NaN).  The monolithic FMU of the scene
+(one CS FMU, same step) can be added as a row.  Outputs: the table (printed),
+``report.csv``, ``work_precision.png`` (log error against log wall time, one
+curve per scheme).
+"""
+from __future__ import annotations
+
+import csv
+import math
+import statistics
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Optional, Sequence
+
+import numpy as np
+
+from .errors import CosimError
+from .master import Master, _norm_choice, SCHEMES, EXTRAPOLATIONS
+from .reference import ReferenceSolution, solve_reference
+from .system import CosimSystem, ReferenceProblem
+
+DEFAULT_SCHEMES = (("jacobi", "hold"), ("jacobi", "linear"), ("gauss-seidel", "hold"),
+                   ("gauss-seidel", "linear"), ("newton", "linear"))
+REFUSE_FACTOR = 100.0
+MAX_REFERENCE_POINTS = 400_001
+
+
+@dataclass
+class Row:
+    label: str
+    scheme: str
+    extrapolation: str
+    step: float
+    status: str = "ok"
+    err_final: float = math.nan
+    err_linf: float = math.nan  # max |error| at the communication points
+    err_rms: float = math.nan  # RMS at the communication points
+    err_dense: float = math.nan  # max |error| on the dense grid (run interpolated linearly)
+    digits: float = math.nan
+    order: float = math.nan
+    wall_median: float = math.nan
+    real_time_factor: float = math.nan
+    macro_steps: int = 0
+    rollbacks: int = 0
+    iterations: int = 0
+    fmu_calls: int = 0
+    below_reference: bool = False
+    failure: str = ""
+
+    def as_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+@dataclass
+class Report:
+    system: str
+    rows: list
+    reference_error: float
+    reference_settings: dict
+    target: float
+    measure: str
+    coarsest: dict = field(default_factory=dict)  # scheme label -> Row meeting the target at the largest H
+    equal_time: dict = field(default_factory=dict)  # scheme label -> error at the common wall time
+    common_wall: float = math.nan
+
+    def table(self) -> str:
+        head = (f"{'setting':<24} {'H [s]':>9} {'status':>8} {'err_final':>10} {'err_Linf':>10} {'err_RMS':>10} {'err_dense':>10} "
+                f"{'digits':>6} {'order':>6} {'wall [s]':>9} {'x real':>7} {'steps':>7} {'rollb':>5} "
+                f"{'iters':>6} {'FMU calls':>9}")
+        lines = [f"{self.system}: error on {self.measure} against the reference "
+                 f"(its own error estimate {self.reference_error:.2g}; errors below "
+                 f"{REFUSE_FACTOR * self.reference_error:.2g} are not reported)", head, "-" * len(head)]
+
+        def g(v, fmt):
+            ok = isinstance(v, (int, float)) and not (isinstance(v, float) and math.isnan(v))
+            return format(v, fmt) if ok else format("-", ">" + fmt.rstrip("gfd").split(".")[0])
+
+        for r in self.rows:
+            lines.append(f"{r.label:<24} {r.step:>9.3g} {r.status:>8} {g(r.err_final, '10.3g')} {g(r.err_linf, '10.3g')} "
+                         f"{g(r.err_rms, '10.3g')} {g(r.err_dense, '10.3g')} {g(r.digits, '6.2f')} {g(r.order, '6.2f')} "
+                         f"{g(r.wall_median, '9.4f')} {g(r.real_time_factor, '7.1f')} {r.macro_steps:>7d} "
+                         f"{r.rollbacks:>5d} {r.iterations:>6d} {r.fmu_calls:>9d}")
+        lines.append("")
+        lines.append(f"coarsest macro step meeting {self.target:g} ({self.measure}, L-inf):")
+        for lab, r in self.coarsest.items():
+            lines.append(f"  {lab:<24} " + (f"H = {r.step:.4g} s, wall {r.wall_median:.4g} s, "
+                                            f"{r.real_time_factor:.1f}x real time"
+                                            + (" (error below the reference's resolution)" if r.below_reference else "")
+                                            if r else "none of the steps tried"))
+        if self.equal_time:
+            lines.append(f"error at equal wall time {self.common_wall:.4g} s (log-log interpolation):")
+            for lab, e in self.equal_time.items():
+                lines.append(f"  {lab:<24} " + (f"{e:.3g}" if e == e else "outside the measured range"))
+        return "\n".join(lines)
+
+
+def _measure_columns(system: CosimSystem, columns: Optional[Sequence[str]]):
+    names = [r.column for r in system.recorded]
+    if columns:
+        bad = [c for c in columns if c not in names]
+        if bad:
+            raise CosimError(f"report: unknown column(s) {bad}; recorded: {names}")
+        return list(columns), "the chosen columns"
+    rad = [r.column for r in system.recorded if r.physical_unit == "rad"]
+    if rad:
+        return rad, "angles [rad]"
+    return names, "all columns (relative to each column's range)"
+
+
+def _errors(time, values, ref: ReferenceSolution, cols):
+    """(final, L-inf and RMS at the communication points, L-inf on the dense grid, digits), max over columns."""
+    h = ref.time[1] - ref.time[0]
+    idx = np.rint((time - ref.time[0]) / h).astype(int)
+    ok = np.all((idx >= 0) & (idx < len(ref.time)))
+    exact = ok and np.allclose(ref.time[np.clip(idx, 0, len(ref.time) - 1)], time,
+                               atol=1e-9 * max(1.0, abs(ref.time[-1])))
+    dense = np.linspace(ref.time[0], time[-1], min(len(ref.time), 2001))
+    didx = np.rint((dense - ref.time[0]) / h).astype(int)
+    fin = linf = rms2 = dense_inf = 0.0
+    digits = math.inf
+    for c, j, s in cols:
+        yref = ref.values[:, j]
+        y = values[:, c]
+        ref_cp = yref[idx] if exact else np.interp(time, ref.time, yref)
+        e_cp = np.abs(y - ref_cp)
+        e_d = np.abs(np.interp(ref.time[didx], time, y) - yref[didx])
+        fin = max(fin, e_cp[-1] / s)
+        linf = max(linf, e_cp.max() / s)
+        rms2 = max(rms2, float(np.mean(e_cp ** 2)) / s ** 2)
+        dense_inf = max(dense_inf, e_d.max() / s)
+        atol = 1e-3 * max(np.max(np.abs(yref)), 1e-300)  # near zero crossings, digits relative to the range
+        digits = min(digits, -math.log10(max(float(np.max(e_cp / (atol + np.abs(ref_cp)))), 1e-300)))
+    return fin, linf, math.sqrt(rms2), dense_inf, digits
+
+
+def make_report(system: CosimSystem, problem: ReferenceProblem, steps: Sequence[float],
+                schemes: Sequence[tuple] = DEFAULT_SCHEMES, repeats: int = 5, target: float = 1e-4,
+                columns: Optional[Sequence[str]] = None, extra_rows: Sequence = (), stop: Optional[float] = None,
+                progress=None) -> Report:
+    """Sweep ``schemes`` x ``steps`` (each a multiple of the smallest by a power of 2 is best: exact
+    comparison points) and measure every run against the reference of ``problem``.
+
+    ``extra_rows``: (label, system) pairs run like the schemes at each step with Jacobi (e.g. the
+    monolithic FMU as a one-unit system).
+    """
+    if repeats < 1:
+        raise CosimError("repeats must be >= 1")
+    steps = sorted({float(h) for h in steps}, reverse=True)
+    if not steps or min(steps) <= 0:
+        raise CosimError("steps must be positive")
+    schemes = [(_norm_choice(s, SCHEMES, "scheme"), _norm_choice(e, EXTRAPOLATIONS, "extrapolation"))
+               for s, e in schemes]
+    t0 = problem.start_time
+    t1 = float(stop) if stop is not None else problem.stop_time
+    hmin = min(steps)
+    n = int(round((t1 - t0) / hmin))
+    if n + 1 > MAX_REFERENCE_POINTS:
+        n = MAX_REFERENCE_POINTS - 1
+    ref_problem = problem if t1 == problem.stop_time else ReferenceProblem(
+        problem.model, problem.x0, problem.u, problem.columns, t0, t1, problem.nominals)
+    ref = solve_reference(ref_problem, times=np.linspace(t0, t1, n + 1))
+    names, measure = _measure_columns(system, columns)
+    pos = [r.column for r in system.recorded]
+    cols = []
+    for c in names:
+        j = list(ref.columns).index(c)
+        s = 1.0 if measure.startswith("angles") or columns else max(np.ptp(ref.values[:, j]), 1e-300)
+        cols.append((pos.index(c), j, s))
+    ref_err = max(ref.error[j] / s for _, j, s in cols)
+    rows = []
+    runs = [(f"{s}/{e}", system, s, e) for s, e in schemes] + [(lab, sysm, "jacobi", "hold") for lab, sysm in extra_rows]
+    for label, sysm, scheme, ext in runs:
+        prev = None
+        for H in steps:
+            if progress:
+                progress(f"{label} H = {H:.4g}")
+            walls = []
+            result = None
+            with Master(sysm, scheme, ext) as m:  # warm-up: loads and instantiates; not timed
+                result = m.run(step=H, stop=t1)
+            if result.ok:
+                for _ in range(repeats):
+                    with Master(sysm, scheme, ext) as m:
+                        r2 = m.run(step=H, stop=t1)
+                    walls.append(r2.summary.wall_time)
+            s = result.summary
+            row = Row(label, scheme, ext, H, s.status, macro_steps=s.macro_steps, rollbacks=s.rollbacks,
+                      iterations=s.iterations, fmu_calls=s.fmu_calls,
+                      failure=str(s.failure).splitlines()[0] if s.failure else "")
+            if result.ok:
+                row.wall_median = statistics.median(walls)
+                row.real_time_factor = (t1 - t0) / row.wall_median if row.wall_median > 0 else math.inf
+                fin, linf, rms, dense, dig = _errors(result.time, result.values, ref, cols)
+                row.err_final, row.err_linf, row.err_rms, row.err_dense, row.digits = fin, linf, rms, dense, dig
+                if linf < REFUSE_FACTOR * ref_err:
+                    row.below_reference = True
+                    row.err_final = row.err_linf = row.err_rms = row.digits = math.nan
+                if prev is not None and prev.status == "ok" and not prev.below_reference and not row.below_reference \
+                        and abs(prev.step / H - 2.0) < 1e-9:
+                    row.order = math.log2(prev.err_linf / row.err_linf) if row.err_linf > 0 else math.nan
+            rows.append(row)
+            prev = row
+    rep = Report(system.name, rows, ref_err, ref.settings, target, measure)
+    labels = list(dict.fromkeys(r.label for r in rows))
+    for lab in labels:
+        ok = [r for r in rows if r.label == lab and r.status == "ok" and (r.err_linf <= target or r.below_reference)]
+        rep.coarsest[lab] = max(ok, key=lambda r: r.step) if ok else None
+    walls = [r.wall_median for r in rows if r.status == "ok" and r.err_linf == r.err_linf]
+    if walls:
+        rep.common_wall = float(statistics.median(walls))
+        for lab in labels:
+            pts = sorted((r.wall_median, r.err_linf) for r in rows
+                         if r.label == lab and r.status == "ok" and r.err_linf == r.err_linf and r.err_linf > 0)
+            if len(pts) >= 2 and pts[0][0] <= rep.common_wall <= pts[-1][0]:
+                lw = np.log([p[0] for p in pts])
+                le = np.log([p[1] for p in pts])
+                order = np.argsort(lw)
+                rep.equal_time[lab] = float(np.exp(np.interp(math.log(rep.common_wall), lw[order], le[order])))
+            else:
+                rep.equal_time[lab] = math.nan
+    return rep
+
+
+def write_report(rep: Report, out_dir) -> dict:
+    """report.txt, report.csv and work_precision.png in ``out_dir``; returns their paths."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"table": out / "report.txt", "csv": out / "report.csv", "plot": out / "work_precision.png"}
+    paths["table"].write_text(rep.table() + "\n")
+    fields = list(Row("", "", "", 0.0).as_dict())
+    with open(paths["csv"], "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=["system", "measure", "reference_error", *fields])
+        w.writeheader()
+        for r in rep.rows:
+            w.writerow({"system": rep.system, "measure": rep.measure, "reference_error": rep.reference_error,
+                        **r.as_dict()})
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.5, 5.5))
+    for lab in dict.fromkeys(r.label for r in rep.rows):
+        pts = [(r.wall_median, r.err_linf, r.step) for r in rep.rows
+               if r.label == lab and r.status == "ok" and r.err_linf == r.err_linf and r.err_linf > 0]
+        if pts:
+            ax.loglog([p[0] for p in pts], [p[1] for p in pts], "o-", label=lab)
+    ax.axhline(REFUSE_FACTOR * rep.reference_error, color="grey", ls=":",
+               label=f"100 x reference error estimate ({rep.reference_error:.1g})")
+    ax.axhline(rep.target, color="k", ls="--", lw=0.8, label=f"target {rep.target:g}")
+    ax.set_xlabel("wall time [s] (median)")
+    ax.set_ylabel(f"max error at communication points, {rep.measure}")
+    ax.set_title(f"{rep.system}: error against run time")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(paths["plot"], dpi=120)
+    plt.close(fig)
+    return paths
