@@ -4,7 +4,9 @@ Every point equals the same run done serially with the same FMUs, bit for bit, a
 with that point's values; failed points are recorded with their reason; a restarted sweep skips the points
 done; the state of rest is solved again per point (P_L = tau_load / D_m); folded parameters are refused.
 
-Runs use the master's defaults (``OPTS`` is passed to the sweep and to every serial run alike).
+``OPTS`` (passed to the sweep and to every serial run alike) switches the master's divergence monitor off:
+these tests are about the sweep, and the monitor's verdict on borderline runs is still being tuned (it
+stops joint.J = 1.25 at t = 0.21 s on a bounded run).  The failing point below fails in its FMU.
 """
 import csv
 import dataclasses
@@ -21,7 +23,7 @@ from fmugen.sweep.metrics import compute, parse_metrics
 from fmugen.sweep.points import parse_samples
 
 SPLIT = Path(__file__).resolve().parents[1] / "examples" / "scenes" / "single_joint_split.toml"
-OPTS = {}
+OPTS = {"detect_divergence": False}
 
 
 @pytest.fixture(scope="module")
