@@ -37,8 +37,6 @@ from .model_description import model_description_xml
 
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 CFLAGS = ("-O2", "-fPIC", "-shared", "-Wall", "-Wextra", "-std=c99")
-#: a generated model.c larger than this compiles with -O1 (see _cflags_for)
-LARGE_SOURCE_BYTES = 2_000_000
 # zip entries get a fixed date so that identical inputs give identical FMUs
 _ZIP_DATE = (2020, 1, 1, 0, 0, 0)
 
@@ -213,16 +211,6 @@ def _terminate_as_exception():
         signal.signal(signal.SIGTERM, previous)
 
 
-def _cflags_for(source: Path) -> list:
-    """Optimisation by size: -O2, but -O1 for a generated file over
-    :data:`LARGE_SOURCE_BYTES`, where gcc -O2's time grows faster than the
-    file (the straight-line code of a large arm; measured in
-    examples/bench_large_models.py)."""
-    if source.name == "model.c" and source.stat().st_size > LARGE_SOURCE_BYTES:
-        return ["-O1"]
-    return []
-
-
 def _run_jobs(jobs: list, cwd: Path, what: str, budget: _Budget, stage: str) -> None:
     """Run compiler commands, at most one per CPU at a time; the first failure
     (or an exceeded budget, or an exception such as a SIGTERM) kills the rest."""
@@ -269,7 +257,7 @@ def _compile(cc: str, extra: list, sources: list, src: Path, lib: Path, what: st
     objs[0].parent.mkdir(exist_ok=True)
     # largest first, so the long model.c starts at once
     order = sorted(range(len(sources)), key=lambda i: -(src / sources[i]).stat().st_size)
-    jobs = [[cc, *flags, *_cflags_for(src / sources[i]), "-c", sources[i], "-o", str(objs[i])] for i in order]
+    jobs = [[cc, *flags, "-c", sources[i], "-o", str(objs[i])] for i in order]
     _run_jobs(jobs, src, what, budget, "compile")
     link = [cc, "-shared", *extra, "-o", str(lib), *map(str, objs), "-lm"]
     _run_jobs([link], src, what, budget, "link")
