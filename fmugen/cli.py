@@ -45,7 +45,7 @@ def _kind(path: Path) -> str:
 
 
 def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler", model="forward_dynamics",
-                   sets=None):
+                   sets=None, strategy="auto"):
     """The SymbolicModel a file describes (robot, component assembly, or a scene's monolithic model).
 
     For a robot, ``model`` chooses the forward dynamics (states q, qd; input
@@ -62,7 +62,8 @@ def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler", mo
         import fmugen
 
         arm = fmugen.load_robot(path, formulation)
-        m = arm.inverse_dynamics_model() if model == "inverse_dynamics" else arm.state_space_model(outputs=outputs)
+        m = (arm.inverse_dynamics_model() if model == "inverse_dynamics"
+             else arm.state_space_model(outputs=outputs, strategy=strategy))
     else:
         from .components.assembly import load_assembly
 
@@ -123,7 +124,7 @@ def _cmd_build(args) -> int:
     outputs = tuple(o for o in args.outputs.split(",") if o)
     if sys.stderr.isatty():  # progress of the first stage; build_fmu reports the others
         print(f"fmugen build {path.name}: derive ...", end="", file=sys.stderr, flush=True)
-    model = symbolic_model(path, outputs, args.formulation, args.model, sets=args.set)
+    model = symbolic_model(path, outputs, args.formulation, args.model, sets=args.set, strategy=args.strategy)
     t1 = time.perf_counter()
     if sys.stderr.isatty():
         print(f" {t1 - t0:.1f} s", file=sys.stderr, flush=True)
@@ -189,6 +190,8 @@ def main(argv=None) -> int:
     p.add_argument("--fold", default="none",
                    help="fold parameters into constants: none (default), all, or comma-separated names")
     p.add_argument("--ops", action="store_true", help="print operation counts of the generated functions")
+    p.add_argument("--strategy", default="auto", choices=["auto", "straight", "loops"],
+                   help="robots: straight-line code, or the runtime's looped dynamics (auto: loops from 7 links)")
     p.add_argument("--budget-seconds", type=float, default=None,
                    help="stop the build (with a message, temporary files removed) after this many seconds")
     p.add_argument("--budget-memory", default=None,
