@@ -293,6 +293,8 @@ class Master:
         self.ny, self.nu = ny, nu
         self.S = np.array(S, dtype=np.intp)
         self.F = np.array(F, dtype=float)
+        self._unit_factors = bool(np.all(self.F == 1.0))
+        self._rows = np.arange(16)
         self.u_owner = np.array(owner_u, dtype=np.intp)
         self.u_src_unit = np.array(src_unit, dtype=np.intp)
         self.coupling_labels = tuple(u_labels)
@@ -369,7 +371,8 @@ class Master:
         nu = self.nu
         if nu:
             np.take(self.Y, self.S, out=out[:nu])
-            out[:nu] *= self.F
+            if not self._unit_factors:
+                out[:nu] *= self.F
         return out
 
     # -- the run ----------------------------------------------------------------
@@ -406,6 +409,10 @@ class Master:
         Upred = np.zeros(max(nu, 1))
         d = np.zeros(max(nu, 1))
         scale = np.zeros(max(nu, 1))
+        Unew_v, Upred_v, d_v, Uset_v, DUset_v = Unew[:nu], Upred[:nu], d[:nu], Uset[:nu], DUset[:nu]
+        U0_v, U1_v, U2_v = U_hist[0, :nu], U_hist[1, :nu], U_hist[2, :nu]
+        hold_fast = ext == 0 and not implicit  # Upred = U_n; no input derivatives sent; one history row
+        self._send_du = not hold_fast
         rec_idx = self.rec_idx
         cap = int(min(max((stop - t0) / Hmin, 16), 1_000_000)) + 2 if not adaptive else 1024
         T = np.empty(cap)
@@ -447,29 +454,40 @@ class Master:
             H = min(H0, Hmax)
             err_prev = 1.0
             rejected_last = False
-            # divergence monitor: window maxima of the scaled defect
-            win_len, win_max, win_sig, windows, win_count = 5, 0.0, 0.0, [], 0
-            recent = deque(maxlen=8)  # (defect, signal) of the last macro steps
+            # divergence monitor: every win_len accepted steps, on the block of their defects and values
+            win_len, windows, win_count = 5, [], 0
+            Dblk = np.zeros((win_len, max(nu, 1)))
+            Ublk = np.zeros((win_len, max(nu, 1)))
+            recent = deque(maxlen=8)  # (defect, signal, relative defect) of the last macro steps
+            peak = np.abs(U_hist[0, :nu]).copy()  # slowly forgetting peak |U| per coupling
             grow_votes = deque(maxlen=GROW_AFTER)  # step-size factors the last accepted steps proposed
             J = None
             J_H = None
             while t < stop - 1e-12 * max(1.0, abs(stop)):
-                if t + H > stop or stop - (t + H) < 1e-3 * H:
+                if abs(stop - (t + H)) <= 1e-6 * H:
+                    pass  # the last step: keep H (bit-identical to a loop that steps H), land on stop
+                elif t + H > stop or stop - (t + H) < 1e-3 * H:
                     H = stop - t
                 # -- predictor: extrapolant through the last communication points --
                 U0 = U_hist[0]
-                Uset[:nu] = U0[:nu]
-                if ext == 0 or n_hist == 1:
-                    DUset[:nu] = 0.0
-                elif ext == 1 or n_hist == 2:
-                    DUset[:nu] = (U0[:nu] - U_hist[1, :nu]) / (t_hist[0] - t_hist[1])
-                else:  # quadratic: slope of the secant to P(t_n + H)
-                    h1, h2 = t_hist[0] - t_hist[1], t_hist[1] - t_hist[2]
-                    d1 = (U0[:nu] - U_hist[1, :nu]) / h1
-                    d2 = (U_hist[1, :nu] - U_hist[2, :nu]) / h2
-                    c2 = (d1 - d2) / (h1 + h2)
-                    DUset[:nu] = d1 + c2 * (H + h1)  # (P(t+H) - U_n)/H = d1 + c2 (H + h1)
-                Upred[:nu] = U0[:nu] + DUset[:nu] * H
+                Uset_v[:] = U0_v
+                if hold_fast:
+                    Upred_v = U0_v  # held: the prediction of U_{n+1} is U_n (DUset stays zero)
+                else:
+                    if ext == 0 or n_hist == 1:
+                        DUset_v[:] = 0.0
+                    elif ext == 1 or n_hist == 2:
+                        np.subtract(U0_v, U1_v, out=DUset_v)
+                        DUset_v /= t_hist[0] - t_hist[1]
+                    else:  # quadratic: slope of the secant to P(t_n + H)
+                        h1, h2 = t_hist[0] - t_hist[1], t_hist[1] - t_hist[2]
+                        d1 = (U0_v - U1_v) / h1
+                        d2 = (U1_v - U2_v) / h2
+                        c2 = (d1 - d2) / (h1 + h2)
+                        DUset_v[:] = d1 + c2 * (H + h1)  # (P(t+H) - U_n)/H = d1 + c2 (H + h1)
+                    Upred_v = Upred[:nu]
+                    np.multiply(DUset_v, H, out=Upred_v)
+                    Upred_v += U0_v
                 if need_states:
                     for k, u in enumerate(units):
                         st = u.save(states[k])
@@ -487,7 +505,7 @@ class Master:
                     else:
                         if J is not None and J_H is not None and abs(H - J_H) > 1e-12 * H:
                             J = None  # the step's sensitivity depends on H
-                        Vg = Upred[:nu].copy()
+                        Vg = Upred_v.copy()
                         it = 0
                         conv = False
                         err_c_prev = math.inf
@@ -551,14 +569,14 @@ class Master:
                     rejected_last = True
                     continue
                 # -- defect, error estimate, divergence --
-                np.subtract(Unew[:nu], Upred[:nu], out=d[:nu])
-                if not np.all(np.isfinite(Unew[:nu])):
-                    j = int(np.argmax(~np.isfinite(Unew[:nu])))
-                    failure = FailureReport(t, "non-finite", "a coupled value is not finite",
-                                            coupling=self.coupling_labels[j])
-                    break
-                absU = np.abs(Unew[:nu])
-                np.maximum(scale[:nu], absU, out=scale[:nu])
+                np.subtract(Unew_v, Upred_v, out=d_v)
+                if adaptive or implicit:
+                    if not np.all(np.isfinite(Unew_v)):
+                        j = int(np.argmax(~np.isfinite(Unew_v)))
+                        failure = FailureReport(t, "non-finite", "a coupled value is not finite",
+                                                coupling=self.coupling_labels[j])
+                        break
+                    np.maximum(scale[:nu], np.abs(Unew_v), out=scale[:nu])
                 if adaptive:
                     ratio = np.abs(d[:nu]) / (tol * scale[:nu])
                     err = float(ratio.max()) if nu else 0.0
@@ -580,58 +598,31 @@ class Master:
                         rejected_last = True
                         continue
                 # -- accept --
-                t = t + H if stop - (t + H) > 1e-12 * max(1.0, abs(stop)) else stop
+                t = t + H if stop - (t + H) > 1e-6 * H else stop
                 summ.macro_steps += 1
                 summ.step_min = min(summ.step_min, H)
                 summ.step_max = max(summ.step_max, H)
-                U_hist[2, :nu] = U_hist[1, :nu]
-                U_hist[1, :nu] = U_hist[0, :nu]
-                U_hist[0, :nu] = Unew[:nu]
+                if not hold_fast:
+                    U2_v[:] = U1_v
+                    U1_v[:] = U0_v
+                U0_v[:] = Unew_v
                 t_hist[2], t_hist[1], t_hist[0] = t_hist[1], t_hist[0], t
                 n_hist = min(n_hist + 1, 3)
                 if n_rows == len(T):
                     T = np.concatenate([T, np.empty(len(T))])
                     V = np.concatenate([V, np.empty_like(V)])
                 T[n_rows] = t
-                V[n_rows] = Y[rec_idx]
+                np.take(Y, rec_idx, out=V[n_rows])
                 n_rows += 1
                 if detect_divergence and nu and not adaptive:  # adaptive: the step control bounds the defect
-                    dn = float(np.max(np.abs(d[:nu]) / scale0[:nu]))
-                    sn = float(np.max(absU / scale0[:nu]))
-                    if sn > 1e8:
-                        j = int(np.argmax(absU / scale0[:nu]))
-                        failure = FailureReport(t, "diverged",
-                                                f"coupled value grew to {sn:.3g} x its initial scale",
-                                                coupling=self.coupling_labels[j])
-                        break
-                    recent.append((dn, sn))
-                    if _explosive(recent):
-                        j = int(np.argmax(np.abs(d[:nu]) / scale0[:nu]))
-                        failure = FailureReport(
-                            t, "diverged",
-                            f"the coupling diverges: the coupled values grew more than 4x on each of the last "
-                            f"4 macro steps with a defect as large as the signal (H = {H:.4g} s is "
-                            f"above this scheme's stability limit: take a smaller step, extrapolation, or an "
-                            f"iterative/newton scheme)", coupling=self.coupling_labels[j])
-                        break
-                    win_max = max(win_max, dn)
-                    win_sig = max(win_sig, sn)
+                    Dblk[win_count] = d_v
+                    Ublk[win_count] = Unew_v
                     win_count += 1
                     if win_count == win_len:
-                        windows.append((win_max, win_sig))
-                        win_max = win_sig = 0.0
                         win_count = 0
-                        div = _diverging(windows)
-                        if div:
-                            jrel = np.abs(d[:nu]) / scale0[:nu]
-                            j = int(np.argmax(jrel))
-                            failure = FailureReport(
-                                t, "diverged",
-                                f"the coupling diverges: the interface defect (changed {div:.3g}x over the last "
-                                f"{win_len * max(_run_length(windows), min(len(windows), SUSTAINED))} macro steps) "
-                                f"does not decay and is as large as the signal (H = {H:.4g} s is above this scheme's stability limit: take a smaller "
-                                f"step, extrapolation, or an iterative/newton scheme)",
-                                coupling=self.coupling_labels[j])
+                        failure = self._monitor(t, H, Dblk[:, :nu], Ublk[:, :nu], scale0[:nu], peak, windows,
+                                                recent)
+                        if failure is not None:
                             break
                 # -- next H --
                 if adaptive:
@@ -688,6 +679,48 @@ class Master:
             summ.step_min = summ.step_max = 0.0
         return CosimResult(T[:n_rows].copy(), V[:n_rows].copy(), self.columns, summ)
 
+    def _monitor(self, t, H, D, U, scale0, peak, windows, recent):
+        """Divergence check on a block of accepted macro steps (defects D, values U: (win_len, nu))."""
+        A = np.abs(U)
+        R = np.abs(D)
+        if not (math.isfinite(A.sum()) and math.isfinite(R.sum())):
+            j = int(np.argmax(~np.isfinite(A).all(axis=0) | ~np.isfinite(R).all(axis=0)))
+            return FailureReport(t, "non-finite", "a coupled value is not finite", coupling=self.coupling_labels[j])
+        A /= scale0
+        sn = A.max(axis=1)
+        if sn[-1] > 1e8:
+            j = int(np.argmax(A[-1]))
+            return FailureReport(t, "diverged", f"coupled value grew to {sn[-1]:.3g} x its initial scale",
+                                 coupling=self.coupling_labels[j])
+        # the defect against the same coupling's recent peak magnitude (not its value now, which crosses
+        # zero): ~1 when the coupling error is the signal, ~H*omega for a resolved motion
+        np.maximum(peak * PEAK_DECAY ** len(D), np.abs(U).max(axis=0), out=peak)
+        Rs = R / scale0
+        jd = Rs.argmax(axis=1)
+        rows = self._rows[: len(D)]
+        dn = Rs[rows, jd]
+        rel = R[rows, jd] / np.maximum(peak[jd], REST * scale0[jd])
+        recent.extend(zip(dn.tolist(), sn.tolist(), rel.tolist()))
+        if _explosive(recent):
+            return FailureReport(
+                t, "diverged",
+                f"the coupling diverges: the coupled values grew more than 4x on each of 4 macro steps with a "
+                f"defect as large as the signal (H = {H:.4g} s is above this scheme's stability limit: take a "
+                f"smaller step, extrapolation, or an iterative/newton scheme)",
+                coupling=self.coupling_labels[int(jd[-1])])
+        k = int(dn.argmax())
+        _push_window(windows, float(dn[k]), float(sn.max()), float(rel[k]))
+        div = _diverging(windows)
+        if div:
+            return FailureReport(
+                t, "diverged",
+                f"the coupling diverges: the interface defect (changed {div:.3g}x over the last "
+                f"{len(D) * max(_run_length(windows), min(len(windows), SUSTAINED))} macro steps) "
+                f"does not decay and is as large as the signal (H = {H:.4g} s is above this scheme's stability "
+                f"limit: take a smaller step, extrapolation, or an iterative/newton scheme)",
+                coupling=self.coupling_labels[int(jd[k])])
+        return None
+
     _do_steps = 0
 
     def _do(self, u, t, H, no_prior) -> int:
@@ -698,7 +731,7 @@ class Master:
             if st > 1:
                 raise UnitFailure(u.name, "fmi2SetReal", st, u.messages())
             calls += 1
-            if u.can_interpolate:
+            if u.can_interpolate and self._send_du:
                 st = u._setInDer(u.c, u.in_vr, u.n_in, u.in_order, u.du_ptr)
                 if st > 1:
                     raise UnitFailure(u.name, "fmi2SetRealInputDerivatives", st, u.messages())
@@ -784,51 +817,72 @@ class Master:
         return np.linalg.inv(np.eye(nu) - Jg), calls
 
 
+PEAK_DECAY = 0.995  # per macro step: the peak magnitude forgets over ~200 steps
 REST = 1e-6  # coupled signals below this fraction of their nominal scale count as at rest (no growth from noise)
 SUSTAINED = 20  # windows (100 macro steps) of a defect that neither decays nor shrinks against the signal
 ENVELOPE = 6  # windows (of 5 macro steps) in the defect's envelope: longer than an oscillation period
 
 
-def _envelope(windows, i) -> float:
-    return max(w[0] for w in windows[max(0, i - ENVELOPE + 1): i + 1])
+class _Window:
+    """One window of win_len macro steps, with what the criteria need kept incrementally (O(1) per window)."""
+
+    __slots__ = ("d", "s", "rel", "env", "run", "first_moving", "n_moving", "sustained")
+
+    def __getitem__(self, i):  # (defect, signal, relative defect), as a tuple
+        return (self.d, self.s, self.rel)[i]
+
+
+def _push_window(windows, d, s, rel) -> None:
+    w = _Window()
+    w.d, w.s, w.rel = d, s, rel
+    # envelope: the largest defect of the last ENVELOPE windows (longer than an oscillation period)
+    w.env = max([d] + [x.d for x in windows[-(ENVELOPE - 1):]]) if ENVELOPE > 1 else d
+    moving = s >= 1e3 * REST
+    if windows and w.env >= windows[-1].env:
+        p = windows[-1]
+        w.run = p.run + 1
+        w.first_moving = p.first_moving if p.first_moving is not None else (w if moving else None)
+        w.n_moving = p.n_moving + (1 if moving else 0)
+    else:
+        w.run = 0
+        w.first_moving = w if moving else None
+        w.n_moving = 1 if moving else 0
+    ok = rel >= 0.1 and moving
+    w.sustained = (windows[-1].sustained + 1 if windows else 1) if ok else 0
+    windows.append(w)
+    if len(windows) > 4 * SUSTAINED:  # keep the list short; the criteria look back at most SUSTAINED
+        del windows[: len(windows) - 2 * SUSTAINED]
 
 
 def _run_length(windows) -> int:
     """Number of windows over which the defect's envelope has not decreased, ending now."""
-    n = 0
-    for i in range(len(windows) - 1, 0, -1):
-        if _envelope(windows, i) >= _envelope(windows, i - 1):
-            n += 1
-        else:
-            break
-    return n
+    return windows[-1].run if windows else 0
 
 
 def _diverging(windows) -> float:
-    """Growth factor if the defect's envelope rose without a pause >= 10x and the defect is at
-    least a tenth of the signal (the coupling error has become the signal); else 0."""
-    n = _run_length(windows)
-    # only windows where the signals move (above rest): growth from round-off noise is no growth
-    moving = [w for w in windows[len(windows) - 1 - n:] if w[1] >= 1e3 * REST]
-    if len(moving) >= 4:
-        first, last = moving[0], moving[-1]
-        growth = max(w[0] for w in moving[-2:]) / max(first[0], REST)
-        # the defect is a sizeable part of the signal and that part is not shrinking (a stable scheme on a
-        # ramp from rest also grows, but its defect falls behind the signal)
-        if growth >= 10.0 and last[0] >= 0.1 * last[1] and last[0] * first[1] >= 0.5 * first[0] * last[1]:
+    """Growth factor if the coupling diverges, else 0.
+
+    Growth: over a run of windows in which the defect's envelope never decreased (>= 4 of them with the
+    signals above rest), the defect grew >= 10x and stays >= 0.1 of its coupling's recent peak (and that
+    relative size is not shrinking -- a stable scheme on a ramp from rest also grows, but its defect falls
+    behind the signal).  Sustained: a growth that a nonlinearity (valve flow, rails) has bounded, a limit
+    cycle whose relative defect stays >= 0.1 over SUSTAINED windows without the envelope halving.
+    """
+    last = windows[-1]
+    first = last.first_moving
+    if first is not None and last.n_moving >= 4:
+        growth = max(last.d, windows[-2].d) / max(first.d, REST)
+        if growth >= 10.0 and last.rel >= 0.1 and last.rel >= 0.5 * first.rel:
             return growth
-    # a growth that a nonlinearity (valve flow, rails) has bounded: a limit cycle whose defect stays a
-    # sizeable part of the signal and does not decay over SUSTAINED windows
-    if len(windows) > SUSTAINED:
-        last = windows[-SUSTAINED:]
-        env_now, env_then = _envelope(windows, len(windows) - 1), _envelope(windows, len(windows) - 1 - SUSTAINED)
-        if all(w[0] >= 0.1 * w[1] and w[1] >= 1e3 * REST for w in last) and env_now >= 0.5 * env_then:
-            return env_now / max(env_then, REST)
+    if last.sustained >= SUSTAINED and len(windows) > SUSTAINED:
+        then = windows[-1 - SUSTAINED].env
+        if last.env >= 0.5 * then:
+            return last.env / max(then, REST)
     return 0.0
 
 
 def _growing(windows) -> bool:
-    return _run_length(windows) >= 2 and windows[-1][0] >= 0.1 * windows[-1][1]
+    return bool(windows) and windows[-1].run >= 2 and windows[-1].rel >= 0.1
 
 
 def _halves(recent):
@@ -842,8 +896,8 @@ def _growing_steps(recent) -> bool:
     if len(recent) < 4:
         return False
     a, b = _halves(recent)
-    db = max(x[0] for x in b)
-    return db >= 10 * max(max(x[0] for x in a), 1e-300) and db >= 0.1 * max(x[1] for x in b)
+    top = max(b, key=lambda x: x[0])
+    return top[0] >= 10 * max(max(x[0] for x in a), 1e-300) and top[2] >= 0.1
 
 
 def _explosive(recent) -> bool:
@@ -854,7 +908,7 @@ def _explosive(recent) -> bool:
     if len(recent) < 5:
         return False
     r = list(recent)[-5:]
-    return (r[0][1] > 0 and all(b[1] >= 4 * a[1] for a, b in zip(r, r[1:])) and r[-1][0] >= 0.5 * r[-1][1]
+    return (r[0][1] > 0 and all(b[1] >= 4 * a[1] for a, b in zip(r, r[1:])) and r[-1][2] >= 0.5
             and r[-1][1] >= 1e-3)  # above round-off: signals are scaled by their nominal values
 
 
