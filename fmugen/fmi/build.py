@@ -220,11 +220,15 @@ def _run_jobs(jobs: list, cwd: Path, what: str, budget: _Budget, stage: str) -> 
         while pending or running:
             while pending and len(running) < width:
                 cmd = pending.pop(0)
+                # output to a file, not a pipe: a compiler with more warnings than a
+                # pipe holds would block until read, and this loop reads at the end
+                log = tempfile.TemporaryFile(mode="w+")
                 try:
-                    proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                            text=True)
+                    proc = subprocess.Popen(cmd, cwd=cwd, stdout=log, stderr=subprocess.STDOUT, text=True)
                 except OSError as e:
+                    log.close()
                     raise BuildError(f"cannot run the C compiler: {shlex.join(cmd)}\n(in {cwd})\n{e}") from None
+                proc.log = log
                 running.append((cmd, proc))
             time.sleep(0.02)
             budget.check(stage, [p.pid for _, p in running])
@@ -232,8 +236,9 @@ def _run_jobs(jobs: list, cwd: Path, what: str, budget: _Budget, stage: str) -> 
                 if proc.poll() is None:
                     continue
                 running.remove((cmd, proc))
-                out = proc.stdout.read()
-                proc.stdout.close()
+                proc.log.seek(0)
+                out = proc.log.read()
+                proc.log.close()
                 if proc.returncode != 0:
                     raise BuildError(f"C compiler failed (exit {proc.returncode}) building {what!r}:\n"
                                      f"  cd {cwd} && {shlex.join(cmd)}\n{out.strip()}")
@@ -241,7 +246,7 @@ def _run_jobs(jobs: list, cwd: Path, what: str, budget: _Budget, stage: str) -> 
         for _, proc in running:  # only on the way out through an exception
             proc.kill()
             proc.wait()
-            proc.stdout.close()
+            proc.log.close()
 
 
 def _compile(cc: str, extra: list, sources: list, src: Path, lib: Path, what: str,
