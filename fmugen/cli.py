@@ -10,6 +10,10 @@
                      [--set ...] [--without INSTANCES] --out FILE.npz   (operating point, A B C D, fmugen/control)
     fmugen sweep SCENE.toml --grid NAME=v1,v2,... | --sample NAME=dist(...) -n N --seed S [--metrics ...]
                  --out DIR [--scheduler ADDRESS] [--workers K]   (parameter studies on Dask, fmugen/sweep)
+    fmugen cosim SCENE.toml [--scheme jacobi|gauss-seidel|iterative|newton] [--extrapolation hold|linear|quadratic]
+                 [--step H] [--adaptive --tol E] [--stop T] [--set ...] --out DIR   (co-simulation, fmugen/cosim)
+    fmugen reference SCENE.toml [--points N] [--set ...] --out DIR   (the scene as one model, Radau at 1e-12)
+    fmugen report SCENE.toml [--steps H1,H2,...] [--schemes S/E,...] [--repeats 5] --out DIR   (error vs wall time)
 
 FILE is a robot file (a ``[robot]`` table), an assembly of actuator-chain
 components (an ``[assembly]`` table) or a scene (a ``[scene]`` table: one FMU
@@ -223,6 +227,10 @@ def main(argv=None) -> int:
     from .sweep.cli import add_parser as add_sweep_parser  # fmugen sweep: parameter studies on Dask
 
     add_sweep_parser(sub)
+
+    from .cosim.commands import add_cosim_commands  # fmugen cosim | reference | report: fmugen/cosim
+
+    add_cosim_commands(sub)
 
     args = parser.parse_args(argv)
     try:

@@ -826,7 +826,7 @@ ENVELOPE = 6  # windows (of 5 macro steps) in the defect's envelope: longer than
 class _Window:
     """One window of win_len macro steps, with what the criteria need kept incrementally (O(1) per window)."""
 
-    __slots__ = ("d", "s", "rel", "env", "run", "first_moving", "n_moving", "sustained")
+    __slots__ = ("d", "s", "rel", "env", "run", "first_moving", "n_moving", "sustained", "jumps")
 
     def __getitem__(self, i):  # (defect, signal, relative defect), as a tuple
         return (self.d, self.s, self.rel)[i]
@@ -837,7 +837,9 @@ def _push_window(windows, d, s, rel) -> None:
     w.d, w.s, w.rel = d, s, rel
     # envelope: the largest defect of the last ENVELOPE windows (longer than an oscillation period)
     w.env = max([d] + [x.d for x in windows[-(ENVELOPE - 1):]]) if ENVELOPE > 1 else d
-    moving = s >= 1e3 * REST
+    # moving: the defect itself is above rest (1e-3 of the coupling's scale); at rest it is round-off,
+    # and growth measured from round-off means nothing
+    moving = d >= 1e3 * REST
     if windows and w.env >= windows[-1].env:
         p = windows[-1]
         w.run = p.run + 1
@@ -849,6 +851,7 @@ def _push_window(windows, d, s, rel) -> None:
         w.n_moving = 1 if moving else 0
     ok = rel >= 0.1 and moving
     w.sustained = (windows[-1].sustained + 1 if windows else 1) if ok else 0
+    w.jumps = (windows[-1].jumps + 1 if windows else 1) if (rel >= 1.0 and moving) else 0
     windows.append(w)
     if len(windows) > 4 * SUSTAINED:  # keep the list short; the criteria look back at most SUSTAINED
         del windows[: len(windows) - 2 * SUSTAINED]
@@ -862,18 +865,22 @@ def _run_length(windows) -> int:
 def _diverging(windows) -> float:
     """Growth factor if the coupling diverges, else 0.
 
-    Growth: over a run of windows in which the defect's envelope never decreased (>= 4 of them with the
-    signals above rest), the defect grew >= 10x and stays >= 0.1 of its coupling's recent peak (and that
+    Growth: over a run of windows in which the defect's envelope never decreased (>= 6 of them with the
+    signals above rest), the defect grew >= 30x and stays >= 0.2 of its coupling's recent peak (and that
     relative size is not shrinking -- a stable scheme on a ramp from rest also grows, but its defect falls
     behind the signal).  Sustained: a growth that a nonlinearity (valve flow, rails) has bounded, a limit
     cycle whose relative defect stays >= 0.1 over SUSTAINED windows without the envelope halving.
     """
     last = windows[-1]
     first = last.first_moving
-    if first is not None and last.n_moving >= 4:
-        growth = max(last.d, windows[-2].d) / max(first.d, REST)
-        if growth >= 10.0 and last.rel >= 0.1 and last.rel >= 0.5 * first.rel:
+    if first is not None and last.n_moving >= 6:
+        growth = max(last.d, windows[-2].d) / first.d
+        if growth >= 30.0 and last.rel >= 0.2 and last.rel >= 0.5 * first.rel:
             return growth
+    # jumps: in 3 windows running, with the envelope not falling, an interface value moved by more than
+    # its own recent peak within one macro step (a motion from rest does so in its first window at most)
+    if last.jumps >= 3 and last.run >= 2:
+        return last.env / max(windows[-1 - min(last.run, len(windows) - 1)].env, REST)
     if last.sustained >= SUSTAINED and len(windows) > SUSTAINED:
         then = windows[-1 - SUSTAINED].env
         if last.env >= 0.5 * then:
