@@ -154,8 +154,8 @@ static void kinematics(int n, const int *rev, const double *lc, const double *g,
  * S (6n), IA (36n: the link inertias on entry, articulated inertias on
  * exit); scratch v, c, pA, U (6n each), D, u (n each). */
 static int aba(int n, const double *lc, const double *g, const double *qd, const double *tau,
-               const double *S, double *IA, double *v, double *c, double *pA, double *U, double *D,
-               double *u, double *qdd)
+               const double *fx, const double *S, double *IA, double *v, double *c, double *pA, double *U,
+               double *D, double *u, double *qdd)
 {
     /* pass 1: velocities, velocity-product accelerations c_i = v_i x S_i qd_i, bias forces */
     double vp[6] = {0, 0, 0, 0, 0, 0};
@@ -167,6 +167,8 @@ static int aba(int n, const double *lc, const double *g, const double *qd, const
         for (int k = 0; k < 6; k++) c[6 * i + k] *= qd[i];
         mv6(IA + 36 * i, vi, h);
         crf(vi, h, pA + 6 * i);
+        if (fx)
+            for (int k = 0; k < 6; k++) pA[6 * i + k] -= fx[6 * i + k];
         memcpy(vp, vi, sizeof vp);
     }
     /* pass 2: articulated inertias and bias forces, tip to base */
@@ -201,13 +203,45 @@ static int aba(int n, const double *lc, const double *g, const double *qd, const
     return FMUGEN_OK;
 }
 
+/* External wrenches as world spatial forces at the base origin, fx (6n):
+ * [t + c x f; f] on link ext_link[e] (force f at its centre of mass c,
+ * torque t, base coordinates); per link also c, f, t (9n: the derivatives
+ * need them).  Returns fx, or NULL when there are none. */
+static double *external_forces(int n, int ne, const int *ext_link, const double *ext, const double *lc,
+                               const double *R, const double *p, double *fx, double *cft)
+{
+    if (ne <= 0) return NULL;
+    memset(fx, 0, (size_t)6 * n * sizeof(double));
+    memset(cft, 0, (size_t)9 * n * sizeof(double));
+    for (int e = 0; e < ne; e++) {
+        int k = ext_link[e];
+        const double *Rk = R + 9 * k, *cl = lc + FMUGEN_CHAIN_NC * k + FMUGEN_CHAIN_COM, *f = ext + 6 * e;
+        double *c = cft + 9 * k, m[3];
+        for (int r = 0; r < 3; r++)
+            c[r] = p[3 * k + r] + Rk[3 * r] * cl[0] + Rk[3 * r + 1] * cl[1] + Rk[3 * r + 2] * cl[2];
+        for (int r = 0; r < 3; r++) {
+            c[3 + r] += f[r];
+            c[6 + r] += f[3 + r];
+        }
+        cross3(c, f, m);
+        for (int r = 0; r < 3; r++) {
+            fx[6 * k + r] += f[3 + r] + m[r];
+            fx[6 * k + 3 + r] += f[r];
+        }
+    }
+    return fx;
+}
+
 int fmugen_chain_fd(int n, const int *rev, const double *lc, const double *g, const double *q,
-                    const double *qd, const double *tau, double *qdd, double *p_ee, double *work)
+                    const double *qd, const double *tau, int ne, const int *ext_link, const double *ext,
+                    double *qdd, double *p_ee, double *work)
 {
     double *R = work, *p = R + 9 * n, *S = p + 3 * n, *IA = S + 6 * n, *v = IA + 36 * n;
     double *c = v + 6 * n, *pA = c + 6 * n, *U = pA + 6 * n, *D = U + 6 * n, *u = D + n;
+    double *fx = u + n, *cft = fx + 6 * n;
     kinematics(n, rev, lc, g, q, R, p, S, IA, p_ee);
-    return aba(n, lc, g, qd, tau, S, IA, v, c, pA, U, D, u, qdd);
+    const double *f = external_forces(n, ne, ext_link, ext, lc, R, p, fx, cft);
+    return aba(n, lc, g, qd, tau, f, S, IA, v, c, pA, U, D, u, qdd);
 }
 
 /* K -= A + A^T with A = I crm(v): the velocity term of d(I a + v x* I v),
@@ -285,8 +319,8 @@ static int spd_inverse(int n, double *A, double *T, double *Minv)
 }
 
 int fmugen_chain_fd_jacobian(int n, const int *rev, const double *lc, const double *g, const double *q,
-                             const double *qd, const double *tau, double *qdd, double *dqdd, double *dp_ee,
-                             double *work)
+                             const double *qd, const double *tau, int ne, const int *ext_link,
+                             const double *ext, double *qdd, double *dqdd, double *dp_ee, double *work)
 {
     double *R = work, *p = R + 9 * n, *S = p + 3 * n, *I = S + 6 * n, *IA = I + 36 * n, *v = IA + 36 * n;
     double *a = v + 6 * n, *h = a + 6 * n, *f = h + 6 * n, *dv = f + 6 * n, *w = dv + 6 * n;
@@ -294,11 +328,14 @@ int fmugen_chain_fd_jacobian(int n, const int *rev, const double *lc, const doub
     double *c = Q + 6 * n, *pA = c + 6 * n, *U = pA + 6 * n, *D = U + 6 * n, *u = D + n;
     double *M = u + n, *T = M + (size_t)n * n, *Mi = T + (size_t)n * n;
     double *G = Mi + (size_t)n * n, *H = G + 12 * n;
+    double *fx = H + 6 * n, *cft = fx + 6 * n, *ev = cft + 9 * n, *Ge = ev + 3 * n, *d = Ge + 3 * n;
     double IC[36], K[36], HC[6], F[6], p_ee[3];
+    double Ts[3] = {0, 0, 0}, Fs[3] = {0, 0, 0}, CF = 0.0, CFm[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
     kinematics(n, rev, lc, g, q, R, p, S, I, p_ee);
+    const double *fxp = external_forces(n, ne, ext_link, ext, lc, R, p, fx, cft);
     /* forward dynamics first: the derivatives are those of ID at qdd = FD */
     memcpy(IA, I, (size_t)36 * n * sizeof(double));
-    int st = aba(n, lc, g, qd, tau, S, IA, v, c, pA, U, D, u, qdd);
+    int st = aba(n, lc, g, qd, tau, fxp, S, IA, v, c, pA, U, D, u, qdd);
     if (st != FMUGEN_OK) return st;
     /* forward: v_i, a_i, momenta h_i = I_i v_i, forces f_i = I_i a_i + v_i x* h_i, and per joint j
      * dv_j = S_j x v_{j-1}, w_j = S_j x a_{j-1} - dv_j x v_{j-1}, u_j = 2 v_{j-1} x S_j */
@@ -317,7 +354,7 @@ int fmugen_chain_fd_jacobian(int n, const int *rev, const double *lc, const doub
         mv6(I + 36 * i, vi, h + 6 * i);
         mv6(I + 36 * i, ai, t);
         crf(vi, h + 6 * i, f + 6 * i);
-        for (int k = 0; k < 6; k++) f[6 * i + k] += t[k];
+        for (int k = 0; k < 6; k++) f[6 * i + k] += t[k] - (fxp ? fxp[6 * i + k] : 0.0);
         memcpy(vp, vi, sizeof vp);
         memcpy(ap, ai, sizeof ap);
     }
@@ -359,6 +396,31 @@ int fmugen_chain_fd_jacobian(int n, const int *rev, const double *lc, const doub
         mv6(K, dv + 6 * i, t2);
         crf(dv + 6 * i, HC, t3);
         for (int k = 0; k < 6; k++) Qi[k] -= t[k] + t2[k] + t3[k];
+        if (fxp) {
+            /* external wrenches do not turn with the subtree: with the sums over
+             * k >= i of t_k, f_k, c_k . f_k and c_k f_k^T, S_i . sum E_k(w) = e_i . w
+             * for E_k(w) = [w x t_k + c_k x (w x f_k); w x f_k], and Q_i += sum E_k(w_i) */
+            const double *ck = cft + 9 * i, *fk = ck + 3, *tk = ck + 6, *sw = Si, *sv = Si + 3;
+            CF += ck[0] * fk[0] + ck[1] * fk[1] + ck[2] * fk[2];
+            for (int r = 0; r < 3; r++) {
+                Ts[r] += tk[r];
+                Fs[r] += fk[r];
+                for (int k = 0; k < 3; k++) CFm[3 * r + k] += ck[r] * fk[k];
+            }
+            double *ei = ev + 3 * i, a1[3], a2[3], Ew[3];
+            cross3(Ts, sw, a1);
+            cross3(Fs, sv, a2);
+            for (int r = 0; r < 3; r++)
+                ei[r] = a1[r] + a2[r] + CF * sw[r] - (CFm[3 * r] * sw[0] + CFm[3 * r + 1] * sw[1] + CFm[3 * r + 2] * sw[2]);
+            cross3(sw, Ts, a1); /* sum_k c_k x (w x f_k) = w (sum c_k . f_k) - (sum f_k c_k^T) w */
+            for (int r = 0; r < 3; r++)
+                Ew[r] = a1[r] + CF * sw[r] - (CFm[r] * sw[0] + CFm[3 + r] * sw[1] + CFm[6 + r] * sw[2]);
+            cross3(sw, Fs, a2);
+            for (int r = 0; r < 3; r++) {
+                Qi[r] += Ew[r];
+                Qi[3 + r] += a2[r];
+            }
+        }
         for (int j = 0; j <= i; j++) M[i * n + j] = dot6(ali, S + 6 * j);
         M[i * n + i] += L[FMUGEN_CHAIN_ROTOR];
     }
@@ -369,7 +431,7 @@ int fmugen_chain_fd_jacobian(int n, const int *rev, const double *lc, const doub
      *   dID[i][j] (i < j)  =  S_i . Q_j           (q),   S_i . P_j                        (qd)
      * so column j of Minv dID is G_j W_j + H_j Q_j with the running sums
      * G_j = sum_{i >= j} Minv[:, i] al_i^T (n x 12) and H_j = sum_{i < j} Minv[:, i] S_i^T (n x 6). */
-    size_t k3 = 3 * (size_t)n;
+    size_t k3 = 3 * (size_t)n + 6 * (size_t)(ne > 0 ? ne : 0);
     memset(H, 0, (size_t)6 * n * sizeof(double));
     for (int j = 0; j < n; j++) { /* upper parts, j ascending; H in registers row by row */
         const double *Qj = Q + 6 * j, *Pj = P + 6 * j, *Mj = Mi + (size_t)j * n, *Sj = S + 6 * j;
@@ -388,6 +450,7 @@ int fmugen_chain_fd_jacobian(int n, const int *rev, const double *lc, const doub
         }
     }
     memset(G, 0, (size_t)12 * n * sizeof(double));
+    memset(Ge, 0, (size_t)3 * n * sizeof(double));
     for (int j = n - 1; j >= 0; j--) { /* lower parts, j descending */
         const double *Mj = Mi + (size_t)j * n, *alj = al + 12 * j;
         double Wq[12], Wd[12], b = -lc[FMUGEN_CHAIN_NC * j + FMUGEN_CHAIN_DAMPING];
@@ -408,6 +471,40 @@ int fmugen_chain_fd_jacobian(int n, const int *rev, const double *lc, const doub
             double *row = dqdd + r * k3;
             row[j] += sq;
             row[n + j] += sd;
+        }
+        if (fxp) { /* dID[i][j] += e_i . w_j (j <= i): -M^-1 of it, by the running sum Ge */
+            const double *ej = ev + 3 * j, *wj = S + 6 * j;
+            for (int r = 0; r < n; r++) {
+                double m = Mj[r], s = 0.0;
+                for (int k = 0; k < 3; k++) {
+                    double gk = Ge[(size_t)k * n + r] + ej[k] * m;
+                    Ge[(size_t)k * n + r] = gk;
+                    s += wj[k] * gk;
+                }
+                dqdd[r * k3 + j] -= s;
+            }
+        }
+    }
+    /* dqdd/dext = -M^-1 dID/dext: tau_i = ... - S_i . [t + c x f; f] for the links k >= i,
+     * so dID_i/df = -(s_w x c + s_v), dID_i/dt = -s_w */
+    for (int e = 0; e < ne; e++) {
+        int k = ext_link[e];
+        const double *ck = cft + 9 * k;
+        for (int comp = 0; comp < 6; comp++) {
+            for (int i = 0; i < n; i++) {
+                const double *Si = S + 6 * i;
+                double x[3];
+                if (i > k) {
+                    d[i] = 0.0;
+                } else if (comp < 3) {
+                    cross3(Si, ck, x);
+                    d[i] = x[comp] + Si[3 + comp]; /* -dID_i/df_comp */
+                } else {
+                    d[i] = Si[comp - 3]; /* -dID_i/dt */
+                }
+            }
+            size_t col = 3 * (size_t)n + 6 * (size_t)e + comp;
+            for (int r = 0; r < n; r++) dqdd[r * k3 + col] = dot_n(Mi + (size_t)r * n, d, k + 1);
         }
     }
     /* (finiteness of the Jacobian is checked by the runtime that asked for it) */

@@ -40,26 +40,31 @@
 #define FMUGEN_CHAIN_NG 4
 
 /* doubles of work space for n links: forward dynamics, and its Jacobian */
-#define FMUGEN_CHAIN_FD_WORK(n) (80 * (n) + 16)
-#define FMUGEN_CHAIN_WORK(n) ((n) * (200 + 3 * (n)) + 64)
+#define FMUGEN_CHAIN_FD_WORK(n) (96 * (n) + 16)
+#define FMUGEN_CHAIN_WORK(n) ((n) * (230 + 3 * (n)) + 64)
 
 /* qdd = M(q)^{-1} (tau - h(q, qd)) by the articulated-body algorithm (O(n));
  * p_ee (3, may be NULL): end-effector position.  revolute[i] is 1 for a
  * revolute, 0 for a prismatic joint; lc is n x FMUGEN_CHAIN_NC, g is
- * FMUGEN_CHAIN_NG.  Returns FMUGEN_OK or FMUGEN_NOT_POSITIVE_DEFINITE. */
+ * FMUGEN_CHAIN_NG.  ne external wrenches act on the links ext_link[0..ne)
+ * (0-based, each link at most once): ext is ne x 6, force (at the link's
+ * centre of mass) and torque, base coordinates.  Returns FMUGEN_OK,
+ * FMUGEN_NOT_POSITIVE_DEFINITE or FMUGEN_NOT_FINITE. */
 FMUGEN_MODEL_HIDDEN int fmugen_chain_fd(int n, const int *revolute, const double *lc, const double *g,
                                         const double *q, const double *qd, const double *tau,
+                                        int ne, const int *ext_link, const double *ext,
                                         double *qdd, double *p_ee, double *work);
 
-/* The exact Jacobian of the forward dynamics at (q, qd, tau):
- *   dqdd (n x 3n, row-major) = [dqdd/dq, dqdd/dqd, dqdd/dtau]
- *                            = M^{-1} [-dID/dq, -dID/dqd, I]  at qdd = FD(q, qd, tau),
+/* The exact Jacobian of the forward dynamics at (q, qd, tau, ext):
+ *   dqdd (n x (3n + 6 ne), row-major) = [dqdd/dq, dqdd/dqd, dqdd/dtau, dqdd/dext]
+ *        = M^{-1} [-dID/dq, -dID/dqd, I, -dID/dext]  at qdd = FD(q, qd, tau, ext),
  * with dID from the analytical derivatives of recursive Newton-Euler in world
  * coordinates (O(n^2)) and one Cholesky factorisation of M (composite rigid
  * bodies).  qdd (n) receives the forward dynamics, dp_ee (3 x n, may be
  * NULL) the derivative of the end-effector position by q. */
 FMUGEN_MODEL_HIDDEN int fmugen_chain_fd_jacobian(int n, const int *revolute, const double *lc, const double *g,
                                                  const double *q, const double *qd, const double *tau,
+                                                 int ne, const int *ext_link, const double *ext,
                                                  double *qdd, double *dqdd, double *dp_ee, double *work);
 
 #endif

@@ -140,12 +140,9 @@ def test_strategy_choice_and_its_limits():
 
     assert not looped(Manipulator(small).state_space_model(outputs=()))
     assert looped(Manipulator(large).state_space_model(outputs=()))
-    # what the loops do not model falls back to straight-line code, or is refused when asked for
-    ext = replace(large, links=large.links[:-1] + (replace(large.links[-1], external_wrench=True),))
-    assert not looped(Manipulator(ext).state_space_model(outputs=()))
-    with pytest.raises(ValueError, match="external wrenches.*strategy='straight'"):
-        Manipulator(ext).state_space_model(strategy="loops")
-    with pytest.raises(ValueError, match="locked joints"):
+    # locked joints (scenes) keep straight-line code, and are refused when loops are asked for
+    assert not looped(Manipulator(large).state_space_model(outputs=(), locked={2: 0.3}))
+    with pytest.raises(ValueError, match="locked joints.*strategy='straight'"):
         Manipulator(small).state_space_model(strategy="loops", locked={1: 0.0})
     with pytest.raises(ValueError, match="strategy must be"):
         Manipulator(small).state_space_model(strategy="fast")
@@ -175,6 +172,30 @@ def test_python_evaluators_call_the_same_loops():
             assert rel(a, b) < RTOL
     sys_l, sys_s = fmugen.linearize(looped, x=x, u=u), fmugen.linearize(straight, x=x, u=u)
     assert rel(sys_l.A, sys_s.A) < RTOL and rel(sys_l.B, sys_s.B) < RTOL
+
+
+def test_external_wrenches_in_the_loops_equal_straight_line_code():
+    """Forces at the centres of mass and torques (base frame) on links 1, 3 and the last: the
+    looped FD and every Jacobian block, the wrench columns included, in C and through Python."""
+    n, ks = LOOP_MIN_LINKS, (0, 2, LOOP_MIN_LINKS - 1)
+    robot = full_featured_chain(n, "standard", seed=8)
+    robot = replace(robot, links=tuple(replace(L, external_wrench=(i in ks)) for i, L in enumerate(robot.links)))
+    arm = Manipulator(robot)
+    looped = arm.state_space_model(outputs=("p_ee", "qdd"))
+    straight = arm.state_space_model(outputs=("p_ee", "qdd"), strategy="straight")
+    assert any(isinstance(st, ChainDynamics) for st in looped.program.steps)
+    assert [v.name for v in looped.inputs] == [v.name for v in straight.inputs] and looped.nu == n + 18
+    el, es = ModelEvaluator(looped), ModelEvaluator(straight)
+    rng = np.random.default_rng(9)
+    with CompiledModel.build(generate_c(looped).source) as cl:
+        for _ in range(3):
+            x, u = rng.uniform(-1.5, 1.5, 2 * n), rng.uniform(-20, 20, looped.nu)
+            ref = es.jacobians(0.0, x, u)
+            assert rel(cl.evaluate([], 0.0, x, u)[0], es.f(0.0, x, u)) < RTOL
+            assert rel(el.f(0.0, x, u), es.f(0.0, x, u)) < RTOL
+            for a, b, c in zip(cl.jacobian([], 0.0, x, u), el.jacobians(0.0, x, u), ref):
+                assert rel(a, c) < RTOL and rel(b, c) < RTOL
+            assert np.max(np.abs(ref[1][n:, n:])) > 1e-3  # the wrench columns are not trivially zero
 
 
 def test_modelstructure_of_a_looped_model_is_dense():

@@ -636,7 +636,7 @@ def lower(
             body.n_solves += 1
             body.n_chains += 1
             out.extend(lines)
-            body.loop_ops = body.loop_ops + chain_ops(st.n, st.kind)
+            body.loop_ops = body.loop_ops + chain_ops(st.n, st.kind, len(st.external))
             # the results stay in the call's array: X[i] prints as arr[offset + i] (no copies;
             # stores of consecutive entries become memcpy, see _block_copies)
             for i, xs in enumerate(st.X):

@@ -61,7 +61,7 @@ NG = 4
 
 def chain_work_doubles(n: int, kind: str) -> int:
     """Work space of the runtime call, in doubles (``FMUGEN_CHAIN_FD_WORK``, ``FMUGEN_CHAIN_WORK`` of chain_dynamics.h)."""
-    return n * (200 + 3 * n) + 64 if kind == "jacobian" else 80 * n + 16
+    return n * (230 + 3 * n) + 64 if kind == "jacobian" else 96 * n + 16
 
 
 @dataclass(frozen=True)
@@ -69,24 +69,29 @@ class ChainDynamics(SolveSPD):
     """``X = chain(B)``: the forward dynamics (``kind="fd"``) or its Jacobian of an n-link chain.
 
     ``B`` (column) = [q (n), qd (n), tau (n), link constants (n x NC, row by
-    row), global constants (NG)]; ``A`` is empty.  ``X`` (column):
+    row), global constants (NG), external wrenches (6 per entry of
+    ``external``: force at the link's centre of mass, torque; base
+    coordinates)]; ``A`` is empty.  ``X`` (column):
 
     * ``fd``:        [qdd (n), p_ee (3)]
-    * ``jacobian``:  [qdd (n), dqdd (n x 3n, row-major: d/dq, d/dqd, d/dtau), dp_ee/dq (3 x n)]
+    * ``jacobian``:  [qdd (n), dqdd (n x (3n + 6e), row-major: d/dq, d/dqd, d/dtau, d/dext),
+                      dp_ee/dq (3 x n)]
 
-    ``revolute`` holds one bool per joint (False: prismatic).
+    ``revolute`` holds one bool per joint (False: prismatic); ``external``
+    the 0-based links with an external wrench, in input order.
     """
 
     kind: str = "fd"
     revolute: tuple = ()
+    external: tuple = ()
 
     @property
     def n(self) -> int:
         return len(self.revolute)
 
     def outputs_size(self) -> int:
-        n = self.n
-        return n + 3 if self.kind == "fd" else n + 3 * n * n + 3 * n
+        n, e = self.n, len(self.external)
+        return n + 3 if self.kind == "fd" else n + n * (3 * n + 6 * e) + 3 * n
 
 
 def link_constants(chain, gravity: Sequence) -> list:
@@ -112,18 +117,21 @@ def chain_call_lines(st: ChainDynamics, index: int, b_code: list, ind: str) -> t
     taken from the heap, and the caller emits the free line before the
     function returns.
     """
-    n = st.n
+    n, ne = st.n, len(st.external)
     tag = f"chain{index}"
     rev = ", ".join("1" if r else "0" for r in st.revolute)
-    nb = 3 * n + NC * n + NG
+    nb = 3 * n + NC * n + NG + 6 * ne
     nx = st.outputs_size()
     lines = [f"{ind}/* {'forward dynamics' if st.kind == 'fd' else 'Jacobian of the forward dynamics'} "
              f"of the {n}-link chain: loops of c_runtime/chain_dynamics.c */",
-             f"{ind}static const int {tag}_rev[{n}] = {{{rev}}};",
-             f"{ind}double {tag}_in[{nb}];"]
+             f"{ind}static const int {tag}_rev[{n}] = {{{rev}}};"]
+    if ne:
+        lines.append(f"{ind}static const int {tag}_ext[{ne}] = {{{', '.join(str(k) for k in st.external)}}};")
+    lines.append(f"{ind}double {tag}_in[{nb}];")
     lines += [f"{ind}{tag}_in[{k}] = {c};" for k, c in enumerate(b_code)]
     q, lc, g = f"{tag}_in", f"{tag}_in + {3 * n}", f"{tag}_in + {3 * n + NC * n}"
-    args = f"{n}, {tag}_rev, {lc}, {g}, {q}, {q} + {n}, {q} + {2 * n}"
+    ext = f"{ne}, {tag}_ext, {tag}_in + {3 * n + NC * n + NG}" if ne else "0, NULL, NULL"
+    args = f"{n}, {tag}_rev, {lc}, {g}, {q}, {q} + {n}, {q} + {2 * n}, {ext}"
     if st.kind == "fd":
         lines += [f"{ind}double {tag}_x[{nx}], {tag}_w[{chain_work_doubles(n, 'fd')}];",
                   f"{ind}status = fmugen_chain_fd({args}, {tag}_x, {tag}_x + {n}, {tag}_w);",
@@ -133,12 +141,12 @@ def chain_call_lines(st: ChainDynamics, index: int, b_code: list, ind: str) -> t
     lines += [f"{ind}double *{tag}_w = (double *)malloc(sizeof(double) * {w + nx});",
               f"{ind}if ({tag}_w == NULL) return FMUGEN_NOT_FINITE; /* out of memory */",
               f"{ind}status = fmugen_chain_fd_jacobian({args}, {tag}_w + {w}, {tag}_w + {w + n}, "
-              f"{tag}_w + {w + n + 3 * n * n}, {tag}_w);",
+              f"{tag}_w + {w + n + n * (3 * n + 6 * ne)}, {tag}_w);",
               f"{ind}if (status != FMUGEN_OK) {{ free({tag}_w); return status; }}"]
     return lines, f"{tag}_w", w, f"{ind}free({tag}_w);"
 
 
-def chain_ops(n: int, kind: str):
+def chain_ops(n: int, kind: str, ne: int = 0):
     """Floating-point operations of one runtime call for n links (:class:`~fmugen.codegen.c_code.OpCount`).
 
     Counted by hand from the loops of ``c_runtime/chain_dynamics.c`` with the
@@ -148,13 +156,18 @@ def chain_ops(n: int, kind: str):
     241 add / 2 div.  The Jacobian adds, per link, the forward (180 / 144)
     and backward (348 / 399) derivative passes; per pair of joints the mass
     matrix (6 / 5, lower triangle) and the columns of M^-1 dID (55 / 56); and
-    the Cholesky factorisation, L^-1 and M^-1 = L^-T L^-1 (each ~n^3/6).
+    the Cholesky factorisation, L^-1 and M^-1 = L^-T L^-1 (each ~n^3/6);
+    with ``ne`` external wrenches about 40 mul per link and 9 per pair more,
+    and n^2 per wrench component.
     """
     from .c_code import OpCount
 
-    fd = OpCount(mul=351 * n, add=336 * n, div=2 * n, calls=(("cos", n), ("sin", n)))
+    fd = OpCount(mul=351 * n + 12 * ne, add=336 * n + 18 * ne, div=2 * n, calls=(("cos", n), ("sin", n)))
     if kind == "fd":
         return fd
+    if ne:
+        fd = fd + OpCount(mul=40 * n + 9 * n * n + 6 * ne * n * (n + 1) // 2,
+                          add=40 * n + 9 * n * n + 6 * ne * n * (n + 1) // 2)
     tri = n * (n + 1) // 2
     chol = (n ** 3 - n) // 6
     linv = (n - 1) * n * (n + 1) // 6
@@ -172,11 +185,12 @@ _SHIM = """
 #include "chain_dynamics.c"
 /* exported wrappers: the runtime's own symbols are hidden */
 int py_chain_fd(int n, const int *r, const double *lc, const double *g, const double *q, const double *qd,
-                const double *tau, double *out, double *work)
-{ return fmugen_chain_fd(n, r, lc, g, q, qd, tau, out, out + n, work); }
+                const double *tau, int ne, const int *xl, const double *x, double *out, double *work)
+{ return fmugen_chain_fd(n, r, lc, g, q, qd, tau, ne, xl, x, out, out + n, work); }
 int py_chain_jac(int n, const int *r, const double *lc, const double *g, const double *q, const double *qd,
-                 const double *tau, double *out, double *work)
-{ return fmugen_chain_fd_jacobian(n, r, lc, g, q, qd, tau, out, out + n, out + n + 3 * n * n, work); }
+                 const double *tau, int ne, const int *xl, const double *x, double *out, double *work)
+{ return fmugen_chain_fd_jacobian(n, r, lc, g, q, qd, tau, ne, xl, x, out, out + n,
+                                  out + n + n * (3 * n + 6 * ne), work); }
 """
 _lib = None
 _lock = threading.Lock()
@@ -199,29 +213,30 @@ def _library():
             lib = ctypes.CDLL(str(work / "chain.so"))
             dp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
             for f in (lib.py_chain_fd, lib.py_chain_jac):
-                f.argtypes = [ctypes.c_int, ip] + [dp] * 7
+                f.argtypes = [ctypes.c_int, ip] + [dp] * 5 + [ctypes.c_int, ip, dp, dp, dp]
                 f.restype = ctypes.c_int
             _lib = lib
         return _lib
 
 
-def evaluate_chain(kind: str, revolute: Sequence[bool], b: Sequence[float]) -> np.ndarray:
+def evaluate_chain(kind: str, revolute: Sequence[bool], b: Sequence[float], external: Sequence[int] = ()) -> np.ndarray:
     """X of a :class:`ChainDynamics` step for the numbers ``b`` (its B), by the runtime's loops."""
-    n = len(revolute)
+    n, ne = len(revolute), len(external)
     b = np.ascontiguousarray(np.asarray(b, dtype=float))
-    if b.size != 3 * n + NC * n + NG:
-        raise ValueError(f"chain dynamics of {n} links: {b.size} inputs, expected {3 * n + NC * n + NG}")
-    out = np.zeros(n + 3 if kind == "fd" else n + 3 * n * n + 3 * n)
+    if b.size != 3 * n + NC * n + NG + 6 * ne:
+        raise ValueError(f"chain dynamics of {n} links: {b.size} inputs, expected {3 * n + NC * n + NG + 6 * ne}")
+    out = np.zeros(n + 3 if kind == "fd" else n + n * (3 * n + 6 * ne) + 3 * n)
     work = np.zeros(chain_work_doubles(n, kind))
     rev = (ctypes.c_int * n)(*[1 if r else 0 for r in revolute])
+    xl = (ctypes.c_int * max(ne, 1))(*(list(external) or [0]))
     dp = ctypes.POINTER(ctypes.c_double)
 
     def at(k):
         return ctypes.cast(b.ctypes.data + 8 * k, dp)
 
     fn = _library().py_chain_fd if kind == "fd" else _library().py_chain_jac
-    status = fn(n, rev, at(3 * n), at(3 * n + NC * n), at(0), at(n), at(2 * n), out.ctypes.data_as(dp),
-                work.ctypes.data_as(dp))
+    status = fn(n, rev, at(3 * n), at(3 * n + NC * n), at(0), at(n), at(2 * n), ne, xl,
+                at(3 * n + NC * n + NG) if ne else None, out.ctypes.data_as(dp), work.ctypes.data_as(dp))
     if status == 1:
         raise np.linalg.LinAlgError("mass matrix is not positive definite")
     if status != 0:

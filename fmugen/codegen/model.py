@@ -310,7 +310,7 @@ class SymbolicModel:
                 if isinstance(stp, Assign):
                     n += sp.count_ops(stp.expr)
                 elif isinstance(stp, ChainDynamics):  # the runtime's loops
-                    ops = chain_ops(stp.n, stp.kind)
+                    ops = chain_ops(stp.n, stp.kind, len(stp.external))
                     n += ops.mul + ops.add + ops.div + ops.n_calls
                 else:
                     n += stp.X.rows ** 3 // 3 + stp.X.rows ** 2 * stp.X.cols

@@ -58,7 +58,8 @@ def compile_program(
             lines.append(f"    v_{st.symbol.name} = {pr.doprint(st.expr)}")
         elif isinstance(st, ChainDynamics):  # the runtime's own loops, through ctypes
             args = ", ".join(pr.doprint(e) for e in st.B)
-            lines.append(f"    _X = _chain({st.kind!r}, {tuple(bool(r) for r in st.revolute)!r}, [{args}])")
+            lines.append(f"    _X = _chain({st.kind!r}, {tuple(bool(r) for r in st.revolute)!r}, [{args}], "
+                         f"{tuple(int(k) for k in st.external)!r})")
             lines += [f"    v_{xs.name} = _X[{i}]" for i, xs in enumerate(st.X)]
         else:
             n, k = st.B.shape

@@ -175,7 +175,7 @@ class Manipulator:
         (:mod:`fmugen.codegen.chain`: code size linear in n, for C only --
         the Python evaluators need "straight"); "auto" (default) takes
         "loops" from :data:`~fmugen.codegen.chain.LOOP_MIN_LINKS` links on,
-        for arms without external wrenches or locked joints.
+        for arms without locked joints.
 
         ``outputs``: any of "p_ee" (end-effector position, frame N origin) and
         "qdd" (joint accelerations, which have direct feedthrough from tau).
@@ -195,10 +195,10 @@ class Manipulator:
         locked = dict(locked or {})
         if strategy not in ("auto", "straight", "loops"):
             raise ValueError(f"strategy must be 'auto', 'straight' or 'loops', not {strategy!r}")
-        loopable = not locked and not self.external_links
+        loopable = not locked
         if strategy == "loops" and not loopable:
-            raise ValueError(f"{robot.name}: strategy='loops' does not handle "
-                             f"{'locked joints' if locked else 'external wrenches'}; use strategy='straight'")
+            raise ValueError(f"{robot.name}: strategy='loops' does not handle locked joints; "
+                             f"use strategy='straight'")
         if strategy == "loops" or (strategy == "auto" and loopable and n >= LOOP_MIN_LINKS):
             return self._looped_state_space_model(outputs, name)
         bad = [j for j in locked if not (isinstance(j, int) and 1 <= j <= n)]
@@ -328,18 +328,22 @@ class Manipulator:
         """
         n, robot = self.n, self.robot
         rev = tuple(L.joint == REVOLUTE for L in robot.links)
+        ext, ne = self.ext_symbols, len(self.external_links)
         B = sp.Matrix(self.q + self.qd + self.tau
-                      + link_constants(joint_frame_chain(robot), robot.gravity))
+                      + link_constants(joint_frame_chain(robot), robot.gravity) + ext)
         P = Program("_w")
         X = sp.Matrix([P.fresh("qdd") for _ in range(n)] + [P.fresh("pee") for _ in range(3)])
-        P.steps.append(ChainDynamics(X, sp.zeros(0, 0), B, kind="fd", revolute=rev))
+        P.steps.append(ChainDynamics(X, sp.zeros(0, 0), B, kind="fd", revolute=rev,
+                                     external=tuple(self.external_links)))
         qdd, pee = list(X[:n]), list(X[n:])
         Jp = Program("_j")
-        nj = n + 3 * n * n + 3 * n
+        nu = n + 6 * ne
+        nj = n + n * (2 * n + nu) + 3 * n
         XJ = sp.Matrix([Jp.fresh("jd") for _ in range(nj)])
-        Jp.steps.append(ChainDynamics(XJ, sp.zeros(0, 0), B, kind="jacobian", revolute=rev))
-        Y = sp.Matrix(n, 3 * n, list(XJ[n:n + 3 * n * n]))
-        dpee = sp.Matrix(3, n, list(XJ[n + 3 * n * n:]))
+        Jp.steps.append(ChainDynamics(XJ, sp.zeros(0, 0), B, kind="jacobian", revolute=rev,
+                                      external=tuple(self.external_links)))
+        Y = sp.Matrix(n, 2 * n + nu, list(XJ[n:n + n * (2 * n + nu)]))
+        dpee = sp.Matrix(3, n, list(XJ[n + n * (2 * n + nu):]))
         out_vars, out_exprs = [], []
         if "p_ee" in outputs:
             for r in range(3):
@@ -355,10 +359,10 @@ class Manipulator:
         dfdx = sp.zeros(2 * n, 2 * n)
         dfdx[:n, n:] = sp.eye(n)
         dfdx[n:, :] = Y[:, :2 * n]
-        dfdu = sp.zeros(2 * n, n)
+        dfdu = sp.zeros(2 * n, nu)
         dfdu[n:, :] = Y[:, 2 * n:]
         dgdx = sp.zeros(len(out_vars), 2 * n)
-        dgdu = sp.zeros(len(out_vars), n)
+        dgdu = sp.zeros(len(out_vars), nu)
         row = 0
         if "p_ee" in outputs:
             dgdx[:3, :n] = dpee
@@ -375,6 +379,7 @@ class Manipulator:
         inputs = [Variable(f"tau[{i + 1}]", self.tau[i], "N.m" if rev[i] else "N",
                            f"{'torque' if rev[i] else 'force'} applied by actuator {i + 1}", start=0.0)
                   for i in range(n)]
+        inputs += self._wrench_inputs()
         params = tuple(Variable(p.name, p.symbol, p.unit, p.description, start=p.value)
                        for p in robot.parameters)
         return SymbolicModel(
@@ -386,6 +391,20 @@ class Manipulator:
             provenance=f"{robot.source or robot.name}; looped articulated-body algorithm and analytical "
                        f"Newton-Euler derivatives (c_runtime/chain_dynamics.c)",
         )
+
+    def _wrench_inputs(self) -> list:
+        """The external-wrench inputs, in the order of ``ext_symbols``."""
+        out = []
+        for k in self.external_links:
+            f, t = self.ext[k]
+            for c in range(3):
+                out.append(Variable(f"f_ext_{k + 1}[{c + 1}]", f[c], "N",
+                                    f"external force on link {k + 1} at its centre of mass, base {'xyz'[c]}",
+                                    start=0.0))
+            for c in range(3):
+                out.append(Variable(f"t_ext_{k + 1}[{c + 1}]", t[c], "N.m",
+                                    f"external torque on link {k + 1}, base {'xyz'[c]}", start=0.0))
+        return out
 
     def inverse_dynamics_model(self, formulation=None, name=None) -> SymbolicModel:
         """tau = ID(q, qd, qdd, w_ext) as a state-free model (e.g. for computed-torque control).
