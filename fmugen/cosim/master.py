@@ -328,10 +328,11 @@ class Master:
             self.gs_new.append(np.array(idx, dtype=np.intp))
         self.gs_units = [self.units[index[n]] for n in self.order]
         self.gs_k = [index[n] for n in self.order]
+        self._first_me = next((u for u in self.gs_units if u.kind == "me"), None)
         if any(u.kind == "me" for u in self.units):
-            me = [u.name for u in self.units if u.kind == "me"]
-            raise CosimError(f"{self.system.name}: FMU(s) {', '.join(me)} are Model Exchange; this master "
-                             "co-simulates Co-Simulation FMUs only (build them with fmi_type 'cs' or 'both')")
+            from .me_block import MEBlock
+
+            self.me_block = MEBlock(self, [u for u in self.units if u.kind == "me"])
         else:
             self.me_block = None
         # scales of the coupled signals: the declared nominal of the source (times the factor), else 1
@@ -782,7 +783,8 @@ class Master:
                     Uset[idx] = U0[idx]
                     DUset[idx] = (new - U0[idx]) / H
             if u.kind == "me":
-                calls += self.me_block.step(t, H)
+                if u is self._first_me:
+                    calls += self.me_block.step(t, H)
             else:
                 calls += self._do(u, t, H, no_prior)
         return calls
@@ -812,7 +814,22 @@ class Master:
                 Jg[rows, j] = (self.F[rows] * Y[self.S[rows]] - Unew[rows]) / delta
                 Y[u.out_sl] = Y_base[u.out_sl]
         if self.me_block is not None:
-            calls += self.me_block.interface_jacobian(t, H, U0, Vg, Unew, Jg, scale)
+            me_units = self.me_block.units
+            me_k = [k for k, u in enumerate(self.units) if u.kind == "me"]
+            rows = np.nonzero(np.isin(self.u_src_unit[:nu], me_k))[0]
+            cols = [j for u in me_units for j in range(u.in_sl.start, u.in_sl.stop)
+                    if self.units[self.u_src_unit[j]].kind != "me"]
+            for j in cols:
+                delta = 1e-6 * max(abs(Vg[j]), scale[j])
+                for k in me_k:
+                    self.units[k].restore(states[k])
+                Uset[:nu] = U0[:nu]
+                DUset[:nu] = (Vg - U0[:nu]) / H
+                DUset[j] += delta / H
+                calls += len(me_k) + self.me_block.step(t, H)
+                Jg[rows, j] = (self.F[rows] * Y[self.S[rows]] - Unew[rows]) / delta
+                for k in me_k:
+                    Y[self.units[k].out_sl] = Y_base[self.units[k].out_sl]
         # Newton on R(V) = G(V) - V: V <- V + (I - dG/dV)^-1 R
         return np.linalg.inv(np.eye(nu) - Jg), calls
 

@@ -223,6 +223,7 @@ class ModelUnit(_Unit):
     """A Model-Exchange FMU (integrated by the master's ME block)."""
 
     kind = "me"
+    can_interpolate = True  # the master's ME block evaluates the extrapolated inputs itself
 
     def _make_fmu(self):
         from fmpy.fmi2 import FMU2Model
