@@ -1,4 +1,5 @@
 """Scenes: models, initial state at rest, FMUs per group, pruning, locked joints, cache."""
+import textwrap
 import zipfile
 from pathlib import Path
 
@@ -178,3 +179,35 @@ def test_the_joint_fmu_carries_the_stroke_its_two_chamber_actuator_allows(tmp_pa
     theta = next(v for v in m.states if v.name == "theta")
     # V_A,B = V_t/2 -+ D_m theta > 0:  |theta| < V_t / (2 D_m) = 1e-5 / 3e-5 rad (stiff set)
     assert np.isclose(theta.max, 1e-5 / (2 * 1.5e-5)) and np.isclose(theta.min, -1e-5 / (2 * 1.5e-5))
+
+
+def test_a_long_arm_alone_in_its_fmu_uses_the_looped_dynamics_and_the_reference_straight_code(tmp_path):
+    from fmugen.robot.chain import chain_to_toml, n_link_chain
+
+    (tmp_path / "chain8.toml").write_text(chain_to_toml(n_link_chain(8, seed=3)))
+    (tmp_path / "s.toml").write_text(textwrap.dedent('''
+        [scene]
+        name = "long_arm"
+        stop = 0.1
+        record = ["arm.q[8]"]
+        connections = [["k.theta", "arm.tau[8]", 1.0]]
+        [instances.arm]
+        robot = "chain8.toml"
+        start = { "q[2]" = 0.3 }
+        [instances.k]
+        type = "joint_inertia"
+        [fmus.arm]
+        members = ["arm"]
+        [fmus.k]
+        members = ["k"]
+        '''))
+    sc = load_scene(tmp_path / "s.toml")
+    m, _ = sc.group_model("arm")
+    assert any(type(st).__name__ == "ChainDynamics" for st in m.program.steps)
+    mono = sc.monolithic_model()
+    assert not any(type(st).__name__ == "ChainDynamics" for st in mono.program.steps)
+    x = np.array([v.start or 0.0 for v in mono.states])
+    arm_x = x[[k for k, v in enumerate(mono.states) if v.name.startswith("arm.")]]
+    f_loop = ModelEvaluator(m).f(0.0, arm_x, np.zeros(m.nu))
+    f_mono = ModelEvaluator(mono).f(0.0, x, np.zeros(mono.nu))[:len(arm_x)]
+    assert np.allclose(f_loop, f_mono, rtol=1e-10, atol=1e-10)

@@ -226,11 +226,15 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
                 f_ = _number(f_, f"{where} factor")
                 if f_ == 0:
                     raise SceneError(f"{where} factor must not be zero")
-        elif isinstance(c, list) and len(c) == 2:
-            s_, t_, f_ = c[0], c[1], None
+        elif isinstance(c, list) and len(c) in (2, 3):
+            s_, t_, f_ = c[0], c[1], (c[2] if len(c) == 3 else None)
+            if f_ is not None:
+                f_ = _number(f_, f"{where} factor")
+                if f_ == 0:
+                    raise SceneError(f"{where} factor must not be zero")
         else:
-            raise SceneError(f"{where}: expected [\"source\", \"target\"] or {{ from = ..., to = ..., factor = ... }}, "
-                             f"got {c!r}")
+            raise SceneError(f"{where}: expected [\"source\", \"target\"], [\"source\", \"target\", factor] or "
+                             f"{{ from = ..., to = ..., factor = ... }}, got {c!r}")
         if not isinstance(s_, str) or not isinstance(t_, str):
             raise SceneError(f"{where}: endpoints must be strings 'instance.variable'")
         conns.append((s_, t_, f_))

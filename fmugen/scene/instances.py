@@ -20,13 +20,19 @@ from .file import InstanceSpec
 
 
 def instance_model(spec: InstanceSpec, default_set: str, src: str, sets: Optional[dict] = None,
-                   robot_outputs: Sequence[str] = ()) -> SymbolicModel:
-    """The instance's model with the scene's parameters and start values (nothing folded yet)."""
+                   robot_outputs: Sequence[str] = (), strategy: str = "straight") -> SymbolicModel:
+    """The instance's model with the scene's parameters and start values (nothing folded yet).
+
+    ``strategy`` (robots): "straight" -- straight-line code that composition
+    can differentiate through (monolithic models, groups of several
+    instances) -- or "auto", which lets an arm in an FMU of its own use the
+    runtime's looped dynamics past the size where they win.
+    """
     where = f"{src}: [instances.{spec.name}]"
     sets = dict(sets or {})
     overrides = dict(spec.parameters)
     if spec.kind == "robot":
-        model = _robot_model(spec, where, robot_outputs)
+        model = _robot_model(spec, where, robot_outputs, strategy)
     else:
         model = _component(spec, default_set, where, overrides)
         params = {v.name for v in model.parameters}
@@ -65,12 +71,15 @@ def _float(v, where) -> float:
     return float(v)
 
 
-def _robot_model(spec: InstanceSpec, where: str, outputs) -> SymbolicModel:
+def _robot_model(spec: InstanceSpec, where: str, outputs, strategy: str = "straight") -> SymbolicModel:
     import fmugen
 
     try:
         arm = fmugen.load_robot(spec.source, spec.options.get("formulation", "newton_euler"))
-        return arm.state_space_model(outputs=tuple(outputs), name=spec.name, locked=spec.locked or None)
+        if spec.locked:
+            strategy = "straight"  # the looped dynamics have no locked joints
+        return arm.state_space_model(outputs=tuple(outputs), name=spec.name, locked=spec.locked or None,
+                                     strategy=strategy)
     except SceneError:
         raise
     except (ValueError, KeyError) as exc:

@@ -224,7 +224,9 @@ class Scene:
         removed = []
         if ins.kind == "robot":
             outs = self.robot_outputs(inst, prune)
-            m = instance_model(ins, self.spec.parameter_set, self.src, self._sets.get(inst), outs)
+            alone = len(self.groups[self.group_of(inst)].members) == 1
+            m = instance_model(ins, self.spec.parameter_set, self.src, self._sets.get(inst), outs,
+                               strategy="auto" if alone else "straight")
             dropped = [o for o in ("p_ee", "qdd") if o not in outs]
             if dropped:
                 removed.append(f"{inst}: outputs {', '.join(dropped)} (nothing reads them)")
