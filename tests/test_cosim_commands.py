@@ -81,3 +81,15 @@ def test_report(tmp_path):
     assert float(gs[1]["err_linf"]) < float(gs[0]["err_linf"])
     assert (out / "work_precision.png").stat().st_size > 0
     assert "coarsest macro step meeting" in (out / "report.txt").read_text()
+
+
+def test_report_sweeps_internal_solvers(tmp_path):
+    out = tmp_path / "report_internal"
+    assert main(["report", SCENE, "--steps", "0.001", "--schemes", "gauss-seidel/linear", "--repeats", "1",
+                 "--stop", "0.2", "--internal", "rodas3:1e-10,dopri5:1e-9", "--no-monolithic", "--out", str(out)]) == 0
+    with open(out / "report.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [r["label"] for r in rows] == ["gauss-seidel/linear rodas3 1e-10", "gauss-seidel/linear dopri5 1e-09"]
+    # both internal solvers far below the coupling error: the same coupling error to 1 %
+    e = [float(r["err_linf"]) for r in rows]
+    assert abs(e[0] - e[1]) < 0.01 * e[0]

@@ -4,7 +4,7 @@
                  [--step H] [--adaptive --tol E] [--stop T] [--set NAME=VALUE ...] --out DIR
     fmugen reference SCENE.toml [--stop T] [--points N] [--set ...] --out DIR
     fmugen report SCENE.toml [--steps H1,H2,...] [--schemes jacobi/hold,...] [--repeats 5] [--target 1e-4]
-                  [--no-monolithic] [--stop T] [--set ...] --out DIR
+                  [--internal rodas3:1e-10,dopri5:1e-8] [--no-monolithic] [--stop T] [--set ...] --out DIR
 
 ``cosim`` writes DIR/results.csv (``time``, then every recorded column),
 DIR/results.npz (a structured array ``results`` and the summary), DIR/results.png
@@ -65,6 +65,8 @@ def add_cosim_commands(subparsers) -> None:
     p.add_argument("--repeats", type=int, default=5, help="timed runs per setting after a warm-up (median)")
     p.add_argument("--target", type=float, default=1e-4, help="error target for the coarsest-setting summary")
     p.add_argument("--no-monolithic", action="store_true", help="leave out the monolithic FMU row")
+    p.add_argument("--internal", default=None, help="comma-separated internal solver:tolerance pairs to sweep "
+                   "as well, e.g. rodas3:1e-10,dopri5:1e-8 (default: the scene's)")
     p.set_defaults(func=cmd_report)
 
 
@@ -179,8 +181,18 @@ def cmd_report(args) -> int:
         rec = tuple(Recorded(r.column, "monolithic", r.column, r.physical_unit) for r in system.recorded)
         extra.append(("monolithic FMU", CosimSystem(system.name + "_monolithic", (unit,), (), rec,
                                                      system.start_time, system.stop_time, system.step)))
+    internal = []
+    for item in (args.internal.split(",") if args.internal else []):
+        meth, _, tl = item.partition(":")
+        try:
+            internal.append((meth.strip().lower(), float(tl)))
+        except ValueError:
+            from .errors import CosimError
+
+            raise CosimError(f"--internal: expected solver:tolerance, got {item!r}") from None
     rep = make_report(system, problem, steps, schemes, repeats=args.repeats, target=args.target, extra_rows=extra,
-                      stop=args.stop, progress=lambda s: print("  " + s, file=sys.stderr, flush=True))
+                      stop=args.stop, progress=lambda s: print("  " + s, file=sys.stderr, flush=True),
+                      internal=internal)
     paths = write_report(rep, out)
     print(rep.table())
     print(f"wrote {paths['table']}, {paths['csv']}, {paths['plot']}")

@@ -155,15 +155,33 @@ def _errors(time, values, ref: ReferenceSolution, cols):
     return fin, linf, math.sqrt(rms2), dense_inf, digits
 
 
+SOLVER_IDS = {"dopri5": 1, "rodas3": 2, "rk4": 3}
+
+
+def with_internal_solver(system: CosimSystem, method: str, tol: float) -> CosimSystem:
+    """The same system with every CS FMU's internal solver set to ``method`` at rtol = atol = ``tol``."""
+    from dataclasses import replace
+
+    if method not in SOLVER_IDS:
+        raise CosimError(f"unknown internal solver {method!r}; choose one of {', '.join(SOLVER_IDS)}")
+    if not (tol > 0 and math.isfinite(tol)):
+        raise CosimError(f"internal tolerance must be finite and positive, not {tol}")
+    units = tuple(replace(u, start_values=dict(u.start_values, **{"solver.method": SOLVER_IDS[method],
+                                                                   "solver.rtol": tol, "solver.atol": tol}))
+                  if str(u.fmi_type).lower() == "cs" else u for u in system.units)
+    return replace(system, units=units)
+
+
 def make_report(system: CosimSystem, problem: ReferenceProblem, steps: Sequence[float],
                 schemes: Sequence[tuple] = DEFAULT_SCHEMES, repeats: int = 5, target: float = 1e-4,
                 columns: Optional[Sequence[str]] = None, extra_rows: Sequence = (), stop: Optional[float] = None,
-                progress=None) -> Report:
+                progress=None, internal: Sequence[tuple] = ()) -> Report:
     """Sweep ``schemes`` x ``steps`` (each a multiple of the smallest by a power of 2 is best: exact
     comparison points) and measure every run against the reference of ``problem``.
 
     ``extra_rows``: (label, system) pairs run like the schemes at each step with Jacobi (e.g. the
-    monolithic FMU as a one-unit system).
+    monolithic FMU as a one-unit system).  ``internal``: (solver, tolerance) pairs -- the sweep is then
+    repeated with every CS FMU's internal solver set to each (``dopri5``, ``rodas3``, ``rk4``).
     """
     if repeats < 1:
         raise CosimError("repeats must be >= 1")
@@ -190,7 +208,12 @@ def make_report(system: CosimSystem, problem: ReferenceProblem, steps: Sequence[
         cols.append((pos.index(c), j, s))
     ref_err = max(ref.error[j] / s for _, j, s in cols)
     rows = []
-    runs = [(f"{s}/{e}", system, s, e) for s, e in schemes] + [(lab, sysm, "jacobi", "hold") for lab, sysm in extra_rows]
+    if internal:  # the sweep x internal solvers and tolerances: (method, tol) pairs
+        runs = [(f"{s}/{e} {meth} {tl:g}", with_internal_solver(system, meth, tl), s, e)
+                for meth, tl in internal for s, e in schemes]
+    else:
+        runs = [(f"{s}/{e}", system, s, e) for s, e in schemes]
+    runs += [(lab, sysm, "jacobi", "hold") for lab, sysm in extra_rows]
     for label, sysm, scheme, ext in runs:
         prev = None
         for H in steps:
