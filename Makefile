@@ -9,10 +9,11 @@ OUT ?= out
 setup:
 	$(PIP) install --quiet --disable-pip-version-check -e ".[test]"
 
-# main job: build the thesis PUMA's ME and CS FMUs, simulate them against a
-# high-accuracy reference and report error against run time
+# main job: the thesis system (PUMA + six hydraulic chains, one FMU each) co-simulated
+# against its monolithic reference; error against run time for every coupling scheme,
+# the monolithic FMU and the arm-only torque-driven study (out/thesis/)
 run: setup
-	$(PYTHON) examples/puma_fmu_vs_reference.py --out $(OUT)
+	$(PYTHON) examples/thesis_system.py --out $(OUT)
 
 test: setup
 	$(PYTHON) -m pytest -q
