@@ -75,3 +75,18 @@ def test_newton_that_cannot_converge_is_reported():
     f = r.summary.failure
     assert f.cause == "not-converged" and "did not converge in 2 iterations" in f.message
     assert f.coupling is not None
+
+
+def test_a_coupling_that_pumps_energy_into_the_puma_is_reported_not_answered_ok(tmp_path):
+    # Jacobi with held inputs at 8 ms is far above its stability limit on the thesis system: the arm
+    # spins up to ~1e5 rad/s within a tenth of a second, then wanders, bounded; without a check the run
+    # "succeeds" with joint angles 2e5 rad off.
+    import fmugen
+    from fmugen.cosim.master import run
+
+    built = fmugen.load_scene("examples/scenes/puma_hydraulic.toml", set={"scene.stop": 0.5}).build(tmp_path)
+    r = run(built.system, scheme="jacobi", extrapolation="hold", step=0.008)
+    assert r.summary.status == "failed" and r.summary.failure.cause == "diverged"
+    assert r.summary.failure.time < 0.5 and "arm." in str(r.summary.failure)
+    ok = run(built.system, scheme="gauss-seidel", extrapolation="linear", step=0.001)
+    assert ok.ok

@@ -702,6 +702,17 @@ class Master:
         dn = Rs[rows, jd]
         rel = R[rows, jd] / np.maximum(peak[jd], REST * scale0[jd])
         recent.extend(zip(dn.tolist(), sn.tolist(), rel.tolist()))
+        # grown a thousandfold past its scale while the coupling error is as large as the signal: the
+        # coupling has pumped energy in (a PUMA under Jacobi/held at 8 ms spins at 1e5 rad/s within 0.1 s
+        # and then wanders, bounded, with defects small against those values)
+        if sn.max() > GROWN and float(rel.max()) >= 0.5:
+            j = int(jd[int(np.argmax(rel))])
+            return FailureReport(
+                t, "diverged",
+                f"the coupling diverges: coupled values grew to {sn.max():.3g} x their initial scale with an "
+                f"interface defect {float(rel.max()):.2g} x the signal (H = {H:.4g} s is above this scheme's "
+                f"stability limit: take a smaller step, extrapolation, or an iterative/newton scheme)",
+                coupling=self.coupling_labels[j])
         if _explosive(recent):
             return FailureReport(
                 t, "diverged",
@@ -836,6 +847,7 @@ class Master:
 
 PEAK_DECAY = 0.995  # per macro step: the peak magnitude forgets over ~200 steps
 REST = 1e-6  # coupled signals below this fraction of their nominal scale count as at rest (no growth from noise)
+GROWN = 1e3  # coupled values this many times their initial scale (or nominal) count as grown
 SUSTAINED = 20  # windows (100 macro steps) of a defect that neither decays nor shrinks against the signal
 ENVELOPE = 6  # windows (of 5 macro steps) in the defect's envelope: longer than an oscillation period
 
