@@ -81,8 +81,9 @@ def summary(report_csv: Path, target: float) -> str:
         b = best.get(lab)
         text = (f"H = {f(b, 'step') * 1e3:g} ms: {f(b, 'err_linf'):.2g} rad in {f(b, 'wall_median'):.3f} s "
                 f"({f(b, 'real_time_factor'):.1f}x real time)" if b else f"never within {target:g} rad")
-        lim = (f"; stable up to H = {max(stable) * 1e3:g} ms" if stable else "; unstable at every H tried")
-        lim += f", fails from {min(failed) * 1e3:g} ms" if failed and stable else ""
+        ms = lambda hs: ", ".join(f"{h * 1e3:g}" for h in sorted(hs))  # noqa: E731
+        lim = f"; ran at H = {ms(stable)} ms" if stable else "; failed at every H tried"
+        lim += f", failed (reported) at {ms(failed)} ms" if failed and stable else ""
         lines.append(f"  {lab:<22} {text}{lim}")
     return "\n".join(lines)
 
