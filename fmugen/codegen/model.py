@@ -280,6 +280,20 @@ class SymbolicModel:
             raise ValueError(f"{self.name}: {', '.join(unknown)} not a state, input or parameter")
         return replace(self, **groups)
 
+    def with_ranges_narrowed(self, ranges: dict) -> "SymbolicModel":
+        """A copy whose states and outputs named in ``ranges`` ({name: (min, max)}, None = open) keep
+        only the intersection of their own validity range and the one given."""
+        if not ranges:
+            return self
+
+        def narrowed(v):
+            if v.name not in ranges:
+                return v
+            lo, hi = intersect_range((v.min, v.max), ranges[v.name])
+            return replace(v, min=lo, max=hi)
+
+        return replace(self, states=tuple(map(narrowed, self.states)), outputs=tuple(map(narrowed, self.outputs)))
+
     def pruned(self) -> "SymbolicModel":
         """A copy whose programs hold only the steps the results need."""
         jac_needs = []
@@ -315,6 +329,13 @@ class SymbolicModel:
                 else:
                     n += stp.X.rows ** 3 // 3 + stp.X.rows ** 2 * stp.X.cols
         return n
+
+
+def intersect_range(a: tuple, b: tuple) -> tuple:
+    """Intersection of two (min, max) ranges in which None means unbounded."""
+    lo = a[0] if b[0] is None else (b[0] if a[0] is None else max(a[0], b[0]))
+    hi = a[1] if b[1] is None else (b[1] if a[1] is None else min(a[1], b[1]))
+    return lo, hi
 
 
 def _finite_signs(expr):

@@ -29,11 +29,10 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import replace
 from pathlib import Path
 from typing import Union
 
-from ..codegen.model import SymbolicModel
+from ..codegen.model import SymbolicModel, intersect_range
 from ..errors import InputFileError, check_identifier, read_text_file
 from .amplifier import amplifier
 from .connect import assemble
@@ -198,21 +197,5 @@ def carry_input_ranges(model: SymbolicModel, components: dict, connections) -> S
             continue
         for v in comp.inputs:
             if v.name == var_name and (v.min is not None or v.max is not None):
-                lo, hi = limits.get(source, (None, None))
-                if v.min is not None:
-                    lo = v.min if lo is None else max(lo, v.min)
-                if v.max is not None:
-                    hi = v.max if hi is None else min(hi, v.max)
-                limits[source] = (lo, hi)
-    if not limits:
-        return model
-
-    def narrowed(v):
-        if v.name not in limits:
-            return v
-        lo, hi = limits[v.name]
-        lo = lo if v.min is None else (v.min if lo is None else max(lo, v.min))
-        hi = hi if v.max is None else (v.max if hi is None else min(hi, v.max))
-        return replace(v, min=lo, max=hi)
-
-    return replace(model, states=tuple(map(narrowed, model.states)), outputs=tuple(map(narrowed, model.outputs)))
+                limits[source] = intersect_range(limits.get(source, (None, None)), (v.min, v.max))
+    return model.with_ranges_narrowed(limits)

@@ -20,7 +20,7 @@ from typing import Optional
 
 import numpy as np
 
-from ..codegen.model import SymbolicModel
+from ..codegen.model import SymbolicModel, intersect_range
 from ..components.connect import assemble, same_unit
 from .errors import SceneError, did_you_mean
 from .file import GroupSpec, SOLVERS, apply_sets, parse_scene, read_toml
@@ -314,25 +314,10 @@ class Scene:
             if si not in members or factor is not None:
                 continue
             v = self._var(ti, tv, self.src)[1]
-            if v.min is None and v.max is None:
-                continue
-            key = self.fmu_name(si, sv)
-            lo, hi = limits.get(key, (None, None))
-            lo = v.min if lo is None else (lo if v.min is None else max(lo, v.min))
-            hi = v.max if hi is None else (hi if v.max is None else min(hi, v.max))
-            limits[key] = (lo, hi)
-        if not limits:
-            return m
-
-        def narrowed(v):
-            if v.name not in limits:
-                return v
-            lo, hi = limits[v.name]
-            lo = lo if v.min is None else (v.min if lo is None else max(lo, v.min))
-            hi = hi if v.max is None else (v.max if hi is None else min(hi, v.max))
-            return replace(v, min=lo, max=hi)
-
-        return replace(m, states=tuple(map(narrowed, m.states)), outputs=tuple(map(narrowed, m.outputs)))
+            if v.min is not None or v.max is not None:
+                key = self.fmu_name(si, sv)
+                limits[key] = intersect_range(limits.get(key, (None, None)), (v.min, v.max))
+        return m.with_ranges_narrowed(limits)
 
     def monolithic_model(self) -> SymbolicModel:
         """The whole scene as one model (names ``instance.variable``), nothing pruned or folded."""
