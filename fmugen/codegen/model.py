@@ -17,13 +17,13 @@ q and qd for co-simulation without direct feedthrough.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Optional, Sequence
 
 import sympy as sp
 
 from .chain import ChainDynamics, chain_ops
-from .program import Assign, Program, SolveSPD
+from .program import Assign, Program
 
 
 @dataclass(frozen=True)
