@@ -3,8 +3,10 @@ from __future__ import annotations
 
 import difflib
 
+from ..errors import FmugenError
 
-class SceneError(ValueError):
+
+class SceneError(FmugenError):
     """A scene file, a ``--set`` or a scene request is wrong; the message names file, key and reason."""
 
 

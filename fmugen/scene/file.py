@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Optional
 
 from ..components.assembly import COMPONENT_TYPES
+from ..errors import read_text_file
 from .errors import SceneError, did_you_mean
 
 SCENE_KEYS = {"name", "description", "parameter_set", "start", "stop", "step", "tolerance", "record",
@@ -104,16 +105,7 @@ def _numbers_table(v, where) -> dict:
 
 
 def read_toml(path: Path) -> dict:
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise SceneError(f"{path}: no such file") from None
-    except OSError as exc:
-        raise SceneError(f"{path}: cannot be read: {exc.strerror}") from None
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise SceneError(f"{path}: not a UTF-8 text file (byte {exc.start}); a scene is a TOML text file") from None
+    text = read_text_file(path, "scene file")
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
