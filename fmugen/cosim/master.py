@@ -359,7 +359,6 @@ class Master:
     # -- primitives (hot loop: attributes bound to locals, no allocation) ------
     def _read_all(self) -> int:
         calls = 0
-        Y = self.Y
         for u in self.units:
             if u.n_out:
                 st = u._getReal(u.c, u.out_vr, u.n_out, u.y_ptr)
@@ -399,7 +398,7 @@ class Master:
         ext = {"hold": 0, "linear": 1, "quadratic": 2}[self.extrapolation]
         p_err = 2 if implicit else ext + 1  # the defect is O(H^p_err)
 
-        units, F, S = self.units, self.F, self.S
+        units = self.units
         Y, Uset, DUset = self.Y, self.Uset, self.DUset
         no_interp = self.no_interp
         any_no_interp = bool(no_interp.any())

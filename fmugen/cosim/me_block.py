@@ -18,11 +18,10 @@ outputs q, qd, actuator output tau -- satisfy this).
 """
 from __future__ import annotations
 
-from ctypes import POINTER, byref, c_double, c_uint
+from ctypes import byref
 
 import numpy as np
 
-from .errors import CosimError
 from .units import UnitFailure, dptr, vr_array
 
 ME_RTOL = 1e-10
@@ -37,7 +36,6 @@ class MEBlock:
         self.rtol = rtol
         self.n_rhs = 0
         self.n_jac = 0
-        index = {u.name: k for k, u in enumerate(master.units)}
         self.me_index = {u.name: i for i, u in enumerate(units)}
         off = 0
         for u in units:
