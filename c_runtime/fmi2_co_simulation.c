@@ -25,11 +25,11 @@ static int is_cs(fmugen_instance *inst, const char *fn)
 }
 
 /*
- * Input derivatives: order 1 is stored and used to extrapolate the input
- * linearly over the following communication steps, u(t) = u(t_c) + du (t -
- * t_c), until it is set again (0 switches extrapolation off).  FMI 2.0 has
- * no flag telling the master the highest order a slave uses, so higher
- * orders are accepted and ignored with a warning.
+ * Input derivatives: orders 1 and 2 are stored and used to extrapolate the
+ * input over the following communication steps, u(t) = u(t_c) + du (t - t_c)
+ * + ddu (t - t_c)^2 / 2, until they are set again (0 switches a term off).
+ * FMI 2.0 has no flag telling the master the highest order a slave uses, so
+ * higher orders are accepted and ignored with a warning.
  */
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                        const fmi2Integer order[], const fmi2Real value[])
@@ -68,9 +68,12 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference
     for (size_t i = 0; i < nvr; i++) {
         if (order[i] == 1) {
             inst->du[vr[i] - fmugen_vr_u(m)] = value[i];
+        } else if (order[i] == 2) {
+            inst->ddu[vr[i] - fmugen_vr_u(m)] = value[i];
         } else {
             fmugen_log(inst, fmi2Warning, FMUGEN_LOG_STATUS_WARNING,
-                       "%s: derivative of order %d of %s ignored (inputs are extrapolated linearly)", fn, order[i],
+                       "%s: derivative of order %d of %s ignored (inputs are extrapolated to second order)", fn,
+                       order[i],
                        fmugen_real_name(inst, vr[i], name, sizeof name));
             status = fmi2Warning;
         }
@@ -246,6 +249,9 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     /* inputs at the time reached, so that outputs and the next step see a
      * continuous input */
     fmugen_inputs_at(inst, tc, u0, inst->s.time, inst->u);
+    /* the polynomial goes on from the new point: its slope there */
+    for (int i = 0; i < m->nu; i++)
+        if (inst->ddu[i] != 0.0) inst->du[i] += inst->ddu[i] * (inst->s.time - tc);
     fmugen_invalidate(inst);
     inst->s.last_successful_time = inst->s.time;
     if (rc != FMUGEN_SOLVER_OK) {

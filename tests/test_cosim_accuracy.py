@@ -47,12 +47,18 @@ def test_reference_is_far_below_the_errors(ref_default):
 
 @pytest.mark.parametrize("scheme,ext,order", [("jacobi", "hold", 1), ("jacobi", "linear", 2),
                                               ("gauss-seidel", "hold", 1), ("gauss-seidel", "linear", 2),
-                                              ("newton", "linear", 2)])
+                                              ("newton", "linear", 2), ("jacobi", "quadratic", 3),
+                                              # Gauss-Seidel: the later FMU gets the line to the source's new
+                                              # value, so quadratic extrapolation of the first one stays order 2
+                                              ("gauss-seidel", "quadratic", 2)])
 def test_observed_order(ref_default, scheme, ext, order):
     errs = np.array([_error(run(split_system("default", "step"), scheme, ext, step=H), ref_default)
                      for H in H_SWEEP])
     observed = np.log2(errs[:-1] / errs[1:])
-    assert np.all(np.abs(observed - order) < 0.15), (errs, observed)
+    # third order (the parabola goes to the FMUs as a second input derivative) approaches 3 from below
+    # over these halvings (2.84, 2.93): the last one within 0.1
+    tol = 0.15 if order < 3 else 0.2
+    assert np.all(np.abs(observed - order) < tol) and abs(observed[-1] - order) < 0.1, (errs, observed)
     # and every error is > 100x the reference's own error estimate
     assert errs.min() > 100 * ref_default.error_of("joint.theta")
 

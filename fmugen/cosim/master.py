@@ -28,10 +28,12 @@ FMU sees during [t_n, t_{n+1}]:
 Extrapolation of U over the step from past communication points: ``hold``
 (constant, order 1), ``linear`` (order 2), ``quadratic`` (through three
 points).  FMUs that declare ``canInterpolateInputs`` receive the value at t_n
-and its slope (fmi2SetRealInputDerivatives, order 1); our runtime accepts
-first derivatives only, so ``quadratic`` passes the secant from U_n to the
-quadratic's value at t_{n+1} (exact at both ends; the global order stays 2).
-FMUs that cannot interpolate get the extrapolant's value at the midpoint.
+and its slope (fmi2SetRealInputDerivatives, order 1) and, for ``quadratic``,
+its second derivative (order 2): the parabola itself, so Jacobi/quadratic is of
+order 3.  Gauss-Seidel gives a later FMU the line to its source's new value
+(order 2), and iterated schemes the line to the iterate: a parabola through
+U_{n-1} there destabilised the PUMA's wrist coupling (measured).  FMUs that
+cannot interpolate get the extrapolant's value at the midpoint.
 
 Adaptive macro step (``adaptive=True``): the local error indicator is the
 **interface defect** d = U_{n+1} - P(t_{n+1}), the mismatch between what an FMU
@@ -304,6 +306,7 @@ class Master:
         self.Y = np.zeros(max(ny, 1))  # outputs at t_{n+1} (being computed)
         self.Uset = np.zeros(max(nu, 1))  # input values passed at t_n
         self.DUset = np.zeros(max(nu, 1))  # input slopes passed at t_n
+        self.DDUset = np.zeros(max(nu, 1))  # input second derivatives passed at t_n (quadratic inputs)
         self.unit_io = []
         for k, unit in enumerate(self.units):
             out_vrs = [unit.variables[v].valueReference for v in outs[k]]
@@ -314,8 +317,10 @@ class Master:
             unit.out_sl = slice(y_off[k], y_off[k] + len(out_vrs))
             unit.u_ptr = dptr(self.Uset, u_off[k])
             unit.du_ptr = dptr(self.DUset, u_off[k])
+            unit.ddu_ptr = dptr(self.DDUset, u_off[k])
             unit.y_ptr = dptr(self.Y, y_off[k])
             unit.in_order = (__import__("ctypes").c_int * max(1, len(in_vrs)))(*([1] * len(in_vrs)))
+            unit.in_order2 = (__import__("ctypes").c_int * max(1, len(in_vrs)))(*([2] * len(in_vrs)))
             unit.in_names, unit.out_names = list(ins[k]), list(outs[k])
         # which U entries belong to FMUs that cannot take input derivatives
         self.no_interp = np.array([not getattr(self.units[k], "can_interpolate", False) for k in owner_u], dtype=bool)
@@ -413,6 +418,9 @@ class Master:
         U0_v, U1_v, U2_v = U_hist[0, :nu], U_hist[1, :nu], U_hist[2, :nu]
         hold_fast = ext == 0 and not implicit  # Upred = U_n; no input derivatives sent; one history row
         self._send_du = not hold_fast
+        self._send_ddu = ext == 2  # quadratic: the parabola itself goes to the FMUs (order 2)
+        self.DDUset[:] = 0.0
+        self._quad_h1, self._U1 = 0.0, U_hist[1]
         rec_idx = self.rec_idx
         cap = int(min(max((stop - t0) / Hmin, 16), 1_000_000)) + 2 if not adaptive else 1024
         T = np.empty(cap)
@@ -479,14 +487,17 @@ class Master:
                     elif ext == 1 or n_hist == 2:
                         np.subtract(U0_v, U1_v, out=DUset_v)
                         DUset_v /= t_hist[0] - t_hist[1]
-                    else:  # quadratic: slope of the secant to P(t_n + H)
+                    else:  # quadratic: P(t_n + s) = U_n + P'(t_n) s + P'' s^2 / 2 through the last three points
                         h1, h2 = t_hist[0] - t_hist[1], t_hist[1] - t_hist[2]
                         d1 = (U0_v - U1_v) / h1
                         d2 = (U1_v - U2_v) / h2
                         c2 = (d1 - d2) / (h1 + h2)
-                        DUset_v[:] = d1 + c2 * (H + h1)  # (P(t+H) - U_n)/H = d1 + c2 (H + h1)
+                        DUset_v[:] = d1 + c2 * h1
+                        self.DDUset[:nu] = 2.0 * c2
                     Upred_v = Upred[:nu]
                     np.multiply(DUset_v, H, out=Upred_v)
+                    if ext == 2 and n_hist >= 3:
+                        Upred_v += 0.5 * H * H * self.DDUset[:nu]
                     Upred_v += U0_v
                 if need_states:
                     for k, u in enumerate(units):
@@ -506,6 +517,11 @@ class Master:
                         if J is not None and J_H is not None and abs(H - J_H) > 1e-12 * H:
                             J = None  # the step's sensitivity depends on H
                         Vg = Upred_v.copy()
+                        # the line from U_n to the guess at t_{n+1}: a parabola through U_{n-1} as well
+                        # (quadratic) makes the iterated coupling unstable on the PUMA (a multistep
+                        # extrapolation inside an implicit step), so it stays a line
+                        self._quad_h1 = 0.0
+                        self.DDUset[:nu] = 0.0
                         it = 0
                         conv = False
                         err_c_prev = math.inf
@@ -517,7 +533,7 @@ class Master:
                                         raise UnitFailure(u.name, "fmi2SetFMUstate", st, u.messages())
                                 calls += len(units)
                             Uset[:nu] = U0[:nu]
-                            DUset[:nu] = (Vg - U0[:nu]) / H
+                            self._slopes_to(Vg, U0, H)
                             calls += self._step_jacobi(t, H, 1, any_no_interp, True)
                             self._coupled(Unew)
                             R = Unew[:nu] - Vg
@@ -747,6 +763,11 @@ class Master:
                 if st > 1:
                     raise UnitFailure(u.name, "fmi2SetRealInputDerivatives", st, u.messages())
                 calls += 1
+                if self._send_ddu:
+                    st = u._setInDer(u.c, u.in_vr, u.n_in, u.in_order2, u.ddu_ptr)
+                    if st > 1:
+                        raise UnitFailure(u.name, "fmi2SetRealInputDerivatives", st, u.messages())
+                    calls += 1
         st = u._doStep(u.c, t, H, no_prior)
         self._do_steps += 1
         if st > 1:
@@ -789,9 +810,11 @@ class Master:
                 if ext == 0 or not getattr(u, "can_interpolate", False):
                     Uset[idx] = new  # the source's value at t_{n+1}, held
                     DUset[idx] = 0.0
-                else:  # the line from U_n to the source's U_{n+1}
+                else:  # the line from U_n to the source's U_{n+1} (a parabola through U_{n-1} as well
+                    # destabilises the PUMA's wrist coupling at 2 ms: measured, so it stays a line)
                     Uset[idx] = U0[idx]
                     DUset[idx] = (new - U0[idx]) / H
+                self.DDUset[idx] = 0.0
             if u.kind == "me":
                 if u is self._first_me:
                     calls += self.me_block.step(t, H)
@@ -799,12 +822,24 @@ class Master:
                 calls += self._do(u, t, H, no_prior)
         return calls
 
+    def _slopes_to(self, V, U0, H) -> None:
+        """Inputs over an iterated macro step: the line from U_n to the guess V at t_n + H, or (quadratic,
+        with history) the parabola through U_{n-1}, U_n and V -- slopes into DUset, curvatures into DDUset."""
+        nu, h1 = self.nu, self._quad_h1
+        A = V - U0[:nu]
+        if h1 > 0:
+            b = (A / H + (self._U1[:nu] - U0[:nu]) / h1) / (H + h1)
+            self.DUset[:nu] = A / H - b * H
+            self.DDUset[:nu] = 2.0 * b
+        else:
+            self.DUset[:nu] = A / H
+
     def _interface_jacobian(self, t, H, U0, Vg, Unew, states, scale):
         """M = (I - dG/dV)^-1 by finite differences of rolled-back steps, one FMU at a time."""
         nu = self.nu
         Jg = np.zeros((nu, nu))
         calls = 0
-        Y, Uset, DUset = self.Y, self.Uset, self.DUset
+        Y, Uset = self.Y, self.Uset
         Y_base = Y.copy()
         for k, u in enumerate(self.units):
             if not u.n_in or u.kind == "me":
@@ -816,8 +851,9 @@ class Master:
                 delta = 1e-6 * max(abs(Vg[j]), scale[j])
                 u.restore(states[k])
                 Uset[: nu] = U0[: nu]
-                DUset[: nu] = (Vg - U0[: nu]) / H
-                DUset[j] += delta / H
+                Vp = Vg.copy()
+                Vp[j] += delta
+                self._slopes_to(Vp, U0, H)
                 if self.no_interp[j]:
                     Uset[j] = 0.5 * (U0[j] + Vg[j] + delta)
                 calls += 1 + self._do(u, t, H, 0)
@@ -834,8 +870,9 @@ class Master:
                 for k in me_k:
                     self.units[k].restore(states[k])
                 Uset[:nu] = U0[:nu]
-                DUset[:nu] = (Vg - U0[:nu]) / H
-                DUset[j] += delta / H
+                Vp = Vg.copy()
+                Vp[j] += delta
+                self._slopes_to(Vp, U0, H)
                 calls += len(me_k) + self.me_block.step(t, H)
                 Jg[rows, j] = (self.F[rows] * Y[self.S[rows]] - Unew[rows]) / delta
                 for k in me_k:
