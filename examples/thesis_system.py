@@ -5,8 +5,8 @@
    starting at rest with the arm held against gravity.
 2. Solves the same scene as one ODE (the monolithic model) with Radau at
    1e-12, confirmed by a tenfold tighter solve: the reference.
-3. Co-simulates it with fmugen's master -- Jacobi and Gauss-Seidel with held
-   and linearly extrapolated inputs, Newton coupling -- over a halving
+3. Co-simulates it with fmugen's master -- Jacobi and Gauss-Seidel with held,
+   linearly and quadratically extrapolated inputs, Newton coupling -- over a halving
    sequence of macro steps, plus the scene as one monolithic FMU, and
    reports error against run time (median of ``--repeats`` runs after a
    warm-up): ``OUT/thesis/report.txt`` (printed), ``report.csv``,
@@ -33,7 +33,7 @@ sys.path.insert(0, str(ROOT))
 from fmugen.cli import main as fmugen_main  # noqa: E402
 
 SCENE = ROOT / "examples" / "scenes" / "puma_hydraulic.toml"
-SCHEMES = "jacobi/hold,jacobi/linear,gauss-seidel/hold,gauss-seidel/linear,newton/linear"
+SCHEMES = "jacobi/hold,jacobi/linear,jacobi/quadratic,gauss-seidel/hold,gauss-seidel/linear,gauss-seidel/quadratic,newton/linear"
 
 
 def merge_arm_study(report_csv: Path, arm_csv: Path) -> None:
