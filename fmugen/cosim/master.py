@@ -471,7 +471,8 @@ class Master:
             grow_votes = deque(maxlen=GROW_AFTER)  # step-size factors the last accepted steps proposed
             J = None
             J_H = None
-            while t < stop - 1e-12 * max(1.0, abs(stop)):
+            t_last = stop - 1e-12 * max(1.0, abs(stop))  # loop guard, computed once
+            while t < t_last:
                 if abs(stop - (t + H)) <= 1e-6 * H:
                     pass  # the last step: keep H (bit-identical to a loop that steps H), land on stop
                 elif t + H > stop or stop - (t + H) < 1e-3 * H:
@@ -623,7 +624,8 @@ class Master:
                     U1_v[:] = U0_v
                 U0_v[:] = Unew_v
                 t_hist[2], t_hist[1], t_hist[0] = t_hist[1], t_hist[0], t
-                n_hist = min(n_hist + 1, 3)
+                if n_hist < 3:
+                    n_hist += 1
                 if n_rows == len(T):
                     T = np.concatenate([T, np.empty(len(T))])
                     V = np.concatenate([V, np.empty_like(V)])
@@ -720,11 +722,11 @@ class Master:
         # grown a thousandfold past its scale while the coupling error is as large as the signal: the
         # coupling has pumped energy in (a PUMA under Jacobi/held at 8 ms spins at 1e5 rad/s within 0.1 s
         # and then wanders, bounded, with defects small against those values)
-        if sn.max() > GROWN and float(rel.max()) >= 0.5:
+        if sn[-1] > GROWN and float(rel.max()) >= 0.5:
             j = int(jd[int(np.argmax(rel))])
             return FailureReport(
                 t, "diverged",
-                f"the coupling diverges: coupled values grew to {sn.max():.3g} x their initial scale with an "
+                f"the coupling diverges: coupled values grew to {sn[-1]:.3g} x their initial scale with an "
                 f"interface defect {float(rel.max()):.2g} x the signal (H = {H:.4g} s is above this scheme's "
                 f"stability limit: take a smaller step, extrapolation, or an iterative/newton scheme)",
                 coupling=self.coupling_labels[j])
