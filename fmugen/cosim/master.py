@@ -528,11 +528,7 @@ class Master:
                         err_c_prev = math.inf
                         while True:
                             if it > 0:
-                                for k, u in enumerate(units):
-                                    st = u.restore(states[k])
-                                    if st > 1:
-                                        raise UnitFailure(u.name, "fmi2SetFMUstate", st, u.messages())
-                                calls += len(units)
+                                calls += self._restore_all(states)
                             Uset[:nu] = U0[:nu]
                             self._slopes_to(Vg, U0, H)
                             calls += self._step_jacobi(t, H, 1, any_no_interp, True)
@@ -560,9 +556,7 @@ class Master:
                         if not conv:
                             j = int(np.argmax(np.abs(R))) if nu else 0
                             if adaptive and H > Hmin * (1 + 1e-12):
-                                for k, u in enumerate(units):
-                                    u.restore(states[k])
-                                calls += len(units)
+                                calls += self._restore_all(states)
                                 summ.rollbacks += 1
                                 H = max(Hmin, H / 4)
                                 rejected_last = True
@@ -578,9 +572,7 @@ class Master:
                     # only have been given inputs that jumped
                     if not (adaptive and e.status == 2 and H > Hmin * (1 + 1e-12)):
                         raise
-                    for k, u in enumerate(units):
-                        u.restore(states[k])
-                    calls += len(units)
+                    calls += self._restore_all(states)
                     summ.rollbacks += 1
                     H = max(Hmin, H / 4)
                     rejected_last = True
@@ -604,11 +596,7 @@ class Master:
                                                     f"interface defect {err:.3g} x tol at the minimum macro step "
                                                     f"{Hmin:.4g} s", coupling=self.coupling_labels[j])
                             break
-                        for k, u in enumerate(units):
-                            st = u.restore(states[k])
-                            if st > 1:
-                                raise UnitFailure(u.name, "fmi2SetFMUstate", st, u.messages())
-                        calls += len(units)
+                        calls += self._restore_all(states)
                         summ.rollbacks += 1
                         grow_votes.clear()
                         H = max(Hmin, H * max(0.2, SAFETY * err ** (-1.0 / p_err)))
@@ -823,6 +811,14 @@ class Master:
             else:
                 calls += self._do(u, t, H, no_prior)
         return calls
+
+    def _restore_all(self, states) -> int:
+        """Every FMU back to its saved state (a rollback); a refused restore is a failure.  Returns the calls."""
+        for k, u in enumerate(self.units):
+            st = u.restore(states[k])
+            if st > 1:
+                raise UnitFailure(u.name, "fmi2SetFMUstate", st, u.messages())
+        return len(self.units)
 
     def _slopes_to(self, V, U0, H) -> None:
         """Inputs over an iterated macro step: the line from U_n to the guess V at t_n + H, or (quadratic,

@@ -22,7 +22,6 @@ link's centre of mass).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 from typing import Mapping, Optional, Sequence
 
 import numpy as np
@@ -285,15 +284,7 @@ class Manipulator:
             rev = L.joint == REVOLUTE
             inputs.append(Variable(f"tau[{i + 1}]", self.tau[i], "N.m" if rev else "N",
                                    f"{'torque' if rev else 'force'} applied by actuator {i + 1}", start=0.0))
-        for k in self.external_links:
-            f, t = self.ext[k]
-            for c in range(3):
-                inputs.append(Variable(f"f_ext_{k + 1}[{c + 1}]", f[c], "N",
-                                       f"external force on link {k + 1} at its centre of mass, base {'xyz'[c]}",
-                                       start=0.0))
-            for c in range(3):
-                inputs.append(Variable(f"t_ext_{k + 1}[{c + 1}]", t[c], "N.m",
-                                       f"external torque on link {k + 1}, base {'xyz'[c]}", start=0.0))
+        inputs += self._wrench_inputs()
         params = tuple(
             Variable(p.name, p.symbol, p.unit, p.description, start=p.value) for p in robot.parameters
         )
@@ -422,14 +413,7 @@ class Manipulator:
                 unit = units[0] if L.joint == REVOLUTE else units[1]
                 inputs.append(Variable(f"{stem}[{i + 1}]", group[i], unit, f"{what} of joint {i + 1} ({L.name})",
                                        start=0.0))
-        for k in self.external_links:
-            for c in range(3):
-                inputs.append(Variable(f"f_ext_{k + 1}[{c + 1}]", self.ext[k][0][c], "N",
-                                       f"external force on link {k + 1} at its centre of mass, base {'xyz'[c]}",
-                                       start=0.0))
-            for c in range(3):
-                inputs.append(Variable(f"t_ext_{k + 1}[{c + 1}]", self.ext[k][1][c], "N.m",
-                                       f"external torque on link {k + 1}, base {'xyz'[c]}", start=0.0))
+        inputs += self._wrench_inputs()
         outputs = tuple(
             Variable(f"tau[{i + 1}]", _real(f"tau_out_{i + 1}"), "N.m" if L.joint == REVOLUTE else "N",
                      f"{'torque' if L.joint == REVOLUTE else 'force'} that joint {i + 1} needs")
