@@ -25,9 +25,11 @@ static int is_cs(fmugen_instance *inst, const char *fn)
 }
 
 /*
- * Input derivatives: orders 1 and 2 are stored and used to extrapolate the
+ * Input derivatives: orders 1 to 3 are stored and used to extrapolate the
  * input over the following communication steps, u(t) = u(t_c) + du (t - t_c)
- * + ddu (t - t_c)^2 / 2, until they are set again (0 switches a term off).
+ * + ddu (t - t_c)^2 / 2 + dddu (t - t_c)^3 / 6, until they are set again (0
+ * switches a term off).  Three orders let a master pass a cubic Hermite
+ * interpolant (values and slopes at both ends of the step).
  * FMI 2.0 has no flag telling the master the highest order a slave uses, so
  * higher orders are accepted and ignored with a warning.
  */
@@ -70,9 +72,11 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference
             inst->du[vr[i] - fmugen_vr_u(m)] = value[i];
         } else if (order[i] == 2) {
             inst->ddu[vr[i] - fmugen_vr_u(m)] = value[i];
+        } else if (order[i] == 3) {
+            inst->dddu[vr[i] - fmugen_vr_u(m)] = value[i];
         } else {
             fmugen_log(inst, fmi2Warning, FMUGEN_LOG_STATUS_WARNING,
-                       "%s: derivative of order %d of %s ignored (inputs are extrapolated to second order)", fn,
+                       "%s: derivative of order %d of %s ignored (inputs are extrapolated to third order)", fn,
                        order[i],
                        fmugen_real_name(inst, vr[i], name, sizeof name));
             status = fmi2Warning;
@@ -250,8 +254,15 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
      * continuous input */
     fmugen_inputs_at(inst, tc, u0, inst->s.time, inst->u);
     /* the polynomial goes on from the new point: its slope there */
-    for (int i = 0; i < m->nu; i++)
-        if (inst->ddu[i] != 0.0) inst->du[i] += inst->ddu[i] * (inst->s.time - tc);
+    const double s_end = inst->s.time - tc;
+    for (int i = 0; i < m->nu; i++) {
+        if (inst->dddu[i] != 0.0) {
+            inst->du[i] += (inst->ddu[i] + 0.5 * inst->dddu[i] * s_end) * s_end;
+            inst->ddu[i] += inst->dddu[i] * s_end;
+        } else if (inst->ddu[i] != 0.0) {
+            inst->du[i] += inst->ddu[i] * s_end;
+        }
+    }
     fmugen_invalidate(inst);
     inst->s.last_successful_time = inst->s.time;
     if (rc != FMUGEN_SOLVER_OK) {

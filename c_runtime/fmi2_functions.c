@@ -220,7 +220,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     size_t len = strlen(instanceName);
     inst->instance_name = rt_alloc(functions, len + 1, 1);
     const int nx = m->nx, nu = m->nu, ny = m->ny, np = m->np;
-    inst->n_vec = (size_t)(2 * nx + 3 * nu + np);
+    inst->n_vec = (size_t)(2 * nx + 4 * nu + np);
     inst->vec = rt_alloc(functions, inst->n_vec + 1, sizeof(double));
     inst->dx_cache = rt_alloc(functions, (size_t)nx + 1, sizeof(double));
     inst->y_cache = rt_alloc(functions, (size_t)ny + 1, sizeof(double));
@@ -236,7 +236,8 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     inst->u = inst->x + nx;
     inst->du = inst->u + nu;
     inst->ddu = inst->du + nu;
-    inst->p = inst->ddu + nu;
+    inst->dddu = inst->ddu + nu;
+    inst->p = inst->dddu + nu;
     inst->fsal = inst->p + np;
     fmugen_set_defaults(inst);
     fmugen_log(inst, fmi2OK, FMUGEN_LOG_EVENTS, "fmi2Instantiate: %s instance of %s (nx=%d, nu=%d, ny=%d, np=%d)",

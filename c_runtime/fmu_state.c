@@ -4,7 +4,7 @@
  *
  * A snapshot holds everything that determines how the simulation continues:
  * the FMI state, time, start/stop time, states x, inputs u, input
- * derivatives du, ddu, parameters p, runtime parameters and solver choice, the
+ * derivatives du, ddu, dddu, parameters p, runtime parameters and solver choice, the
  * solver's memory (proposed next step, controller history, first-same-as-
  * last derivative) and the counters.  Restoring it reproduces the
  * continuation bit for bit.  (Logging settings are not part of it.)
@@ -12,12 +12,12 @@
  * Serialised form (native byte order, for the same platform):
  *   8 bytes  magic "FMUGENST"
  *   u32      format version (2: with the stiffness and stability monitors; 3: with range_check;
- *            4: with second input derivatives)
+ *            4: with second input derivatives; 5: with third input derivatives)
  *   u32      fmuType
  *   u32 x 4  nx, nu, ny, np
  *   u32      length of the GUID, then the GUID bytes (no terminator)
  *   i64/f64  the scalar fields, in the order of put_scalars()
- *   u64      number of doubles, then the doubles x, u, du, ddu, p, fsal
+ *   u64      number of doubles, then the doubles x, u, du, ddu, dddu, p, fsal
  *   u64      FNV-1a hash of all preceding bytes
  * A blob with another magic, version, GUID, size or hash is refused with
  * fmi2Error and a message saying which check failed.
@@ -29,7 +29,7 @@
 #include "fmugen_runtime.h"
 
 #define SNAPSHOT_MAGIC 0x464D5547u /* "FMUG" */
-#define FORMAT_VERSION 4u
+#define FORMAT_VERSION 5u
 static const char blob_magic[8] = {'F', 'M', 'U', 'G', 'E', 'N', 'S', 'T'};
 
 typedef struct fmugen_snapshot {
@@ -357,7 +357,7 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
     if (s.last_do_step_status < fmi2OK || s.last_do_step_status > fmi2Error)
         return fail(inst, fn, "invalid last fmi2DoStep status in blob");
     {
-        reader v = r; /* the arrays x, u, du, ddu, p, fsal: finite, as fmi2SetReal would have them */
+        reader v = r; /* the arrays x, u, du, ddu, dddu, p, fsal: finite, as fmi2SetReal would have them */
         for (size_t i = 0; i < inst->n_vec; i++)
             if (!isfinite(get_f64(&v))) return fail(inst, fn, "non-finite value (state, input, parameter) in blob");
     }

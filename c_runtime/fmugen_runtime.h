@@ -47,7 +47,7 @@ typedef enum {
 FMUGEN_INTERNAL extern const char *const fmugen_log_category_names[FMUGEN_LOG_COUNT];
 
 /* Everything that determines how a simulation continues, apart from the
- * arrays (x, u, du, ddu, p, fsal).  Copied as a whole by fmi2GetFMUstate, written
+ * arrays (x, u, du, ddu, dddu, p, fsal).  Copied as a whole by fmi2GetFMUstate, written
  * field by field by fmi2SerializeFMUstate. */
 typedef struct fmugen_scalars {
     int fmi_state;             /* fmugen_fmi_state */
@@ -87,10 +87,10 @@ typedef struct fmugen_instance {
 
     fmugen_scalars s;
 
-    /* one block: x[nx], u[nu], du[nu], ddu[nu], p[np], fsal[nx] */
+    /* one block: x[nx], u[nu], du[nu], ddu[nu], dddu[nu], p[np], fsal[nx] */
     double *vec;
     size_t n_vec;
-    double *x, *u, *du, *ddu, *p, *fsal;
+    double *x, *u, *du, *ddu, *dddu, *p, *fsal;
 
     /* cache of one model evaluation at (cache_time, x, u, p) */
     int cache_valid;

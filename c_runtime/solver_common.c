@@ -12,8 +12,10 @@ void fmugen_inputs_at(const fmugen_instance *inst, double t0, const double *u0, 
     const int nu = inst->model->nu;
     const double dt = t - t0;
     for (int i = 0; i < nu; i++)
-        out[i] = inst->ddu[i] != 0.0 ? u0[i] + (inst->du[i] + 0.5 * inst->ddu[i] * dt) * dt
-               : inst->du[i] != 0.0 ? u0[i] + inst->du[i] * dt : u0[i];
+        out[i] = inst->dddu[i] != 0.0
+                     ? u0[i] + (inst->du[i] + (0.5 * inst->ddu[i] + inst->dddu[i] * dt / 6.0) * dt) * dt
+                 : inst->ddu[i] != 0.0 ? u0[i] + (inst->du[i] + 0.5 * inst->ddu[i] * dt) * dt
+                 : inst->du[i] != 0.0 ? u0[i] + inst->du[i] * dt : u0[i];
 }
 
 int fmugen_ode_rhs(fmugen_ode *ode, double t, const double *x, double *dx)

@@ -6,8 +6,9 @@
 2. Solves the same scene as one ODE (the monolithic model) with Radau at
    1e-12, confirmed by a tenfold tighter solve: the reference.
 3. Co-simulates it with fmugen's master -- Jacobi and Gauss-Seidel with held,
-   linearly and quadratically extrapolated inputs, Newton coupling -- over a halving
-   sequence of macro steps, plus the scene as one monolithic FMU, and
+   linearly and quadratically extrapolated inputs, Newton coupling with linear,
+   Hermite-parabola and cubic inputs -- over a halving sequence of macro steps
+   (40 ms down to 0.625 ms), plus the scene as one monolithic FMU, and
    reports error against run time (median of ``--repeats`` runs after a
    warm-up): ``OUT/thesis/report.txt`` (printed), ``report.csv``,
    ``work_precision.png``.
@@ -16,7 +17,9 @@
    same CSV (``study = arm only``), from ``examples/puma_fmu_vs_reference.py``.
 5. Ends with the summary: the coarsest co-simulation that holds 1e-4 rad on
    all six joints, its wall time against real time, and how Jacobi and
-   Gauss-Seidel with held inputs and the monolithic FMU compare.
+   Gauss-Seidel with held inputs and the monolithic FMU compare; then the
+   Gauss-Seidel/held stability limit bisected between the report's steps, and
+   the iterated schemes' coarsest 1e-4 rad steps as multiples of it.
 
     python examples/thesis_system.py --out out [--repeats 5] [--quick]
 """
@@ -33,7 +36,10 @@ sys.path.insert(0, str(ROOT))
 from fmugen.cli import main as fmugen_main  # noqa: E402
 
 SCENE = ROOT / "examples" / "scenes" / "puma_hydraulic.toml"
-SCHEMES = "jacobi/hold,jacobi/linear,jacobi/quadratic,gauss-seidel/hold,gauss-seidel/linear,gauss-seidel/quadratic,newton/linear"
+SCHEMES = ("jacobi/hold,jacobi/linear,jacobi/quadratic,gauss-seidel/hold,gauss-seidel/linear,gauss-seidel/quadratic,"
+           "newton/linear,newton/quadratic,newton/cubic")
+# macro steps: halvings from 40 ms (exact comparison points on one reference grid)
+STEPS = "0.04,0.02,0.01,0.005,0.0025,0.00125,0.000625"
 
 
 def merge_arm_study(report_csv: Path, arm_csv: Path) -> None:
@@ -95,8 +101,8 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="fewer settings and no arm-only study (for the tests)")
     args = ap.parse_args(argv)
     out = args.out / "thesis"
-    steps = "0.004,0.002,0.001" if args.quick else "0.008,0.004,0.002,0.001,0.0005"
-    schemes = "gauss-seidel/hold,gauss-seidel/linear,newton/linear" if args.quick else SCHEMES
+    steps = "0.04,0.004,0.002,0.001" if args.quick else STEPS
+    schemes = "gauss-seidel/hold,gauss-seidel/linear,newton/linear,newton/cubic" if args.quick else SCHEMES
     rc = fmugen_main(["report", str(SCENE), "--out", str(out), "--steps", steps, "--schemes", schemes,
                       "--repeats", str(args.repeats)] + (["--stop", "0.5"] if args.quick else []))
     if rc != 0:
@@ -113,10 +119,51 @@ def main(argv=None) -> int:
     else:
         merge_arm_study(report_csv, _empty_arm_csv(out))
     text = summary(report_csv, 1e-4)
+    text += "\n" + held_limit_line(report_csv, 0.5 if args.quick else None)
     (out / "summary.txt").write_text(text + "\n")
     print("\n" + text)
     print(f"\nwrote {out / 'report.txt'}, {report_csv}, {out / 'work_precision.png'}, {out / 'summary.txt'}")
     return 0
+
+
+def stability_limit(system, scheme: str, extrapolation: str, stable: float, unstable: float, stop=None,
+                    rel: float = 0.02) -> tuple:
+    """Bisect the largest macro step at which ``scheme/extrapolation`` runs to the end without a failure
+    (the divergence check on), between a step that ran and one that failed: (largest stable, smallest failed)."""
+    from fmugen.cosim import run
+
+    while unstable - stable > rel * stable:
+        H = 0.5 * (stable + unstable)
+        if run(system, scheme, extrapolation, step=H, stop=stop).ok:
+            stable = H
+        else:
+            unstable = H
+    return stable, unstable
+
+
+def held_limit_line(report_csv: Path, stop=None) -> str:
+    """The Gauss-Seidel/held stability limit bisected between the report's steps, and the coarsest step of each
+    iterated scheme that holds 1e-4 rad as a multiple of it (the issue's "10x" goal)."""
+    import fmugen
+
+    with open(report_csv, newline="") as fh:
+        rows = [r for r in csv.DictReader(fh) if r["study"].startswith("thesis")]
+    gs = [r for r in rows if r["label"] == "gauss-seidel/hold"]
+    ok = [float(r["step"]) for r in gs if r["status"] == "ok"]
+    bad = [float(r["step"]) for r in gs if r["status"] != "ok" and (not ok or float(r["step"]) > max(ok))]
+    if not ok or not bad:
+        return "Gauss-Seidel/held: no stability limit between the steps tried"
+    over = {"scene.stop": stop} if stop else {}
+    built = fmugen.load_scene(SCENE, set=over).build(Path(report_csv).parent / "fmus")
+    lo, hi = stability_limit(built.system, "gauss-seidel", "hold", max(ok), min(bad))
+    lines = [f"Gauss-Seidel/held: largest stable macro step {lo * 1e3:.3g} ms (fails at {hi * 1e3:.3g} ms, "
+             f"bisected to 2 %)"]
+    for lab in dict.fromkeys(r["label"] for r in rows if r["label"].startswith(("newton", "iterative"))):
+        good = [float(r["step"]) for r in rows if r["label"] == lab and r["status"] == "ok"
+                and (float(r["err_linf"] or "nan") <= 1e-4 or r.get("below_reference") == "True")]
+        if good:
+            lines.append(f"  {lab:<22} holds 1e-4 rad at H = {max(good) * 1e3:g} ms: {max(good) / lo:.1f}x that limit")
+    return "\n".join(lines)
 
 
 def _empty_arm_csv(out: Path) -> Path:

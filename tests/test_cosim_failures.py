@@ -7,12 +7,28 @@ import pytest
 
 from cosim_rigs import split_system
 from fmugen.cosim import CosimError, Coupling, Unit, run
+from fmugen.cosim.master import Master
+
+
+def test_hermite_inputs_need_output_derivatives_and_say_which_fmu_lacks_them():
+    from fmpy import read_model_description
+
+    system = split_system()
+    # fmugen's CS FMUs declare first output derivatives (states as outputs, or a Jacobian)
+    for u in system.units:
+        assert read_model_description(str(u.path)).coSimulation.maxOutputDerivativeOrder == 1
+    with Master(system, "newton", "quadratic") as m:
+        m.units[0].max_output_derivative_order = 0  # as a third-party FMU without them would declare
+        with pytest.raises(CosimError, match=f"FMU '{m.units[0].name}' declares maxOutputDerivativeOrder = 0"):
+            m.run(step=1e-3)
 
 
 def test_bad_options_are_refused_with_the_choices():
     with pytest.raises(CosimError, match="unknown scheme 'leapfrog'.*jacobi, gauss-seidel, iterative, newton"):
         run(split_system(), "leapfrog")
-    with pytest.raises(CosimError, match="unknown extrapolation 'cubic'"):
+    with pytest.raises(CosimError, match="unknown extrapolation 'quartic'"):
+        run(split_system(), "jacobi", "quartic")
+    with pytest.raises(CosimError, match="cubic inputs .* need an iterated scheme"):
         run(split_system(), "jacobi", "cubic")
     with pytest.raises(CosimError, match="step must be finite and positive"):
         run(split_system(), "jacobi", step=-1e-3)

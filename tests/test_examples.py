@@ -42,4 +42,11 @@ def test_thesis_system_main_job_quick(tmp_path):
     assert err[("gauss-seidel/linear", 0.001)][0] == "ok" and err[("gauss-seidel/linear", 0.001)][1] < 1e-4
     assert err[("gauss-seidel/linear", 0.001)][1] < err[("gauss-seidel/hold", 0.001)][1] / 10
     assert err[("newton/linear", 0.004)][1] < 1e-4
-    assert "thesis system" in (tmp_path / "thesis" / "summary.txt").read_text().lower()
+    # the goal: Newton with cubic Hermite inputs holds 1e-4 rad at 40 ms, where Gauss-Seidel with
+    # held inputs diverges (its limit, bisected, is 3.4 ms: more than 10x)
+    assert err[("newton/cubic", 0.04)][0] == "ok" and err[("newton/cubic", 0.04)][1] < 1e-4
+    assert err[("gauss-seidel/hold", 0.004)][0] == "failed"
+    summary = (tmp_path / "thesis" / "summary.txt").read_text()
+    assert "thesis system" in summary.lower()
+    limit = float(summary.split("largest stable macro step ")[1].split(" ms")[0])
+    assert 2.0 < limit < 4.0 and 40.0 / limit > 10

@@ -1,7 +1,7 @@
-"""Co-Simulation inputs between communication points: u(t) = u_c + du (t - t_c) + ddu (t - t_c)^2 / 2.
+"""Co-Simulation inputs between communication points: u(t) = u_c + du s + ddu s^2 / 2 + dddu s^3 / 6.
 
 An integrator x' = u makes the effect exact: x(t) is the integral of that polynomial,
-which every CS solver integrates exactly (degree <= 2 < their orders).
+which every CS solver integrates to its tolerance (1e-12 here).
 """
 import numpy as np
 import pytest
@@ -23,7 +23,7 @@ def integrator(tmp_path_factory):
 
 
 @pytest.mark.parametrize("solver", [1, 2, 3])
-def test_second_input_derivative_is_integrated_and_carried_on(integrator, tmp_path, solver):
+def test_input_derivatives_to_third_order_are_integrated_and_carried_on(integrator, tmp_path, solver):
     md = read_model_description(str(integrator))
     vr = {v.name: v.valueReference for v in md.modelVariables}
     fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(integrator), str(tmp_path / "u")),
@@ -34,19 +34,20 @@ def test_second_input_derivative_is_integrated_and_carried_on(integrator, tmp_pa
     fmu.setReal([vr["solver.rtol"], vr["solver.atol"]], [1e-12, 1e-12])
     fmu.enterInitializationMode()
     fmu.exitInitializationMode()
-    u0, du, ddu, H = 0.3, -1.5, 4.0, 0.2
+    u0, du, ddu, dddu, H = 0.3, -1.5, 4.0, -9.0, 0.2
     fmu.setReal([vr["u"]], [u0])
     fmu.setRealInputDerivatives([vr["u"]], [1], [du])
     fmu.setRealInputDerivatives([vr["u"]], [2], [ddu])
-    exact = lambda t: u0 * t + du * t**2 / 2 + ddu * t**3 / 6  # noqa: E731
+    fmu.setRealInputDerivatives([vr["u"]], [3], [dddu])
+    exact = lambda t: u0 * t + du * t**2 / 2 + ddu * t**3 / 6 + dddu * t**4 / 24  # noqa: E731
     for k in (1, 2):  # the second step goes on along the same polynomial
         fmu.doStep(currentCommunicationPoint=(k - 1) * H, communicationStepSize=H)
         x, u = fmu.getReal([vr["x"], vr["u"]])
-        assert x == pytest.approx(exact(k * H), rel=1e-9, abs=1e-12)
-        assert u == pytest.approx(u0 + du * k * H + ddu * (k * H) ** 2 / 2, rel=1e-12)
+        s = k * H
+        assert x == pytest.approx(exact(s), rel=1e-9, abs=1e-12)
+        assert u == pytest.approx(u0 + du * s + ddu * s**2 / 2 + dddu * s**3 / 6, rel=1e-12)
     # switched off again: held from here
-    fmu.setRealInputDerivatives([vr["u"]], [1], [0.0])
-    fmu.setRealInputDerivatives([vr["u"]], [2], [0.0])
+    fmu.setRealInputDerivatives([vr["u"]] * 3, [1, 2, 3], [0.0, 0.0, 0.0])
     x2, u2 = fmu.getReal([vr["x"], vr["u"]])
     fmu.doStep(currentCommunicationPoint=2 * H, communicationStepSize=H)
     assert fmu.getReal([vr["x"]])[0] == pytest.approx(x2 + u2 * H, rel=1e-9)

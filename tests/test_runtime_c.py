@@ -383,9 +383,9 @@ def test_bad_value_references_null_arrays_and_nan(fmus, tmp_path):
     expect_error(cs, lambda: cs.setRealInputDerivatives([VDP["x"]], [1], [1.0]), "not an input")
     expect_error(cs, lambda: cs.setRealInputDerivatives([VDP["F"]], [1], [float("nan")]), "not finite")
     n = len(cs.log.messages)
-    cs.setRealInputDerivatives([VDP["F"]], [2], [1.0])  # second derivatives are used: no message
+    cs.setRealInputDerivatives([VDP["F"]] * 2, [2, 3], [1.0, 1.0])  # second and third derivatives are used: no message
     assert len(cs.log.messages) == n
-    cs.setRealInputDerivatives([VDP["F"]], [3], [1.0])  # fmi2Warning: third derivatives are ignored
+    cs.setRealInputDerivatives([VDP["F"]], [4], [1.0])  # fmi2Warning: fourth derivatives are ignored
     assert len(cs.log.messages) == n + 1 and cs.log.messages[-1][0] == 1 and "ignored" in cs.log.last()
     cs.freeInstance()
 

@@ -1,6 +1,6 @@
 """The ``fmugen cosim``, ``fmugen reference`` and ``fmugen report`` subcommands.
 
-    fmugen cosim SCENE.toml [--scheme jacobi|gauss-seidel|iterative|newton] [--extrapolation hold|linear|quadratic]
+    fmugen cosim SCENE.toml [--scheme jacobi|gauss-seidel|iterative|newton] [--extrapolation hold|linear|quadratic|cubic]
                  [--step H] [--adaptive --tol E] [--stop T] [--set NAME=VALUE ...] --out DIR
     fmugen reference SCENE.toml [--stop T] [--points N] [--set ...] --out DIR
     fmugen report SCENE.toml [--steps H1,H2,...] [--schemes jacobi/hold,...] [--repeats 5] [--target 1e-4]
@@ -45,7 +45,7 @@ def add_cosim_commands(subparsers) -> None:
     _common(p)
     p.add_argument("--scheme", default=None, help="jacobi | gauss-seidel | iterative | newton "
                    "(default: the scene's [cosim] scheme, else gauss-seidel)")
-    p.add_argument("--extrapolation", default=None, help="hold | linear | quadratic (default: the scene's, else linear)")
+    p.add_argument("--extrapolation", default=None, help="hold | linear | quadratic | cubic (cubic: iterated schemes only; default: the scene's, else linear)")
     p.add_argument("--step", type=float, default=None, help="macro step H [s] (default: the scene's step)")
     p.add_argument("--adaptive", action="store_true", help="control H by the interface defect (with --tol)")
     p.add_argument("--tol", type=float, default=1e-4, help="adaptive: tolerance relative to each coupled signal")

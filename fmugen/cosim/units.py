@@ -211,6 +211,8 @@ class SlaveUnit(_Unit):
         self._doStep = f["fmi2DoStep"]
         self._setInDer = f["fmi2SetRealInputDerivatives"]
         self._getRealStatus = f["fmi2GetRealStatus"]
+        self._getOutDer = f["fmi2GetRealOutputDerivatives"]
+        self.max_output_derivative_order = int(cs.maxOutputDerivativeOrder or 0)
         return fmu
 
     def last_successful_time(self) -> float:

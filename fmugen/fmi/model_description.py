@@ -319,8 +319,10 @@ def model_description_xml(
         ranged = any(v.min is not None or v.max is not None for v in model.states + model.inputs + model.outputs)
         interface("ModelExchange", completedIntegratorStepNotNeeded=not ranged)
     if "cs" in fmi_types:
+        # first output derivatives: a state's is f; a computed output's needs the Jacobian (dg/dx f + dg/du du)
+        computed = len(model.outputs) > 0
         interface("CoSimulation", canHandleVariableCommunicationStepSize=True, canInterpolateInputs=True,
-                  maxOutputDerivativeOrder=0, canRunAsynchronuously=False)
+                  maxOutputDerivativeOrder=1 if (has_jac or not computed) else 0, canRunAsynchronuously=False)
 
     units = []
     for v in layout.variables:
