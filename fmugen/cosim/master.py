@@ -15,7 +15,7 @@ FMU sees during [t_n, t_{n+1}]:
 * ``iterative`` / ``newton``: the macro step is implicit in the coupling.
   All FMUs are saved (fmi2GetFMUstate), the end values V = U_{n+1} are guessed
   (extrapolation), every FMU steps with its inputs on the line from U_n to V
-  (fmi2SetRealInputDerivatives), and V is corrected -- by the fixed point
+  or a Hermite interpolant (fmi2SetRealInputDerivatives), and V is corrected -- by the fixed point
   V <- G(V) or by Newton on R(V) = G(V) - V = 0 -- with the FMUs restored
   before each repetition, until |R| is below ``coupling_tol`` relative to the
   signals.  The interface Jacobian dG/dV is the sensitivity of a whole macro
@@ -23,7 +23,10 @@ FMU sees during [t_n, t_{n+1}]:
   give: it is obtained by **finite differences of rolled-back steps**, one
   re-step of FMU k per input of FMU k (dG is block-sparse: an FMU's outputs
   depend only on its own inputs), and reused across macro steps while Newton
-  converges fast (modified Newton).
+  converges fast (modified Newton), refreshed by Broyden's rank-one secant
+  update from each iterate (15-25 % fewer iterations on the PUMA: the steps'
+  own adaptive solvers make G rough at their tolerance, which caps the
+  contraction of a frozen Jacobian).
 
 Extrapolation of U over the step from past communication points: ``hold``
 (constant, order 1), ``linear`` (order 2), ``quadratic`` (through three
@@ -31,9 +34,14 @@ points).  FMUs that declare ``canInterpolateInputs`` receive the value at t_n
 and its slope (fmi2SetRealInputDerivatives, order 1) and, for ``quadratic``,
 its second derivative (order 2): the parabola itself, so Jacobi/quadratic is of
 order 3.  Gauss-Seidel gives a later FMU the line to its source's new value
-(order 2), and iterated schemes the line to the iterate: a parabola through
-U_{n-1} there destabilised the PUMA's wrist coupling (measured).  FMUs that
-cannot interpolate get the extrapolant's value at the midpoint.
+(order 2).  FMUs that cannot interpolate get the extrapolant's value at the
+midpoint.  Iterated schemes interpolate between the step's ends instead
+(``_slopes_to``): the line to the iterate (``linear``), or Hermite
+interpolants whose unknowns are the values *and* the sources' slopes at
+t_{n+1} (fmi2GetRealOutputDerivatives): the L-stable parabola arriving with
+the end slope (``quadratic``, third order) and a cubic (``cubic``).  A
+parabola through U_{n-1}, or one leaving U_n with its slope, destabilised the
+PUMA's wrist coupling (measured, and explained by their stability functions).
 
 Adaptive macro step (``adaptive=True``): the local error indicator is the
 **interface defect** d = U_{n+1} - P(t_{n+1}), the mismatch between what an FMU
@@ -400,7 +408,8 @@ class Master:
                                  f"no input derivatives; use {self.scheme}/linear")
             if u.n_src and getattr(u, "max_output_derivative_order", 0) < 1:
                 raise CosimError(f"{what}: FMU {u.name!r} declares maxOutputDerivativeOrder = 0; the Hermite "
-                                 f"inputs need the slopes of its outputs (fmi2GetRealOutputDerivatives); use "
+                                 f"inputs need the slopes of its outputs (fmi2GetRealOutputDerivatives; a fmugen "
+                                 f"FMU has them with its Jacobian: jacobian = true in the scene); use "
                                  f"{self.scheme}/linear")
             if u.n_in and not u.can_interpolate:
                 raise CosimError(f"{what}: FMU {u.name!r} cannot interpolate inputs (canInterpolateInputs = "
@@ -592,6 +601,8 @@ class Master:
                         it = 0
                         conv = False
                         err_c_prev = math.inf
+                        Z_prev = R_prev = None
+                        w = np.concatenate([scale[:nu], scale[:nu] / H]) if self._hermite else scale[:nu]
                         while True:
                             if it > 0:
                                 calls += self._restore_all(states)
@@ -619,6 +630,9 @@ class Master:
                                     calls += c2
                                     J_H = H
                                     summ.jacobians += 1
+                                elif Z_prev is not None:  # between fresh Jacobians: secant updates
+                                    J = _broyden(J, Zg - Z_prev, R - R_prev, w)
+                                Z_prev, R_prev = Zg, R
                                 Zg = Zg + J @ R
                             err_c_prev = err_c
                         summ.iterations += it
@@ -984,6 +998,20 @@ class Master:
                     Y[self.units[k].out_sl] = Y_base[self.units[k].out_sl]
         # Newton on R(Z) = G(Z) - Z: Z <- Z + (I - dG/dZ)^-1 R
         return np.linalg.inv(np.eye(m) - Jg), calls
+
+
+def _broyden(M, s, y, w):
+    """Broyden's good update of M ~ (I - dG/dZ)^-1 = -(dR/dZ)^-1 from the secant pair (s, y) = (dZ, dR),
+    in coordinates scaled by w: M+ = M - (s + M y) s' M / (s' M y)."""
+    Mh = M * (w[None, :] / w[:, None])
+    sh, yh = s / w, y / w
+    Msy = Mh @ yh
+    sM = sh @ Mh
+    den = float(sh @ Msy)
+    if not math.isfinite(den) or abs(den) < 1e-12 * float(np.linalg.norm(sh) * np.linalg.norm(Msy)):
+        return M
+    Mh = Mh - np.outer(sh + Msy, sM) / den
+    return Mh * (w[:, None] / w[None, :])
 
 
 PEAK_DECAY = 0.995  # per macro step: the peak magnitude forgets over ~200 steps

@@ -215,7 +215,9 @@ class Scene:
         if group.jacobian != "auto":
             return bool(group.jacobian)
         scheme = str(self.spec.cosim.get("scheme", ""))
-        return group.fmi_type == "me" or group.solver == "rodas3" or scheme == "newton"
+        hermite = scheme == "iterative" and str(self.spec.cosim.get("extrapolation", "")) in ("quadratic", "cubic")
+        # Newton: interface Jacobians; Hermite inputs: slopes of computed outputs (dg/dx f + dg/du du)
+        return group.fmi_type == "me" or group.solver == "rodas3" or scheme == "newton" or hermite
 
     # ------------------------------------------------------------------ models
     def instance_model(self, inst: str, prune: bool = True) -> tuple:
