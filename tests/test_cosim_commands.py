@@ -67,6 +67,15 @@ def test_bad_scheme_exits_2(tmp_path, capsys):
     assert "unknown scheme 'leapfrog'" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("argv", [["cosim", SCENE, "--scheme", "jacobi", "--extrapolation", "cubic"],
+                                  ["report", SCENE, "--schemes", "newton/linear,gauss-seidel/cubic"]])
+def test_scheme_that_cannot_take_cubic_inputs_is_refused_before_anything_is_written(tmp_path, capsys, argv):
+    out = tmp_path / "out"
+    assert main(argv + ["--out", str(out)]) == 2
+    assert "need an iterated scheme" in capsys.readouterr().err
+    assert not out.exists()
+
+
 def test_report(tmp_path):
     out = tmp_path / "report"
     assert main(["report", SCENE, "--steps", "0.002,0.001", "--schemes", "gauss-seidel/linear,jacobi/hold",

@@ -108,15 +108,16 @@ def write_results(result, out_dir) -> dict:
 
 
 def cmd_cosim(args) -> int:
-    from .master import run
+    from .master import check_choices, run
 
     scene = _load(args)
+    st = dict(scene.spec.cosim or {})
+    # the choices are checked before anything is built or written
+    scheme, ext = check_choices(args.scheme or st.get("scheme", "gauss-seidel"),
+                                args.extrapolation or st.get("extrapolation", "linear"))
     out = Path(args.out)
     built = scene.build(out / "fmus")
     system = built.system
-    st = dict(system.settings or {})
-    scheme = args.scheme or st.get("scheme", "gauss-seidel")
-    ext = args.extrapolation or st.get("extrapolation", "linear")
     result = run(system, scheme, ext, step=args.step, adaptive=args.adaptive, tol=args.tol, stop=args.stop)
     paths = write_results(result, out)
     print(result.summary)
@@ -158,14 +159,17 @@ def cmd_report(args) -> int:
     from .report import DEFAULT_SCHEMES, make_report, write_report
     from .system import CosimSystem, Recorded, Unit
 
+    from .master import check_choices
+
     scene = _load(args)
+    schemes = [tuple(s.split("/", 1)) if "/" in s else (s, "hold") for s in args.schemes.split(",")] \
+        if args.schemes else DEFAULT_SCHEMES
+    schemes = [check_choices(*sc) for sc in schemes]  # before anything is built or written
     out = Path(args.out)
     built = scene.build(out / "fmus")
     system = built.system
     H = float(system.step)
     steps = [float(h) for h in args.steps.split(",")] if args.steps else [8 * H, 4 * H, 2 * H, H, H / 2]
-    schemes = [tuple(s.split("/", 1)) if "/" in s else (s, "hold") for s in args.schemes.split(",")] \
-        if args.schemes else DEFAULT_SCHEMES
     problem = scene.reference_problem()
     extra = []
     if not args.no_monolithic:

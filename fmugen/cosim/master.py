@@ -203,6 +203,16 @@ def _norm_choice(value, choices, what) -> str:
     return v
 
 
+def check_choices(scheme: str, extrapolation: str) -> tuple:
+    """(scheme, extrapolation) normalised, or a CosimError naming the choices (callable before any build)."""
+    scheme = _norm_choice(scheme, SCHEMES, "scheme")
+    extrapolation = _norm_choice(extrapolation, EXTRAPOLATIONS, "extrapolation")
+    if extrapolation == "cubic" and scheme not in ("iterative", "newton"):
+        raise CosimError("cubic inputs interpolate between both ends of a macro step (values and slopes): "
+                         "they need an iterated scheme, iterative or newton, not " + scheme)
+    return scheme, extrapolation
+
+
 def _positive(name, value):
     try:
         v = float(value)
@@ -226,11 +236,7 @@ class Master:
         if not isinstance(system, CosimSystem):
             raise CosimError(f"expected a CosimSystem, got {type(system).__name__}")
         self.system = system
-        self.scheme = _norm_choice(scheme, SCHEMES, "scheme")
-        self.extrapolation = _norm_choice(extrapolation, EXTRAPOLATIONS, "extrapolation")
-        if self.extrapolation == "cubic" and self.scheme not in ("iterative", "newton"):
-            raise CosimError("cubic inputs interpolate between both ends of a macro step (values and slopes): "
-                             "they need an iterated scheme, iterative or newton, not " + self.scheme)
+        self.scheme, self.extrapolation = check_choices(scheme, extrapolation)
         if not system.units:
             raise CosimError(f"{system.name}: no FMUs")
         names = [u.name for u in system.units]
