@@ -469,7 +469,9 @@ class Master:
         summ = Summary(sysm.name, self.scheme, self.extrapolation, bool(adaptive))
         nu = self.nu
         ext = {"hold": 0, "linear": 1, "quadratic": 2, "cubic": 3}[self.extrapolation]
-        p_err = 2 if implicit else ext + 1  # the defect is O(H^p_err)
+        # the defect (what the predictor said against what came out) is O(H^p_err): the predictor is the
+        # extrapolant through 1, 2 or 3 past points, also for the iterated schemes
+        p_err = min(ext, 2) + 1
 
         units = self.units
         Y, Uset, DUset = self.Y, self.Uset, self.DUset
