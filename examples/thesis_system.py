@@ -62,7 +62,7 @@ def merge_arm_study(report_csv: Path, arm_csv: Path) -> None:
         w.writerows(rows)
 
 
-def summary(report_csv: Path, target: float) -> str:
+def summary(report_csv: Path, target: float, stop: float = 2.0) -> str:
     with open(report_csv, newline="") as fh:
         rows = [r for r in csv.DictReader(fh) if r["study"].startswith("thesis")]
 
@@ -72,7 +72,7 @@ def summary(report_csv: Path, target: float) -> str:
         except (TypeError, ValueError):
             return float("nan")
 
-    lines = [f"Thesis system, 2 s, error on the six joint angles against the reference (target {target:g} rad):"]
+    lines = [f"Thesis system, {stop:g} s, error on the six joint angles against the reference (target {target:g} rad):"]
     best = {}
     for r in rows:
         if r["status"] != "ok":
@@ -118,7 +118,7 @@ def main(argv=None) -> int:
         merge_arm_study(report_csv, arm_dir / "puma_error_vs_time.csv")
     else:
         merge_arm_study(report_csv, _empty_arm_csv(out))
-    text = summary(report_csv, 1e-4)
+    text = summary(report_csv, 1e-4, 0.5 if args.quick else 2.0)
     text += "\n" + held_limit_line(report_csv, 0.5 if args.quick else None)
     (out / "summary.txt").write_text(text + "\n")
     print("\n" + text)
