@@ -15,10 +15,10 @@ FMU sees during [t_n, t_{n+1}]:
 * ``iterative`` / ``newton``: the macro step is implicit in the coupling.
   All FMUs are saved (fmi2GetFMUstate), the end values V = U_{n+1} are guessed
   (extrapolation), every FMU steps with its inputs on the line from U_n to V
-  or a Hermite interpolant (fmi2SetRealInputDerivatives), and V is corrected -- by the fixed point
-  V <- G(V) or by Newton on R(V) = G(V) - V = 0 -- with the FMUs restored
-  before each repetition, until |R| is below ``coupling_tol`` relative to the
-  signals.  The interface Jacobian dG/dV is the sensitivity of a whole macro
+  or a Hermite interpolant (fmi2SetRealInputDerivatives), and V is corrected
+  -- by the fixed point V <- G(V) or by Newton on R(V) = G(V) - V = 0 -- with
+  the FMUs restored before each repetition, until |R| is below
+  ``coupling_tol`` relative to the signals.  The interface Jacobian dG/dV is the sensitivity of a whole macro
   step, which the FMUs' directional derivatives (partials of f and g) do not
   give: it is obtained by **finite differences of rolled-back steps**, one
   re-step of FMU k per input of FMU k (dG is block-sparse: an FMU's outputs
