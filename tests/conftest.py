@@ -40,3 +40,13 @@ def _restore_fmpy_logger():
 def _fmpy_default_logger_restored():
     yield
     _restore_fmpy_logger()
+
+
+@pytest.fixture(scope="module")
+def private_reference_cache(tmp_path_factory):
+    """A module's own FMUGEN_CACHE: reference solutions and scene FMUs computed afresh, not read from the
+    user's cache (``pytestmark = pytest.mark.usefixtures("private_reference_cache")``)."""
+    mp = pytest.MonkeyPatch()
+    mp.setenv("FMUGEN_CACHE", str(tmp_path_factory.mktemp("reference_cache")))
+    yield
+    mp.undo()

@@ -16,12 +16,7 @@ from cosim_rigs import LIMITS, reference_problem, split_system
 from fmugen.cosim import run, solve_reference
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _cache(tmp_path_factory):
-    mp = pytest.MonkeyPatch()
-    mp.setenv("FMUGEN_CACHE", str(tmp_path_factory.mktemp("reference_cache")))
-    yield
-    mp.undo()
+pytestmark = pytest.mark.usefixtures("private_reference_cache")
 
 
 H_SWEEP = (2e-3, 1e-3, 5e-4)

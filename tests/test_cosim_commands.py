@@ -11,12 +11,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENE = str(ROOT / "examples" / "scenes" / "single_joint_split_stiff.toml")
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _cache(tmp_path_factory):
-    mp = pytest.MonkeyPatch()
-    mp.setenv("FMUGEN_CACHE", str(tmp_path_factory.mktemp("reference_cache")))
-    yield
-    mp.undo()
+pytestmark = pytest.mark.usefixtures("private_reference_cache")
 
 
 def _csv(path):
