@@ -66,6 +66,7 @@ class Row:
     rollbacks: int = 0
     iterations: int = 0
     fmu_calls: int = 0
+    threads: int = 1  # threads that stepped the FMUs (workers > 1 and sweeps costly enough)
     below_reference: bool = False
     failure: str = ""
 
@@ -88,7 +89,7 @@ class Report:
     def table(self) -> str:
         head = (f"{'setting':<24} {'H [s]':>9} {'status':>8} {'err_final':>10} {'err_Linf':>10} {'err_RMS':>10} {'err_dense':>10} "
                 f"{'digits':>6} {'order':>6} {'wall [s]':>9} {'x real':>7} {'steps':>7} {'rollb':>5} "
-                f"{'iters':>6} {'FMU calls':>9}")
+                f"{'iters':>6} {'FMU calls':>9} {'thr':>3}")
         lines = [f"{self.system}: error on {self.measure} against the reference "
                  f"(its own error estimate {self.reference_error:.2g}; errors below "
                  f"{REFUSE_FACTOR * self.reference_error:.2g} are not reported)", head, "-" * len(head)]
@@ -101,7 +102,7 @@ class Report:
             lines.append(f"{r.label:<24} {r.step:>9.3g} {r.status:>8} {g(r.err_final, '10.3g')} {g(r.err_linf, '10.3g')} "
                          f"{g(r.err_rms, '10.3g')} {g(r.err_dense, '10.3g')} {g(r.digits, '6.2f')} {g(r.order, '6.2f')} "
                          f"{g(r.wall_median, '9.4f')} {g(r.real_time_factor, '7.1f')} {r.macro_steps:>7d} "
-                         f"{r.rollbacks:>5d} {r.iterations:>6d} {r.fmu_calls:>9d}")
+                         f"{r.rollbacks:>5d} {r.iterations:>6d} {r.fmu_calls:>9d} {r.threads:>3d}")
         lines.append("")
         lines.append(f"coarsest macro step meeting {self.target:g} ({self.measure}, L-inf):")
         for lab, r in self.coarsest.items():
@@ -175,13 +176,14 @@ def with_internal_solver(system: CosimSystem, method: str, tol: float) -> CosimS
 def make_report(system: CosimSystem, problem: ReferenceProblem, steps: Sequence[float],
                 schemes: Sequence[tuple] = DEFAULT_SCHEMES, repeats: int = 5, target: float = 1e-4,
                 columns: Optional[Sequence[str]] = None, extra_rows: Sequence = (), stop: Optional[float] = None,
-                progress=None, internal: Sequence[tuple] = ()) -> Report:
+                progress=None, internal: Sequence[tuple] = (), workers: int = 1) -> Report:
     """Sweep ``schemes`` x ``steps`` (each a multiple of the smallest by a power of 2 is best: exact
     comparison points) and measure every run against the reference of ``problem``.
 
     ``extra_rows``: (label, system) pairs run like the schemes at each step with Jacobi (e.g. the
     monolithic FMU as a one-unit system).  ``internal``: (solver, tolerance) pairs -- the sweep is then
     repeated with every CS FMU's internal solver set to each (``dopri5``, ``rodas3``, ``rk4``).
+    ``workers``: threads per run (see :class:`fmugen.cosim.master.Master`).
     """
     if repeats < 1:
         raise CosimError("repeats must be >= 1")
@@ -221,16 +223,16 @@ def make_report(system: CosimSystem, problem: ReferenceProblem, steps: Sequence[
                 progress(f"{label} H = {H:.4g}")
             walls = []
             result = None
-            with Master(sysm, scheme, ext) as m:  # warm-up: loads and instantiates; not timed
+            with Master(sysm, scheme, ext, workers=workers) as m:  # warm-up: loads and instantiates; not timed
                 result = m.run(step=H, stop=t1)
             if result.ok:
                 for _ in range(repeats):
-                    with Master(sysm, scheme, ext) as m:
+                    with Master(sysm, scheme, ext, workers=workers) as m:
                         r2 = m.run(step=H, stop=t1)
                     walls.append(r2.summary.wall_time)
             s = result.summary
             row = Row(label, scheme, ext, H, s.status, macro_steps=s.macro_steps, rollbacks=s.rollbacks,
-                      iterations=s.iterations, fmu_calls=s.fmu_calls,
+                      iterations=s.iterations, fmu_calls=s.fmu_calls, threads=s.threads,
                       failure=str(s.failure).splitlines()[0] if s.failure else "")
             if result.ok:
                 row.wall_median = statistics.median(walls)

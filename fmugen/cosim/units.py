@@ -106,6 +106,7 @@ class _Unit:
         self.check(f["fmi2EnterInitializationMode"](self.c), "fmi2EnterInitializationMode")
         self.check(f["fmi2ExitInitializationMode"](self.c), "fmi2ExitInitializationMode")
         self.n_calls = 4
+        self.do_steps = 0  # fmi2DoStep calls by the master (counted per FMU: one thread steps it at a time)
 
     # -- set-up ---------------------------------------------------------------
     def _apply_start_values(self, values) -> None:
