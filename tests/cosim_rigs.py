@@ -74,6 +74,35 @@ def split_system(ps="default", excitation="step", stop=1.0, step=1e-3, internal=
     return CosimSystem(f"split_{ps}_{excitation}", units, couplings, recorded, 0.0, stop, step, order=order)
 
 
+@functools.lru_cache(maxsize=None)
+def _amp_fmu_dir(ps: str) -> Path:
+    d = Path(tempfile.mkdtemp(prefix=f"cosim_rig_amp_{ps}_"))
+    amp = assemble("amp", {"amp": amplifier(parameter_set=ps, name="amp")}, [], outputs=["amp.u"])
+    fmugen.build_fmu(amp, d / "amp.fmu", fmi_type="cs")
+    comps = {"driver": current_driver(parameter_set=ps, name="driver"),
+             "valve": servo_valve(parameter_set=ps, name="valve"),
+             "actuator": hydraulic_actuator(parameter_set=ps, name="actuator")}
+    chain = assemble("chain", comps, CHAIN_LINKS[1:], outputs=["actuator.tau"])
+    fmugen.build_fmu(chain, d / "chain.fmu", fmi_type="cs")
+    fmugen.build_fmu(joint_inertia(parameter_set=ps, name="joint"), d / "joint.fmu", fmi_type="cs")
+    return d
+
+
+def amp_split_system(ps="default", stop=1.0, step=1e-3) -> CosimSystem:
+    """The step rig in three FMUs: the amplifier alone (no states: its outputs are functions of its inputs
+    now), driver + valve + actuator, and the joint -- the same equations as ``split_system(ps, "step")``."""
+    d = _amp_fmu_dir(ps)
+    units = (Unit("amp", d / "amp.fmu", "cs", {"amp.theta_ref": THETA_STEP}, members=("amp",)),
+             Unit("chain", d / "chain.fmu", "cs", dict(INTERNAL), members=("driver", "valve", "actuator")),
+             Unit("joint", d / "joint.fmu", "cs", dict(INTERNAL), members=("joint",)))
+    couplings = (Coupling(("joint", "theta"), ("amp", "amp.theta"), unit="rad"),
+                 Coupling(("amp", "amp.u"), ("chain", "driver.u"), unit="V"),
+                 Coupling(("joint", "w"), ("chain", "actuator.w"), unit="rad/s"),
+                 Coupling(("chain", "actuator.tau"), ("joint", "tau"), unit="N.m"))
+    recorded = (Recorded("joint.theta", "joint", "theta", "rad"),)
+    return CosimSystem(f"amp_split_{ps}", units, couplings, recorded, 0.0, stop, step)
+
+
 def reference_problem(ps="default", excitation="step", stop=1.0) -> ReferenceProblem:
     comps, links = _components(ps, excitation, True)
     m = assemble("single_joint", comps, links + JOINT_LINKS,

@@ -12,7 +12,7 @@
 import numpy as np
 import pytest
 
-from cosim_rigs import LIMITS, reference_problem, split_system
+from cosim_rigs import LIMITS, amp_split_system, reference_problem, split_system
 from fmugen.cosim import run, solve_reference
 
 
@@ -108,3 +108,25 @@ def test_newton_holds_1e_4_rad_at_ten_times_the_gauss_seidel_limit(ext):
     err = np.max(np.abs(nw["joint.theta"] - ref["joint.theta"]))
     assert err < 1e-4
     assert err > 100 * ref.error_of("joint.theta")
+
+
+def test_newton_takes_an_algebraic_fmus_columns_from_its_directional_derivatives(ref_default):
+    # the amplifier in an FMU of its own has no states: its interface Jacobian columns are its exact
+    # directional derivatives (no re-steps); the result equals the one with finite-difference columns to
+    # the coupling tolerance and matches the monolithic reference like the two-FMU split
+    from fmugen.cosim import Master
+
+    runs = {}
+    for exact in (True, False):
+        with Master(amp_split_system(stop=0.3), "newton", "linear") as m:
+            assert m.units[0].algebraic and not m.units[1].algebraic and not m.units[2].algebraic
+            m.units[0].algebraic = exact
+            runs[exact] = m.run(step=1e-3, coupling_tol=1e-10)
+    a, b = runs[True], runs[False]
+    assert a.ok and b.ok
+    assert np.max(np.abs(a["joint.theta"] - b["joint.theta"])) < 1e-9
+    assert a.summary.do_steps < b.summary.do_steps
+    err = _error(a, ref_default)
+    two_fmus = _error(run(split_system("default", "step", stop=0.3), "newton", "linear", step=1e-3), ref_default)
+    # the amplifier is linear, so the line its output follows is exactly the two-FMU split's: same error
+    assert abs(err - two_fmus) < 1e-3 * two_fmus

@@ -1019,9 +1019,27 @@ class Master:
         else:
             self.DUset[:nu] = A / H
 
+    def _algebraic_columns(self, u, rows, Jg) -> int:
+        """dG/dV of an FMU whose outputs depend only on its inputs now (``u.algebraic``): its exact directional
+        derivatives at the end of the step, one seed per input, no re-step.  Returns the number of calls."""
+        out_idx = self.S[rows] - u.out_sl.start
+        unknowns = vr_array([u.out_vr[i] for i in out_idx])
+        seed = np.zeros(u.n_in)
+        dv = np.zeros(len(rows))
+        for i, j in enumerate(range(u.in_sl.start, u.in_sl.stop)):
+            seed[:] = 0.0
+            seed[i] = 1.0
+            st = u._dirDer(u.c, unknowns, len(rows), u.in_vr, u.n_in, dptr(seed), dptr(dv))
+            if st > 1:
+                raise UnitFailure(u.name, "fmi2GetDirectionalDerivative", st, u.messages())
+            # a held midpoint input (no interpolation) moves by half the end value's change
+            Jg[rows, j] = self.F[rows] * dv * (0.5 if self.no_interp[j] else 1.0)
+        return u.n_in
+
     def _interface_jacobian(self, t, H, U0, Zg, G, states, scale):
         """M = (I - dG/dZ)^-1 by finite differences of rolled-back steps, one FMU at a time (Z: the coupled
-        values at t_n + H, and with Hermite inputs their slopes there)."""
+        values at t_n + H, and with Hermite inputs their slopes there); an algebraic FMU's columns come from
+        its directional derivatives."""
         nu = self.nu
         herm = self._hermite
         m = len(Zg)
@@ -1037,6 +1055,9 @@ class Master:
                 continue
             rows = np.nonzero(self.u_src_unit[:nu] == k)[0]
             if not len(rows):
+                continue
+            if not herm and getattr(u, "algebraic", False):
+                calls += self._algebraic_columns(u, rows, Jg)
                 continue
             if herm:
                 rows = np.concatenate([rows, rows + nu])

@@ -214,6 +214,11 @@ class SlaveUnit(_Unit):
         self._getRealStatus = f["fmi2GetRealStatus"]
         self._getOutDer = f["fmi2GetRealOutputDerivatives"]
         self.max_output_derivative_order = int(cs.maxOutputDerivativeOrder or 0)
+        # outputs that are functions of the inputs at the same instant, nothing else: an fmugen FMU without
+        # continuous states (its generator writes no other memory); then fmi2GetDirectionalDerivative is the
+        # sensitivity of a whole step.  A third-party FMU may hide discrete states, so it is not trusted
+        self.algebraic = (not self.md.derivatives and bool(cs.providesDirectionalDerivative)
+                          and str(self.md.generationTool or "").startswith("fmugen"))
         return fmu
 
     def last_successful_time(self) -> float:
