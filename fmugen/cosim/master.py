@@ -18,12 +18,14 @@ FMU sees during [t_n, t_{n+1}]:
   or a Hermite interpolant (fmi2SetRealInputDerivatives), and V is corrected
   -- by the fixed point V <- G(V) or by Newton on R(V) = G(V) - V = 0 -- with
   the FMUs restored before each repetition, until |R| is below
-  ``coupling_tol`` relative to the signals.  The interface Jacobian dG/dV is the sensitivity of a whole macro
-  step, which the FMUs' directional derivatives (partials of f and g) do not
-  give: it is obtained by **finite differences of rolled-back steps**, one
-  re-step of FMU k per input of FMU k (dG is block-sparse: an FMU's outputs
-  depend only on its own inputs), and reused across macro steps while Newton
-  converges fast (modified Newton), refreshed by Broyden's rank-one secant
+  ``coupling_tol`` relative to the signals.  The interface Jacobian dG/dV is
+  the sensitivity of a whole macro step, which the FMUs' directional
+  derivatives (partials of f and g) do not give: it is obtained by **finite
+  differences of rolled-back steps**, one re-step of FMU k per input of FMU k
+  (dG is block-sparse: an FMU's outputs depend only on its own inputs; an
+  fmugen FMU without states gives its columns exactly, by
+  fmi2GetDirectionalDerivative), reused across macro steps while Newton
+  converges fast (modified Newton) and refreshed by Broyden's rank-one secant
   update from each iterate (15-25 % fewer iterations on the PUMA: the steps'
   own adaptive solvers make G rough at their tolerance, which caps the
   contraction of a frozen Jacobian).
