@@ -46,7 +46,8 @@ def add_cosim_commands(subparsers) -> None:
     _common(p)
     p.add_argument("--scheme", default=None, help="jacobi | gauss-seidel | iterative | newton "
                    "(default: the scene's [cosim] scheme, else gauss-seidel)")
-    p.add_argument("--extrapolation", default=None, help="hold | linear | quadratic | cubic (cubic: iterated schemes only; default: the scene's, else linear)")
+    p.add_argument("--extrapolation", default=None, help="hold | linear | quadratic | cubic (cubic: iterative and "
+                   "newton only; default: the scene's, else linear)")
     p.add_argument("--step", type=float, default=None, help="macro step H [s] (default: the scene's step)")
     p.add_argument("--adaptive", action="store_true", help="control H by the interface defect (with --tol)")
     p.add_argument("--tol", type=float, default=1e-4, help="adaptive: tolerance relative to each coupled signal")
@@ -172,10 +173,9 @@ def cmd_reference(args) -> int:
 def cmd_report(args) -> int:
     import fmugen
 
+    from .master import check_choices
     from .report import DEFAULT_SCHEMES, make_report, write_report
     from .system import CosimSystem, Recorded, Unit
-
-    from .master import check_choices
 
     scene = _load(args)
     schemes = [tuple(s.split("/", 1)) if "/" in s else (s, "hold") for s in args.schemes.split(",")] \
