@@ -37,7 +37,7 @@ from typing import Optional, Sequence
 import numpy as np
 
 from .errors import CosimError
-from .master import Master, _norm_choice, SCHEMES, EXTRAPOLATIONS
+from .master import Master, check_choices
 from .reference import ReferenceSolution, solve_reference
 from .system import CosimSystem, ReferenceProblem
 
@@ -190,8 +190,7 @@ def make_report(system: CosimSystem, problem: ReferenceProblem, steps: Sequence[
     steps = sorted({float(h) for h in steps}, reverse=True)
     if not steps or min(steps) <= 0:
         raise CosimError("steps must be positive")
-    schemes = [(_norm_choice(s, SCHEMES, "scheme"), _norm_choice(e, EXTRAPOLATIONS, "extrapolation"))
-               for s, e in schemes]
+    schemes = [check_choices(s, e) for s, e in schemes]  # refused before any run, not mid-sweep
     t0 = problem.start_time
     t1 = float(stop) if stop is not None else problem.stop_time
     hmin = min(steps)
