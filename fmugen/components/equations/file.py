@@ -175,7 +175,8 @@ def read_component_file(path) -> ComponentFile:
     if not isinstance(connectors, dict):
         raise _err(src, "[connectors] must hold tables [connectors.<name>]")
     cf = ComponentFile(path, name, desc, prov, declared, equations, order, sets, connectors)
-    _check_dimensions(cf)
+    _build_all(cf)  # the language's refusals first (they say what is wrong with the text) ...
+    _check_dimensions(cf)  # ... then the dimensions of what it says
     return cf
 
 
@@ -335,14 +336,7 @@ def component_model(cf: ComponentFile, name: Optional[str] = None, parameter_set
                                  f"{', '.join(cf.sets) or 'none'} ([sets.<name>])")
     values.update(_check_values(dict(overrides or {}), params, f"{src}: parameter override"))
 
-    symbols = {n: sp.Symbol(n, real=True) for n in cf.declared
-               if cf.declared[n].kind in ("parameter", "input", "state")}
-    constant = {symbols[n] for n in params}
-    names = dict(symbols)
-    for n in cf.order:  # intermediates and outputs, each after what it reads
-        names[n] = _build(cf, n, names, constant)
-    ders = [_build(cf, d.name, names, constant) for d in cf.of_kind("state")]
-    outs = [names[d.name] for d in cf.of_kind("output")]
+    ders, outs = _build_all(cf)
 
     def v(d, start):
         return var(d.name, d.unit, d.description, start=start, nominal=d.nominal, min=d.min, max=d.max,
@@ -359,6 +353,18 @@ def component_model(cf: ComponentFile, name: Optional[str] = None, parameter_set
             provenance=cf.provenance or f"component file {cf.path.name}")
     except ValueError as exc:
         raise _err(src, str(exc)) from None
+
+
+def _build_all(cf: ComponentFile) -> tuple:
+    """(derivative expressions, output expressions); intermediates substituted, parameters symbolic."""
+    symbols = {n: sp.Symbol(n, real=True) for n in cf.declared
+               if cf.declared[n].kind in ("parameter", "input", "state")}
+    constant = {symbols[d.name] for d in cf.of_kind("parameter")}
+    names = dict(symbols)
+    for n in cf.order:  # intermediates and outputs, each after what it reads
+        names[n] = _build(cf, n, names, constant)
+    ders = [_build(cf, d.name, names, constant) for d in cf.of_kind("state")]
+    return ders, [names[d.name] for d in cf.of_kind("output")]
 
 
 def _build(cf, target, names, constant):
