@@ -33,8 +33,8 @@ INITIAL_MODES = ("given", "equilibrium")
 @dataclass(frozen=True)
 class InstanceSpec:
     name: str
-    kind: str  # "robot", "component" or "factory"
-    source: str  # robot file (absolute), component type, or "module:function"
+    kind: str  # "robot", "component", "file" (a component file) or "factory"
+    source: str  # robot file (absolute), component type, component file (absolute), or "module:function"
     options: dict = field(default_factory=dict)  # fidelity options / factory keywords / formulation, outputs
     parameter_set: Optional[str] = None
     parameters: dict = field(default_factory=dict)  # overrides
@@ -160,7 +160,7 @@ def _instance_keys(spec: dict) -> set:
     if "factory" in spec:
         return FACTORY_KEYS | COMMON_INSTANCE_KEYS
     typ = spec.get("type")
-    opts = set(COMPONENT_TYPES[typ][1]) if typ in COMPONENT_TYPES else set()
+    opts = set(COMPONENT_TYPES[typ][1]) if isinstance(typ, str) and typ in COMPONENT_TYPES else set()
     return {"type", "parameter_set"} | opts | COMMON_INSTANCE_KEYS
 
 
@@ -329,7 +329,9 @@ def _instance(iname: str, spec, path: Path) -> InstanceSpec:
             raise SceneError(f"{where} options must be a table")
         return InstanceSpec(iname, "factory", ref, dict(opts), pset, params, fixed, start, hold)
     typ = spec["type"]
-    if typ not in COMPONENT_TYPES:
+    if isinstance(typ, str) and typ.startswith(FILE_TYPE_PREFIXES):
+        return _file_instance(iname, typ, path, where, pset, params, fixed, start, hold)
+    if not isinstance(typ, str) or typ not in COMPONENT_TYPES:
         raise SceneError(f"{where} type = {typ!r} is not a component type{did_you_mean(str(typ), COMPONENT_TYPES)}; "
                          f"known: {', '.join(COMPONENT_TYPES)}")
     _, options = COMPONENT_TYPES[typ]
@@ -343,6 +345,25 @@ def _instance(iname: str, spec, path: Path) -> InstanceSpec:
     if typ == "table_trajectory" and (params or pset):
         raise SceneError(f"{where}: a table_trajectory has no parameters (its knots are data)")
     return InstanceSpec(iname, "component", typ, opts, pset, params, fixed, start, hold)
+
+
+FILE_TYPE_PREFIXES = ("file:", "lib:")
+
+
+def _file_instance(iname, typ, path: Path, where, pset, params, fixed, start, hold) -> InstanceSpec:
+    """``type = "file:components/x.toml"`` (relative to the scene) or ``"lib:<shipped name>"``."""
+    from ..components.equations import library_path, read_cached
+
+    try:
+        if typ.startswith("lib:"):
+            fp = library_path(typ[4:])
+        else:
+            fp = Path(typ[5:])
+            fp = fp if fp.is_absolute() else path.parent / fp
+        read_cached(fp)  # declarations, equations and dimensions checked now, with the file named
+    except ValueError as exc:
+        raise SceneError(f"{where} type = {typ!r}: {exc}") from None
+    return InstanceSpec(iname, "file", str(fp.resolve()), {}, pset, params, fixed, start, hold)
 
 
 def _group(gname, g, instances, src) -> GroupSpec:
