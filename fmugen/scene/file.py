@@ -19,7 +19,7 @@ from ..errors import read_text_file
 from .errors import SceneError, did_you_mean
 
 SCENE_KEYS = {"name", "description", "parameter_set", "start", "stop", "step", "tolerance", "record",
-              "initial", "prune", "connections", "monolithic"}
+              "initial", "prune", "connections", "monolithic", "connect"}
 COMMON_INSTANCE_KEYS = {"parameters", "fixed", "start", "hold"}
 ROBOT_KEYS = {"robot", "formulation", "locked", "outputs"}
 FACTORY_KEYS = {"factory", "options", "parameter_set"}
@@ -73,6 +73,8 @@ class SceneSpec:
     groups: dict  # name -> GroupSpec
     monolithic: bool
     cosim: dict
+    connect: tuple = ()  # of (end, end): bonds between connectors or signals, causality inferred (scene/connect.py)
+    bonds: tuple = ()  # the expanded connect pairs (fmugen.scene.connect.Bond), set by Scene
 
 
 def _number(v, where, positive=False, nonneg=False) -> float:
@@ -232,6 +234,11 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
         conns.append((s_, t_, f_))
 
     record = _str_list(sc.get("record", []), f"{src}: [scene] record")
+    connect = sc.get("connect", [])
+    if not isinstance(connect, list) or not all(isinstance(c, list) and len(c) == 2 and all(
+            isinstance(e, str) for e in c) for c in connect):
+        raise SceneError(f"{src}: [scene] connect must be a list of pairs [\"inst.connector\", \"inst.connector\"] "
+                         f"(or two variables)")
 
     groups = {}
     fm = data.get("fmus", {})
@@ -265,7 +272,8 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
     return SceneSpec(path=path, name=name, description=desc, parameter_set=pset, start=start, stop=stop,
                      step=step, tolerance=tolerance, record=record, initial=initial,
                      prune=sc.get("prune", True), connections=tuple(conns), instances=instances,
-                     groups=groups, monolithic=bool(monolithic), cosim=dict(cosim))
+                     groups=groups, monolithic=bool(monolithic), cosim=dict(cosim),
+                     connect=tuple(tuple(c) for c in connect))
 
 
 def _instance(iname: str, spec, path: Path) -> InstanceSpec:

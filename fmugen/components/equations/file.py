@@ -61,7 +61,7 @@ class ComponentFile:
     equations: dict  # lhs name (state for der) -> (lhs text, rhs text, tree, python text)
     order: list  # intermediates and outputs in dependency order
     sets: dict  # set name -> {parameter: value}
-    connectors: dict = field(default_factory=dict)  # raw [connectors] table (fmugen.components.connectors)
+    connectors: dict = field(default_factory=dict)  # name -> (type, {connector var: variable}), checked
 
     def of_kind(self, kind: str) -> list:
         return [d for d in self.declared.values() if d.kind == kind]
@@ -174,6 +174,9 @@ def read_component_file(path) -> ComponentFile:
     connectors = data.get("connectors", {})
     if not isinstance(connectors, dict):
         raise _err(src, "[connectors] must hold tables [connectors.<name>]")
+    from ..connectors import check_file_connectors
+
+    connectors = check_file_connectors(connectors, declared, src)
     cf = ComponentFile(path, name, desc, prov, declared, equations, order, sets, connectors)
     _build_all(cf)  # the language's refusals first (they say what is wrong with the text) ...
     _check_dimensions(cf)  # ... then the dimensions of what it says
