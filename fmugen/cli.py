@@ -16,7 +16,8 @@
     fmugen report SCENE.toml [--steps H1,H2,...] [--schemes S/E,...] [--repeats 5] --out DIR   (error vs wall time)
 
 FILE is a robot file (a ``[robot]`` table), an assembly of actuator-chain
-components (an ``[assembly]`` table) or a scene (a ``[scene]`` table: one FMU
+components (an ``[assembly]`` table), a component file (a ``[component]``
+table, fmugen/components/README.md) or a scene (a ``[scene]`` table: one FMU
 per group into DIR).  ``--set NAME=VALUE`` (repeatable) gives any parameter or
 start value (``--set m=1`` for a robot with a symbolic m, ``--set joint.J=5``
 in a scene).
@@ -44,8 +45,10 @@ def _kind(path: Path) -> str:
         return "assembly"
     if "scene" in data:
         return "scene"
-    raise InputFileError(f"{path}: neither a robot file ([robot] table), an assembly ([assembly] table) "
-                         f"nor a scene ([scene] table)")
+    if "component" in data:
+        return "component"
+    raise InputFileError(f"{path}: neither a robot file ([robot] table), an assembly ([assembly] table), "
+                         f"a scene ([scene] table) nor a component file ([component] table)")
 
 
 def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler", model="forward_dynamics",
@@ -68,6 +71,11 @@ def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler", mo
         arm = fmugen.load_robot(path, formulation)
         m = (arm.inverse_dynamics_model() if model == "inverse_dynamics"
              else arm.state_space_model(outputs=outputs, strategy=strategy))
+    elif kind == "component":  # a component file: parameters through its checks (ranges, exact ifs)
+        from .components.equations import load_component, read_component_file
+
+        params = {d.name for d in read_component_file(path).of_kind("parameter")}
+        m = load_component(path, overrides={k: v for k, v in sets.items() if k in params})
     else:
         from .components.assembly import load_assembly
 
