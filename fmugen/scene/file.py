@@ -188,6 +188,8 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
     pset = sc.get("parameter_set", "default")
     if not isinstance(pset, str):
         raise SceneError(f"{src}: [scene] parameter_set must be a string")
+    if pset.endswith(".toml"):  # a file next to the scene, as every other file the scene names
+        pset = str(Path(pset) if Path(pset).is_absolute() else path.parent / pset)
     initial = sc.get("initial", "given")
     if initial not in INITIAL_MODES:
         raise SceneError(f"{src}: [scene] initial = {initial!r}; choose {' or '.join(map(repr, INITIAL_MODES))}")
