@@ -32,12 +32,12 @@ from pathlib import Path
 
 def _kind(path: Path) -> str:
     # user errors are InputFileError (a ValueError): main() prints one line and exits 2
-    from .errors import InputFileError, read_text_file
+    from .errors import InputFileError, read_text_file, toml_problem
 
     try:
         data = tomllib.loads(read_text_file(path, "TOML file"))
-    except tomllib.TOMLDecodeError as exc:
-        raise InputFileError(f"{path}: not valid TOML: {exc}") from None
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        raise InputFileError(f"{path}: {toml_problem(exc)}") from None
     if "robot" in data:
         return "robot"
     if "assembly" in data:
@@ -82,6 +82,15 @@ def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler", mo
                                  f"{did_you_mean(k, names)}; parameters: {', '.join(p.name for p in m.parameters)}")
             if isinstance(v, bool) or not isinstance(v, (int, float)):
                 raise SceneError(f"{path}: --set {k}={v!r}: a number is needed")
+        from .values import as_number, check_model_values, robot_value_problem
+
+        sets = {k: as_number(v, f"{path}: --set {k}") for k, v in sets.items()}
+        check_model_values(m, sets, lambda k: f"{path}: --set {k}")  # the checks file values get
+        if kind == "robot":
+            params = {p.name for p in m.parameters}
+            problem = robot_value_problem(arm.robot, {k: v for k, v in sets.items() if k in params})
+            if problem:
+                raise SceneError(f"{path}: --set: {problem}")
         m = m.with_starts(sets)
     return m
 

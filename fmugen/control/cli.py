@@ -79,12 +79,12 @@ def parse_at(items) -> dict:
 
 def load_model(path: Path, sets: dict, robot_outputs=(), formulation="newton_euler", without=()):
     """(SymbolicModel, parameter values) of a robot, assembly or scene file."""
-    from ..errors import InputFileError, read_text_file
+    from ..errors import InputFileError, read_text_file, toml_problem
 
     try:
         data = tomllib.loads(read_text_file(path, "TOML file"))
-    except tomllib.TOMLDecodeError as exc:
-        raise InputFileError(f"{path}: not valid TOML: {exc}") from None
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        raise InputFileError(f"{path}: {toml_problem(exc)}") from None
     if "scene" in data:
         from ..scene import load_scene
         from .scene import scene_model
