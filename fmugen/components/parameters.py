@@ -135,7 +135,8 @@ def parse_parameter_set(data: Mapping, source: str, name: str = "") -> Parameter
         for key, val in table.items():
             problem = value_problem(family, key, val)
             if problem:
-                raise InputFileError(f"{source}: [{family}] {key} = {str(val)[:40]} {problem}")
+                shown = repr(val) if len(repr(val)) <= 40 else repr(val)[:40] + "..."
+                raise InputFileError(f"{source}: [{family}] {key} = {shown} {problem}")
             sec[key] = float(val)
         sections[family] = sec
     return ParameterSet(name=name or Path(source).stem, source=source, sections=sections)
