@@ -215,9 +215,11 @@ def build_scene(scene, out_dir, prune: bool = True, progress=None, use_cache: bo
             model, removed = scene.group_model(gname, prune=prune, x0=x0)
             plan[gname] = (key, model, removed)
 
+    created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=".building-", dir=out))
     derive_lock = threading.Lock()
+    ok = False
     try:
         def one(gname):
             key, model, removed = plan[gname]
@@ -271,8 +273,14 @@ def build_scene(scene, out_dir, prune: bool = True, progress=None, use_cache: bo
             reports = {g: f.result() for g, f in futures.items()}
         for g in plan:
             os.replace(stage / f"{g}.fmu", out / f"{g}.fmu")
+        ok = True
     finally:
         shutil.rmtree(stage, ignore_errors=True)
+        if not ok and created:  # a failed build leaves no (empty) output folder behind
+            try:
+                out.rmdir()
+            except OSError:
+                pass
     paths = {g: out / f"{g}.fmu" for g in plan}
     return BuiltScene(scene, out, reports, scene.cosim_system(paths))
 

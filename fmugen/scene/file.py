@@ -106,8 +106,9 @@ def check_time_grid(start: float, stop: float, step: float, where: str) -> int:
                          f"(double precision resolves about {math.ulp(max(abs(start), abs(stop))):.3g} s there; "
                          f"step {step!r})")
     n = (stop - start) / step
-    if n > MAX_MACRO_STEPS:
-        raise SceneError(f"{where} {n:.3g} macro steps of {step!r} s from {start!r} to {stop!r}: more than "
+    if not n <= MAX_MACRO_STEPS:
+        many = f"{n:.3g}" if math.isfinite(n) else "more than 1e308"
+        raise SceneError(f"{where} {many} macro steps of {step!r} s from {start!r} to {stop!r}: more than "
                          f"{MAX_MACRO_STEPS:.0e}; use a larger step or a shorter run")
     return int(math.ceil(n - 1e-9))
 
