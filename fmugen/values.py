@@ -112,9 +112,14 @@ def robot_value_problem(robot, values: Mapping[str, float]) -> Optional[str]:
 
     changed = ", ".join(f"{k} = {v!r}" for k, v in values.items() if k in by_name)
     data, complete = [], True
-    for i, L in enumerate(robot.links, start=1):
-        label = f"link {i} ({L.name})"
-        fields = {"mass": L.mass, "rotor_inertia": L.rotor_inertia, "damping": L.damping, "a": L.a, "d": L.d}
+    dh = bool(robot.links)  # a DH file (links), or a robot written as joints (bodies: URDF)
+    for i, L in enumerate(robot.links or robot.bodies, start=1):
+        label = f"{'link' if dh else 'body'} {i} ({L.name})"
+        fields = {"mass": L.mass, "rotor_inertia": L.rotor_inertia, "damping": L.damping}
+        if dh:
+            fields.update(a=L.a, d=L.d)
+        else:
+            fields.update({f"translation[{k}]": e for k, e in enumerate(L.translation)}, offset=L.offset)
         vals = {}
         for field, e in fields.items():
             x = num(e, new)
@@ -128,7 +133,7 @@ def robot_value_problem(robot, values: Mapping[str, float]) -> Optional[str]:
                 return f"{label}: its centre of mass or inertia is not finite with {changed}"
         m = vals["mass"]
         if m is not None and m <= 0 and not (sp.sympify(L.mass) == 0):
-            return f"{label}: mass = {L.mass} = {m:g} kg with {changed}; a link's mass must be positive"
+            return f"{label}: mass = {L.mass} = {m:g} kg with {changed}; a body's mass must be positive"
         for field in ("rotor_inertia", "damping"):
             if vals[field] is not None and vals[field] < 0:
                 return f"{label}: {field} = {fields[field]} = {vals[field]:g} is negative with {changed}"
@@ -147,6 +152,8 @@ def robot_value_problem(robot, values: Mapping[str, float]) -> Optional[str]:
                 and not inertia_problems(m0, np.array(I0, dtype=float))
             if was_ok:  # the file's values made a rigid body: an override may not unmake it
                 return f"{label}: not a realisable rigid body with {changed}: {'; '.join(problems)}"
+        if not dh:
+            continue
         th = num(L.theta, new)
         al = num(L.alpha, new)
         if th is None or al is None:

@@ -155,12 +155,12 @@ def _group_key(scene, group: str, prune: bool, x0: dict) -> str:
         ins = scene.spec.instances[inst]
         d = dataclasses.asdict(ins)
         d["locked"] = {str(k): v for k, v in ins.locked.items()}
-        if ins.kind == "robot":
+        if ins.kind in ("robot", "file"):
             d["file"] = _file_digest(ins.source)
         elif ins.kind == "factory":
             d["module"] = _factory_digest(ins.source)
         if ins.kind != "robot":
-            d["set_file"] = _set_digest(ins.parameter_set or (scene.spec.parameter_set if ins.kind == "component"
+            d["set_file"] = _set_digest(ins.parameter_set or (scene.spec.parameter_set if ins.kind != "factory"
                                                                else None))
         d["sets"] = scene._sets.get(inst, {})
         parts["instances"][inst] = d
