@@ -416,3 +416,53 @@ def test_component_file_in_a_scene_like_a_builtin(tmp_path):
     sc.write_text(SCENE.format(factor="1.0").replace("file:comp/stribeck.toml", "file:comp/none.toml"))
     with pytest.raises(FmugenError, match=r"\[instances.load\] type = 'file:comp/none.toml'.*no such component file"):
         fmugen.load_scene(sc)
+
+
+# ----------------------------------------------------------------------------- state feedback
+def test_lqr_gain_closed_around_the_nonlinear_scene_as_a_component_file(tmp_path):
+    """K from python-control's lqr, written as a component file, closed around the plant in a scene:
+    the closed loop's A is A - B K of the design (to round-off)."""
+    import control
+
+    plant = load_component("lib:spring_damper", name="plant")
+    lm = fmugen.linearize(plant, x=[0.0, 0.0], u=[0.0])
+    K, _, _ = control.lqr(lm, np.diag([100.0, 1.0]), np.eye(1))
+    x_ref, u_ff = [0.02, 0.0], [2.0]  # hold s = 0.02 m: the spring needs c s = 2 N
+    (tmp_path / "c").mkdir()
+    fmugen.control.state_feedback_file(tmp_path / "c/lqr.toml", K, plant, ["s", "v"], ["F"], x_ref, u_ff)
+    fb = load_component(tmp_path / "c/lqr.toml")
+    assert [p.unit for p in fb.parameters][:2] == ["kg.s-2", "kg.s-1"]  # N/m and N/(m/s)
+    (tmp_path / "loop.toml").write_text("""
+[scene]
+name = "loop"
+stop = 1.0
+connect = [["plant.s", "fb.s"], ["plant.v", "fb.v"], ["fb.F", "plant.F"]]
+[instances]
+plant = { type = "lib:spring_damper" }
+fb = { type = "file:c/lqr.toml" }
+""")
+    sc = fmugen.load_scene(tmp_path / "loop.toml")
+    m = sc.monolithic_model()
+    closed = fmugen.linearize(m, x=[0.0, 0.0], u=[])
+    order = [[v.name for v in m.states].index(n) for n in ("plant.s", "plant.v")]
+    A = np.asarray(closed.A)[np.ix_(order, order)]
+    assert np.allclose(A, np.asarray(lm.A) - np.asarray(lm.B) @ K, rtol=1e-12, atol=1e-12)
+    ev = NumericModel(m)
+    x = np.array([0.02, 0.0])[np.argsort(order)]
+    assert np.max(np.abs(ev.f(0, x, []))) < 1e-12  # the reference is an equilibrium
+
+
+def test_state_feedback_file_splits_long_rows(tmp_path, monkeypatch):
+    import fmugen.control.feedback as fbm
+
+    plant = load_component("lib:spring_damper")
+    K = np.array([[3.0, 0.5]])
+    a = NumericModel(load_component(fbm.state_feedback_file(tmp_path / "a.toml", K, plant, ["s", "v"], ["F"],
+                                                            [0.1, 0.2], [1.0])))
+    monkeypatch.setattr(fbm, "TERMS_PER_LINE", 1)
+    b = NumericModel(load_component(fbm.state_feedback_file(tmp_path / "b.toml", K, plant, ["s", "v"], ["F"],
+                                                            [0.1, 0.2], [1.0])))
+    assert "s_1_2 = K_1_2*(v - ref_v)" in (tmp_path / "b.toml").read_text()
+    u = [0.7, -0.4]
+    assert a.g(0, [], u)[0] == pytest.approx(1.0 - 3.0 * 0.6 - 0.5 * (-0.6), rel=1e-14)
+    assert b.g(0, [], u)[0] == a.g(0, [], u)[0]
