@@ -140,6 +140,17 @@ def describe(lm, model, op=None, out=None) -> None:
           f"(modal test, states scaled by their nominal values, tol 1e-9)", file=out)
 
 
+def _warn_kinks(path: Path, sets: dict, model, op) -> None:
+    data = tomllib.loads(path.read_text())
+    if "scene" not in data:
+        return
+    from ..scene import load_scene
+    from .kinks import kink_warnings
+
+    for line in kink_warnings(load_scene(path, set=sets), model, op):
+        print(line)
+
+
 def run(args) -> int:
     from ..scene import parse_sets
     from .linearize import linear_model
@@ -175,6 +186,8 @@ def run(args) -> int:
         op = trim(model, at=at, free=free, parameter_values=params, t=args.time, tol=args.tol)
         lm = linear_model(model, op, outputs=wanted or "all", inputs=_split(args.inputs) or None)
     describe(lm, model, op)
+    if op is not None and not args.no_trim:  # a smoothed kink at the operating point: say so (fmugen/control/kinks.py)
+        _warn_kinks(path, sets, model, op)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     np.savez(out, A=lm.A, B=lm.B, C=lm.C, D=lm.D, t=np.float64(lm.t), x0=lm.x0, u0=lm.u0, y0=lm.y0,

@@ -170,6 +170,14 @@ def cmd_cosim(args) -> int:
                  workers=args.workers)
     paths = write_results(result, out)
     print(result.summary)
+    if scene.spec.bonds:  # power and energy per bond of the scene's connect (those recorded)
+        from ..scene.bonds import bond_lines
+
+        lines = bond_lines(scene.spec.bonds, result.time, result.__getitem__)
+        if lines:
+            print("\n".join(lines))
+            with open(paths["summary"], "a") as fh:
+                fh.write("\n".join(lines) + "\n")
     print(f"wrote {paths['csv']}, {paths['npz']}, {paths['plot']}, {paths['summary']}")
     if not result.ok:
         print("fmugen cosim: " + str(result.summary.failure).splitlines()[0], file=sys.stderr)

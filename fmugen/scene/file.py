@@ -19,7 +19,7 @@ from ..errors import read_text_file, toml_problem
 from .errors import SceneError, did_you_mean
 
 SCENE_KEYS = {"name", "description", "parameter_set", "start", "stop", "step", "tolerance", "record",
-              "initial", "prune", "connections", "monolithic", "connect"}
+              "initial", "prune", "connections", "monolithic", "connect", "record_bonds"}
 COMMON_INSTANCE_KEYS = {"parameters", "fixed", "start", "hold"}
 ROBOT_KEYS = {"robot", "formulation", "locked", "outputs"}
 FACTORY_KEYS = {"factory", "options", "parameter_set"}
@@ -75,6 +75,7 @@ class SceneSpec:
     cosim: dict
     connect: tuple = ()  # of (end, end): bonds between connectors or signals, causality inferred (scene/connect.py)
     bonds: tuple = ()  # the expanded connect pairs (fmugen.scene.connect.Bond), set by Scene
+    record_bonds: bool = False  # also record each bond's effort and flow (fmugen/scene/bonds.py)
 
 
 def _number(v, where, positive=False, nonneg=False) -> float:
@@ -224,7 +225,7 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
     initial = sc.get("initial", "given")
     if initial not in INITIAL_MODES:
         raise SceneError(f"{src}: [scene] initial = {initial!r}; choose {' or '.join(map(repr, INITIAL_MODES))}")
-    for flag in ("prune", "monolithic"):
+    for flag in ("prune", "monolithic", "record_bonds"):
         if flag in sc and not isinstance(sc[flag], bool):
             raise SceneError(f"{src}: [scene] {flag} must be true or false")
     desc = sc.get("description", "")
@@ -304,7 +305,7 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
                      step=step, tolerance=tolerance, record=record, initial=initial,
                      prune=sc.get("prune", True), connections=tuple(conns), instances=instances,
                      groups=groups, monolithic=bool(monolithic), cosim=dict(cosim),
-                     connect=tuple(tuple(c) for c in connect))
+                     connect=tuple(tuple(c) for c in connect), record_bonds=bool(sc.get("record_bonds", False)))
 
 
 def _instance(iname: str, spec, path: Path) -> InstanceSpec:
