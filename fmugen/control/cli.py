@@ -79,12 +79,12 @@ def parse_at(items) -> dict:
 
 def load_model(path: Path, sets: dict, robot_outputs=(), formulation="newton_euler", without=()):
     """(SymbolicModel, parameter values) of a robot, assembly or scene file."""
-    from ..errors import InputFileError, read_text_file
+    from ..errors import InputFileError, read_text_file, toml_problem
 
     try:
         data = tomllib.loads(read_text_file(path, "TOML file"))
-    except tomllib.TOMLDecodeError as exc:
-        raise InputFileError(f"{path}: not valid TOML: {exc}") from None
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        raise InputFileError(f"{path}: {toml_problem(exc)}") from None
     if "scene" in data:
         from ..scene import load_scene
         from .scene import scene_model
@@ -96,14 +96,25 @@ def load_model(path: Path, sets: dict, robot_outputs=(), formulation="newton_eul
     if bad:
         raise FmugenError(f"{path}: --set {', '.join(f'{k}={v!r}' for k, v in bad.items())}: a parameter "
                           f"value must be a number")
+    from ..values import as_number, check_model_values, robot_value_problem
+
+    sets = {k: as_number(v, f"{path}: --set {k}") for k, v in sets.items()}
     if "robot" in data:
         import fmugen
 
-        return fmugen.load_robot(path, formulation).state_space_model(outputs=robot_outputs), sets
+        arm = fmugen.load_robot(path, formulation)
+        model = arm.state_space_model(outputs=robot_outputs)
+        problem = robot_value_problem(arm.robot, {k: v for k, v in sets.items()
+                                                  if k in {p.name for p in model.parameters}})
+        if problem:  # the checks the file's own values passed
+            raise FmugenError(f"{path}: --set: {problem}")
+        return model, sets
     if "assembly" in data:
         from ..components.assembly import load_assembly
 
-        return load_assembly(path), sets
+        model = load_assembly(path)
+        check_model_values(model, sets, lambda k: f"{path}: --set {k}")
+        return model, sets
     raise InputFileError(f"{path}: neither a robot file ([robot] table), an assembly ([assembly] table) "
                          f"nor a scene ([scene] table)")
 
@@ -145,7 +156,13 @@ def run(args) -> int:
     from .linearize import linear_model
     from .trim import trim
 
+    from .. import arguments
+
     path = Path(args.file)
+    # every argument first: named in its refusal, nothing derived or written before
+    args.tol = arguments.tolerance(args.tol, "--tol")
+    args.time = arguments.number(args.time, "--time")
+    arguments.output_file(args.out, "--out", inputs=[path])
     sets = parse_sets(args.set)
     at = parse_at(args.at)
     wanted = _split(args.outputs)
