@@ -34,7 +34,10 @@ from pathlib import Path
 def _kind(path: Path) -> str:
     # user errors are InputFileError (a ValueError): main() prints one line and exits 2
     from .errors import InputFileError, read_text_file, toml_problem
+    from .robot.loader import is_urdf
 
+    if is_urdf(path):
+        return "robot"
     try:
         data = tomllib.loads(read_text_file(path, "TOML file"))
     except (tomllib.TOMLDecodeError, RecursionError) as exc:
