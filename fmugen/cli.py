@@ -266,6 +266,10 @@ def main(argv=None) -> int:
 
     add_cosim_commands(sub)
 
+    from .components.arm_sizing import add_parser as add_size_parser  # fmugen size: actuator sets per joint
+
+    add_size_parser(sub)
+
     args = parser.parse_args(argv)
     try:
         return args.func(args)

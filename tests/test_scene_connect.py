@@ -128,3 +128,34 @@ def test_record_bonds_and_energy_per_bond(tmp_path):
     assert str(b1) == "act.port <-> valve.port (hydraulic)" and p1[-1] == pytest.approx(60.0)
     assert e1[-1] == pytest.approx(3e6 * 1e-5 * 2.0**2 / 2, rel=1e-12)  # integral of a ramp: trapezoid exact
     assert e2[-1] == pytest.approx(4.0 * np.sin(2.0), rel=1e-4)
+
+
+URDF = """<robot name="two">
+  <link name="base"/>
+  <link name="upper"><inertial><origin xyz="0 0 0.2"/><mass value="2.0"/>
+    <inertia ixx="0.02" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.01"/></inertial></link>
+  <link name="lower"><inertial><origin xyz="0 0 0.15"/><mass value="1.0"/>
+    <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.005"/></inertial></link>
+  <joint name="shoulder" type="revolute"><parent link="base"/><child link="upper"/>
+    <axis xyz="0 1 0"/><limit lower="-2" upper="2" effort="100" velocity="2"/></joint>
+  <joint name="elbow" type="revolute"><parent link="upper"/><child link="lower"/>
+    <origin xyz="0 0 0.4"/><axis xyz="0 1 0"/><limit lower="-2" upper="2" effort="50" velocity="2"/></joint>
+</robot>
+"""
+
+
+def test_connect_to_a_urdf_joint_by_name(tmp_path):
+    (tmp_path / "two.urdf").write_text(URDF)
+    (tmp_path / "s.toml").write_text("""
+[scene]
+name = "s"
+connect = [["act.flange", "arm.elbow"], ["valve.port", "act.port"]]
+[instances]
+arm = { robot = "two.urdf" }
+act = { type = "hydraulic_actuator" }
+valve = { type = "servo_valve" }
+""")
+    sc = fmugen.load_scene(tmp_path / "s.toml")
+    assert ("arm", "qd[2]", "act", "w", None) in sc.connections
+    assert ("act", "tau", "arm", "tau[2]", None) in sc.connections
+    assert str(sc.spec.bonds[0]) == "act.flange <-> arm.elbow (rotational)"
