@@ -1,11 +1,12 @@
-"""Fingerprints of master runs, for the test that the restructured master gives the same results bit for bit.
+"""Runs that compare the restructured master with the single-module master it replaced.
 
-``fingerprint(result)`` hashes the recorded arrays (time, values: their bytes) together with every counter
-of the summary and the failure text.  ``CASES`` cover each scheme x extrapolation, adaptive runs with
-rollbacks, a divergence report, an FMU failure, Model-Exchange units, an algebraic FMU (exact Newton
-columns), FMUs without input interpolation and threads.  ``python tests/master_golden.py`` prints the
-fingerprints of the master in the tree (how the expectations in test_cosim_structure.py were recorded, at
-commit 59795fa, before the master was split into modules).
+``tests/legacy/master_59795fa.py`` is ``fmugen/cosim/master.py`` as it was at commit 59795fa, before it was
+split into modules, unchanged; :func:`legacy_master` loads it inside ``fmugen.cosim`` (so it uses today's
+FMU wrappers and ME block) and :func:`run_case` runs a case with either master on the same FMUs.
+``fingerprint(result)`` hashes what must agree bit for bit: the recorded arrays (their bytes), every summary
+counter, and where a run failed, the failure's time, cause, FMU and coupling.  ``CASES`` cover each scheme x
+extrapolation, adaptive runs with rollbacks, divergence reports, an FMU failure, a non-converged iteration,
+Model-Exchange units, an algebraic FMU (exact Newton columns), FMUs without input interpolation and threads.
 """
 from __future__ import annotations
 
@@ -23,8 +24,10 @@ def fingerprint(r) -> str:
     h = hashlib.sha256()
     h.update(np.ascontiguousarray(r.time, dtype=float).tobytes())
     h.update(np.ascontiguousarray(r.values, dtype=float).tobytes())
-    counters = [s.status, s.macro_steps, s.rollbacks, s.iterations, s.jacobians, s.do_steps, s.fmu_calls,
-                repr(s.step_min), repr(s.step_max), s.threads, str(s.failure) if s.failure else ""]
+    f = s.failure
+    counters = [s.status == "failed", s.macro_steps, s.rollbacks, s.iterations, s.jacobians, s.do_steps,
+                s.fmu_calls, repr(s.step_min), repr(s.step_max), s.threads,
+                [repr(f.time), f.cause, f.unit, f.coupling] if f else None]
     h.update(json.dumps(counters).encode())
     return h.hexdigest()[:24]
 
@@ -78,9 +81,27 @@ for _s, _e in [("jacobi", "linear"), ("gauss-seidel", "quadratic"), ("newton", "
                                                           dict(step=2e-3)))
 
 
-def run_case(name):
+def legacy_master():
+    """The master of commit 59795fa as module ``fmugen.cosim._master_59795fa``."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    name = "fmugen.cosim._master_59795fa"
+    if name not in sys.modules:
+        path = Path(__file__).parent / "legacy" / "master_59795fa.py"
+        spec = importlib.util.spec_from_file_location(name, path)
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules[name] = mod
+        spec.loader.exec_module(mod)
+    return sys.modules[name]
+
+
+def run_case(name, legacy=False):
     from fmugen.cosim import Master
 
+    if legacy:
+        Master = legacy_master().Master
     system, scheme, ext, opts = CASES[name]()
     workers = opts.pop("workers", 1)
     with Master(system, scheme, ext, workers=workers) as m:
@@ -89,16 +110,3 @@ def run_case(name):
             chain.can_interpolate = False
             m.no_interp[chain.in_sl] = True
         return m.run(**opts)
-
-
-if __name__ == "__main__":
-    try:
-        import fmugen.cosim.executor as executor
-    except ImportError:  # the master before it was split into modules
-        import fmugen.cosim.master as executor
-
-    for name in CASES:
-        if name.startswith("threads"):
-            executor.PARALLEL_MIN_COST = 0.0
-        r = run_case(name)
-        print(f"    {name!r}: {fingerprint(r)!r},  # {r.summary.status} {r.summary.macro_steps} steps")
