@@ -272,3 +272,66 @@ def test_names_never_reach_generated_code_unsanitised(tmp_path):
     assert robot.name == "two_link_arm"
     assert "m_up_per_v2" in {p.name for p in robot.parameters}
     assert all(p.name.isidentifier() for p in robot.parameters)
+
+
+# ------------------------------------------------------------- frames as FMU outputs
+def test_frame_outputs_their_jacobians_and_locked_branches():
+    """p:/R:/J: outputs equal fk/jacobian; d p / d q in the model Jacobian is J's linear rows; locking a
+    branch (the Panda's fingers) keeps exactly the free rows and computes only the named frame's path."""
+    from fmugen.codegen.evaluate import ModelEvaluator
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        arm = fmugen.load_robot(erd_robots() / "panda_description/urdf/panda.urdf")
+    m = arm.state_space_model(outputs=("p:panda_hand_tcp", "R:panda_hand", "J:panda_leftfinger"))
+    names = [v.name for v in m.outputs]
+    assert names[:3] == ["p_panda_hand_tcp[1]", "p_panda_hand_tcp[2]", "p_panda_hand_tcp[3]"]
+    assert "R_panda_hand[2,3]" in names and "J_panda_leftfinger[6,9]" in names and len(names) == 3 + 9 + 54
+    ev = ModelEvaluator(m)
+    rng = np.random.default_rng(3)
+    q = rng.uniform(-1, 1, 9)
+    x, u = np.r_[q, rng.uniform(-1, 1, 9)], np.zeros(9)
+    y = ev.g(0.0, x, u)
+    assert np.abs(y[:3] - arm.fk(q, "panda_hand_tcp")[:3, 3]).max() < 1e-14
+    assert np.abs(y[3:12].reshape(3, 3) - arm.fk(q, "panda_hand")[:3, :3]).max() < 1e-14
+    assert np.abs(y[12:].reshape(6, 9) - arm.jacobian(q, "panda_leftfinger")).max() < 1e-14
+    _, _, C, _ = ev.jacobians(0.0, x, u)
+    assert np.abs(C[:3, :9] - arm.jacobian(q, "panda_hand_tcp")[:3]).max() < 1e-13
+    # the TCP's Jacobian has no finger columns; the left finger's has its own joint and not the right one's
+    J = arm.jacobian(q, "panda_leftfinger")
+    assert not J[:, 8].any() and J[:, 7].any()
+
+    locked = arm.state_space_model(outputs=("p:panda_hand_tcp",), locked={8: 0.01, 9: 0.02})
+    assert [v.name for v in locked.states][:7] == [f"q[{i}]" for i in range(1, 8)] and locked.nx == 14
+    lev = ModelEvaluator(locked)
+    q7, qd7, tau7 = rng.uniform(-1, 1, 7), rng.uniform(-1, 1, 7), rng.uniform(-5, 5, 7)
+    qf, qdf = np.r_[q7, 0.01, 0.02], np.r_[qd7, 0.0, 0.0]
+    M, h = arm.mass_matrix(qf), arm.bias(qf, qdf)
+    qdd = np.linalg.solve(M[:7, :7], tau7 - h[:7])
+    assert np.abs(lev.f(0.0, np.r_[q7, qd7], tau7)[7:] - qdd).max() < 1e-10 * np.abs(qdd).max()
+    assert locked.operation_count() < arm.state_space_model(outputs=("p:panda_hand_tcp",)).operation_count()
+    with pytest.raises(ValueError, match="no body or frame 'tool0'.*known: panda_link1"):
+        arm.state_space_model(outputs=("p:tool0",))
+    with pytest.raises(ValueError, match="unknown output 'X:panda_hand'"):
+        arm.state_space_model(outputs=("X:panda_hand",))
+
+
+def test_a_scene_takes_a_urdf_robot_with_frame_outputs(tmp_path):
+    from fmugen.scene import load_scene
+
+    (tmp_path / "arm.urdf").write_text(arm_urdf())
+    (tmp_path / "s.toml").write_text("""
+[scene]
+name = "urdf_arm"
+[instances.arm]
+robot = "arm.urdf"
+outputs = ["p:tcp", "J:tool"]
+locked = { "q[2]" = 0.1 }
+[fmus.arm]
+members = ["arm"]
+""")
+    scene = load_scene(tmp_path / "s.toml")
+    m, removed = scene.instance_model("arm")
+    assert [v.name for v in m.states] == ["q[1]", "qd[1]"]
+    assert [v.name for v in m.outputs][:3] == ["p_tcp[1]", "p_tcp[2]", "p_tcp[3]"]
+    assert "J_tool[6,1]" in [v.name for v in m.outputs] and "J_tool[1,2]" not in [v.name for v in m.outputs]
