@@ -19,7 +19,7 @@ from ..errors import read_text_file
 from .errors import SceneError, did_you_mean
 
 SCENE_KEYS = {"name", "description", "parameter_set", "start", "stop", "step", "tolerance", "record",
-              "initial", "prune", "connections", "monolithic"}
+              "initial", "prune", "connections", "monolithic", "inputs"}
 COMMON_INSTANCE_KEYS = {"parameters", "fixed", "start", "hold"}
 ROBOT_KEYS = {"robot", "formulation", "locked", "outputs"}
 FACTORY_KEYS = {"factory", "options", "parameter_set"}
@@ -73,6 +73,7 @@ class SceneSpec:
     groups: dict  # name -> GroupSpec
     monolithic: bool
     cosim: dict
+    inputs: tuple = ()  # undriven inputs kept as inputs of the FMUs (not fixed) when pruning
 
 
 def _number(v, where, positive=False, nonneg=False) -> float:
@@ -232,6 +233,7 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
         conns.append((s_, t_, f_))
 
     record = _str_list(sc.get("record", []), f"{src}: [scene] record")
+    exposed = _str_list(sc.get("inputs", []), f"{src}: [scene] inputs")
 
     groups = {}
     fm = data.get("fmus", {})
@@ -265,7 +267,7 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
     return SceneSpec(path=path, name=name, description=desc, parameter_set=pset, start=start, stop=stop,
                      step=step, tolerance=tolerance, record=record, initial=initial,
                      prune=sc.get("prune", True), connections=tuple(conns), instances=instances,
-                     groups=groups, monolithic=bool(monolithic), cosim=dict(cosim))
+                     groups=groups, monolithic=bool(monolithic), cosim=dict(cosim), inputs=exposed)
 
 
 def _instance(iname: str, spec, path: Path) -> InstanceSpec:
