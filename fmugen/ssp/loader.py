@@ -19,9 +19,9 @@ are read back from it exactly as written, so the archive runs as the scene.
 """
 from __future__ import annotations
 
+import atexit
 import shutil
 import tempfile
-import weakref
 from pathlib import Path
 from typing import Optional
 
@@ -75,8 +75,23 @@ def fmugen_run(ssd: Ssd) -> Optional[dict]:
 
 
 def _fmi(fmu: Path, name: str, where: str):
+    import zipfile
+
     from fmpy import read_model_description
 
+    from .ssd import MAX_XML_BYTES, parse_xml
+
+    try:  # the version first, with the same safe parser as the SSD: FMI 1.0/3.0 are refused by name
+        with zipfile.ZipFile(fmu) as zf:
+            info = zf.getinfo("modelDescription.xml")
+            if info.file_size > MAX_XML_BYTES:
+                raise InputFileError(f"{where}: component {name}: modelDescription.xml is larger than "
+                                     f"{MAX_XML_BYTES} bytes")
+            version = parse_xml(zf.read(info), f"{where}: component {name}: modelDescription.xml").get("fmiVersion")
+    except (zipfile.BadZipFile, KeyError, OSError) as exc:
+        raise InputFileError(f"{where}: component {name}: not an FMU (zip with modelDescription.xml): {exc}") from None
+    if version != "2.0":
+        raise InputFileError(f"{where}: component {name}: FMI {version} is not supported (FMI 2.0 only)")
     try:
         md = read_model_description(str(fmu), validate=False)
     except Exception as exc:  # fmpy raises many kinds on a broken FMU
@@ -179,16 +194,11 @@ def load_system(path, record: Optional[list] = None, workdir=None):
     """Read the SSP archive ``path`` and return its :class:`CosimSystem`.
 
     The archive is extracted (safely, see :mod:`fmugen.ssp.ssd`) into
-    ``workdir`` (default: a temporary folder removed when the system is
-    garbage-collected)."""
+    ``workdir`` (an empty or new folder), by default into a temporary folder
+    removed when the Python process ends (not before: copies of the system,
+    ``dataclasses.replace(system, ...)``, keep using its FMUs)."""
     if workdir is None:
         tmp = Path(tempfile.mkdtemp(prefix="fmugen_ssp_"))
-        try:
-            ssd = open_ssp(path, tmp)
-            system = to_system(ssd, record)
-        except BaseException:
-            shutil.rmtree(tmp, ignore_errors=True)
-            raise
-        weakref.finalize(system, shutil.rmtree, str(tmp), True)
-        return system
+        atexit.register(shutil.rmtree, str(tmp), True)
+        workdir = tmp
     return to_system(open_ssp(path, Path(workdir)), record)
