@@ -49,7 +49,7 @@ from .checks import (
 )
 from .description import MODIFIED, PRISMATIC, REVOLUTE, STANDARD, Link, Parameter, Payload, Robot
 from .expressions import ExpressionError, NAME_PATTERN, check_double, quantity, snap_angle, symbol_name_problem
-from ..errors import MAX_IDENTIFIER_LENGTH, InputFileError, read_text_file
+from ..errors import MAX_IDENTIFIER_LENGTH, InputFileError, read_text_file, toml_problem
 
 TOP_KEYS = {"robot": True, "parameters": False, "links": True, "payload": False}
 ROBOT_KEYS = {
@@ -105,8 +105,9 @@ def robot_from_toml(text: str, source: str = "<string>") -> Robot:
     """Like :func:`load_robot_description` for TOML text; ``source`` names it in messages."""
     try:
         data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise RobotFileError(f"{source}: TOML syntax error: {exc}") from None
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        raise RobotFileError(f"{source}: " + (toml_problem(exc) if isinstance(exc, RecursionError)
+                             else f"TOML syntax error: {exc}")) from None
     return _Reader(source).robot(data)
 
 

@@ -27,11 +27,15 @@ def add_parser(subparsers) -> None:
 
 
 def cmd_ssp(args) -> int:
+    from .. import arguments as a
     from ..scene import load_scene
     from .export import export_ssp
 
+    output = a.output_file(args.output, "-o", inputs=[args.scene])
+    if args.fmus:
+        a.output_folder(args.fmus, "--fmus", inputs=[args.scene])
     scene = load_scene(args.scene, set=args.set, allow_factories=args.allow_factories)
-    r = export_ssp(scene, Path(args.output), fmus_dir=args.fmus, scheme=args.scheme,
+    r = export_ssp(scene, output, fmus_dir=args.fmus, scheme=args.scheme,
                    extrapolation=args.extrapolation)
     built = r["built"]
     print(built.summary())
@@ -41,6 +45,14 @@ def cmd_ssp(args) -> int:
           f"{'has no stability limit found' if lim == float('inf') else f'is stable below {lim:.3g} s'}); "
           f"fmugen's run: {r['scheme']}/{r['extrapolation']} at {built.system.step:g} s")
     return 0
+
+
+def scene_like(system):
+    """What the commands' argument checks read of a scene (start, stop, step), from an SSP's system."""
+    from types import SimpleNamespace
+
+    return SimpleNamespace(spec=SimpleNamespace(start=system.start_time, stop=system.stop_time, step=system.step,
+                                                cosim=dict(system.settings)))
 
 
 def system_from_args(args):

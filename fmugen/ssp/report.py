@@ -133,6 +133,10 @@ def cmd_report_ssp(args) -> int:
     if args.workers < 1:
         raise CosimError(f"--workers must be >= 1, not {args.workers}")
     system = system_from_args(args)
+    from ..cosim.commands import _check_args
+    from .cli import scene_like
+
+    _check_args(args, scene_like(system))
     H = float(system.step)
     steps = [float(h) for h in args.steps.split(",")] if args.steps else [8 * H, 4 * H, 2 * H, H, H / 2]
     rep = report_ssp(system, steps, schemes, repeats=args.repeats, stop=args.stop, workers=args.workers,
