@@ -178,7 +178,7 @@ def cmd_cosim(args) -> int:
                  workers=args.workers)
     paths = write_results(result, out)
     print(result.summary)
-    if scene.spec.bonds:  # power and energy per bond of the scene's connect (those recorded)
+    if scene is not None and scene.spec.bonds:  # power and energy per bond of the scene's connect (those recorded)
         from ..scene.bonds import bond_lines
 
         lines = bond_lines(scene.spec.bonds, result.time, result.__getitem__)
