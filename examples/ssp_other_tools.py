@@ -88,7 +88,8 @@ def main(argv=None) -> int:
                                step_size=H)
             print(f"  fmpy simulate_ssp: {time.perf_counter() - t0:.1f} s")
             fm = res
-        print(f"  {'column':<18} {'libcosim-fmugenJH':>18} {'fmpy-fmugenJH':>14} {'fmugenJH-own':>13}")
+        print(f"  {'column':<18} {'max |fmugenJH|':>14} {'libcosim-fmugenJH':>18} {'fmpy-fmugenJH':>14} "
+              f"{'fmugenJH-own':>13}   (differences relative to max |fmugenJH|)")
         for c in system.recorded:
             ref = jh[c.column]
             scale = max(np.max(np.abs(ref)), 1e-300)
@@ -102,8 +103,8 @@ def main(argv=None) -> int:
                     k = min(len(v), len(ref) - 1)
                     d_fm = np.max(np.abs(v[:k] - ref[1:k + 1])) / scale
             ot = np.interp(jh.time, own.time, own[c.column])
-            d_own = np.max(np.abs(ref - ot)) / max(np.max(np.abs(ot)), 1e-300)
-            print(f"  {c.column:<18} {d_lc:18.2e} {d_fm:14.2e} {d_own:13.2e}")
+            d_own = np.max(np.abs(ref - ot)) / scale
+            print(f"  {c.column:<18} {scale:14.3g} {d_lc:18.2e} {d_fm:14.2e} {d_own:13.2e}")
     return 0
 
 
