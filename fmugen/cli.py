@@ -18,7 +18,8 @@
     fmugen cosim | report SYSTEM.ssp ...           (any SSP of FMI 2.0 FMUs run by fmugen's master)
 
 FILE is a robot file (a ``[robot]`` table), an assembly of actuator-chain
-components (an ``[assembly]`` table) or a scene (a ``[scene]`` table: one FMU
+components (an ``[assembly]`` table), a component file (a ``[component]``
+table, fmugen/components/README.md) or a scene (a ``[scene]`` table: one FMU
 per group into DIR).  ``--set NAME=VALUE`` (repeatable) gives any parameter or
 start value (``--set m=1`` for a robot with a symbolic m, ``--set joint.J=5``
 in a scene).
@@ -35,7 +36,10 @@ from pathlib import Path
 def _kind(path: Path) -> str:
     # user errors are InputFileError (a ValueError): main() prints one line and exits 2
     from .errors import InputFileError, read_text_file, toml_problem
+    from .robot.loader import is_urdf
 
+    if is_urdf(path):
+        return "robot"
     try:
         data = tomllib.loads(read_text_file(path, "TOML file"))
     except (tomllib.TOMLDecodeError, RecursionError) as exc:
@@ -46,8 +50,10 @@ def _kind(path: Path) -> str:
         return "assembly"
     if "scene" in data:
         return "scene"
-    raise InputFileError(f"{path}: neither a robot file ([robot] table), an assembly ([assembly] table) "
-                         f"nor a scene ([scene] table)")
+    if "component" in data:
+        return "component"
+    raise InputFileError(f"{path}: neither a robot file ([robot] table), an assembly ([assembly] table), "
+                         f"a scene ([scene] table) nor a component file ([component] table)")
 
 
 def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler", model="forward_dynamics",
@@ -70,6 +76,11 @@ def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler", mo
         arm = fmugen.load_robot(path, formulation)
         m = (arm.inverse_dynamics_model() if model == "inverse_dynamics"
              else arm.state_space_model(outputs=outputs, strategy=strategy))
+    elif kind == "component":  # a component file: parameters through its checks (ranges, exact ifs)
+        from .components.equations import load_component, read_component_file
+
+        params = {d.name for d in read_component_file(path).of_kind("parameter")}
+        m = load_component(path, overrides={k: v for k, v in sets.items() if k in params})
     else:
         from .components.assembly import load_assembly
 
@@ -266,6 +277,10 @@ def main(argv=None) -> int:
     from .cosim.commands import add_cosim_commands  # fmugen cosim | reference | report: fmugen/cosim
 
     add_cosim_commands(sub)
+
+    from .components.arm_sizing import add_parser as add_size_parser  # fmugen size: actuator sets per joint
+
+    add_size_parser(sub)
 
     args = parser.parse_args(argv)
     try:
