@@ -111,7 +111,7 @@ def measure(path: Path, args) -> dict:
         pin.computeJointJacobians(model, data, qp)
         pin.updateFramePlacements(model, data)
         for name in robot.frame_names():
-            fid = model.getFrameId(name)
+            fid = model.getFrameId(name, pin.BODY)
             T = arm.fk(q, name)
             e_fk = max(e_fk, np.abs(T[:3, 3] - data.oMf[fid].translation).max())
             Jp = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)[:, iv]
@@ -164,7 +164,10 @@ def main(argv=None) -> int:
     print("|" + "---|" * 12)
     rows = []
     for f in files:
-        r = measure(f, args)
+        try:
+            r = measure(f, args)
+        except Exception as exc:  # noqa: BLE001 -- a row that says what went wrong, then the next file
+            r = {"file": f.name, "dof": "", "kind": "", "status": f"ERROR {type(exc).__name__}: {exc}"[:120]}
         rows.append(r)
 
         def g(key, fmt):

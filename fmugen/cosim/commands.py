@@ -220,6 +220,10 @@ def cmd_reference(args) -> int:
              "confirmed by: " + "; ".join(ref.settings["confirm"]),
              "error estimate per column (max difference between the solves):"]
     lines += [f"  {c:<28} {e:.3g}" for c, e in zip(ref.columns, ref.error)]
+    if scene.spec.bonds:  # the bonds' energies without coupling error, to hold a co-simulation's against
+        from ..scene.bonds import bond_lines
+
+        lines += bond_lines(scene.spec.bonds, ref.time, ref.__getitem__)
     (out / "reference.txt").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     print(f"wrote {out / 'reference.csv'}")
