@@ -17,6 +17,7 @@ q and qd for co-simulation without direct feedthrough.
 """
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, replace
 from typing import Optional, Sequence
 
@@ -24,6 +25,11 @@ import sympy as sp
 
 from .chain import ChainDynamics, chain_ops
 from .program import Assign, Program
+
+
+#: ``min`` of a quantity that must be > 0 (a mass, a time constant): the smallest
+#: positive normal double, since FMI's min is inclusive
+POSITIVE_MIN = sys.float_info.min
 
 
 @dataclass(frozen=True)

@@ -20,9 +20,9 @@ from typing import Mapping, Optional, Sequence
 
 import sympy as sp
 
-from ..codegen.model import Variable
+from ..codegen.model import POSITIVE_MIN, Variable
 from ..errors import FmugenError
-from .parameters import ParameterSet, load_parameter_set, value_problem
+from .parameters import SIGNS, ParameterSet, load_parameter_set, value_problem
 
 #: the model time, the ``t`` argument of the generated C functions
 TIME = sp.Symbol("t", real=True)
@@ -69,7 +69,11 @@ def parameters(family: str, specs: Sequence[tuple], used: Sequence[str], paramet
         if name not in used:
             continue
         value = overrides[name] if name in overrides else pset.value(family, name)
-        out[name] = var(name, unit, description, start=float(value))
+        # the sign the equations need becomes the parameter's min: the FMU
+        # refuses (fmi2SetReal) what a parameter file would have been refused for
+        sign = SIGNS.get(family, {}).get(name)
+        low = POSITIVE_MIN if sign == ">0" else 0.0 if sign == ">=0" else None
+        out[name] = var(name, unit, description, start=float(value), min=low)
     return out
 
 

@@ -437,6 +437,17 @@ class Master:
                 raise CosimError(f"{what}: FMU {u.name!r} cannot interpolate inputs (canInterpolateInputs = "
                                  f"false); use {self.scheme}/linear")
 
+    def _check_states(self, adaptive: bool) -> None:
+        """Iterated schemes and adaptive steps repeat a macro step from saved FMU states: refuse, before
+        anything runs, an FMU that declares it cannot save them (canGetAndSetFMUstate = false)."""
+        for u in self.units:
+            if not getattr(u, "can_save_state", True):
+                what = (f"{self.scheme} iteration" if self.scheme in ("iterative", "newton") else
+                        "adaptive macro steps")
+                raise CosimError(f"{self.system.name}: FMU {u.name!r} ({u.unit.path}) declares "
+                                 f"canGetAndSetFMUstate=\"false\", but {what} repeat macro steps from saved FMU "
+                                 f"states; run it with jacobi or gauss-seidel at a fixed step")
+
     def _gather(self, Unew, G, units=None) -> int:
         """The coupled values into Unew and G[:nu]; with Hermite inputs also their slopes into G[nu:], read by
         fmi2GetRealOutputDerivatives from the sources (``units``: only those).  Returns the number of calls."""
@@ -524,6 +535,8 @@ class Master:
         calls = 0
         rollback_ok = adaptive or implicit
         need_states = rollback_ok
+        if need_states:
+            self._check_states(adaptive)
         n_cs = sum(1 for u in units if u.kind != "me")
         if self.workers > 1 and n_cs > 1 and self.scheme != "gauss-seidel":
             from concurrent.futures import ThreadPoolExecutor
@@ -531,6 +544,7 @@ class Master:
             self._pool = ThreadPoolExecutor(min(self.workers, n_cs) - 1, thread_name_prefix="fmugen-cosim")
             self._groups, self._cost, self._timed = None, {}, 0
         states = []  # (the pool is shut down in the finally below)
+        windows, recent = [], deque(maxlen=8)  # read by the failure report, also of a failure before the first step
         failure = None
         t = t0
         try:

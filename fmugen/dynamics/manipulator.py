@@ -32,12 +32,21 @@ from ..codegen.differentiate import differentiate
 from ..codegen.model import SymbolicModel, Variable
 from ..codegen.program import Program
 from ..codegen.python_code import compile_program
+from ..robot.bounds import parameter_bounds
 from ..robot.description import REVOLUTE, Robot
 from . import crba, kinematics
 from .joint_frames import joint_frame_chain
 from .lagrange import RecursiveLagrange
 from .newton_euler import NestedBodyInverseDynamics
 from .trig import TrigCache
+
+
+def robot_parameters(robot: Robot) -> tuple:
+    """The robot's parameters as model Variables, with the physical ranges of
+    those that are a link's quantity themselves (:func:`fmugen.robot.bounds.parameter_bounds`)."""
+    lows = parameter_bounds(robot)
+    return tuple(Variable(p.name, p.symbol, p.unit, p.description, start=p.value, min=lows.get(p.name))
+                 for p in robot.parameters)
 
 FORMULATIONS = ("newton_euler", "lagrange")
 
@@ -285,9 +294,7 @@ class Manipulator:
             inputs.append(Variable(f"tau[{i + 1}]", self.tau[i], "N.m" if rev else "N",
                                    f"{'torque' if rev else 'force'} applied by actuator {i + 1}", start=0.0))
         inputs += self._wrench_inputs()
-        params = tuple(
-            Variable(p.name, p.symbol, p.unit, p.description, start=p.value) for p in robot.parameters
-        )
+        params = robot_parameters(robot)
         model = SymbolicModel(
             name=name or robot.name,
             description=robot.description or f"{robot.name}: {n}-link manipulator",
@@ -371,8 +378,7 @@ class Manipulator:
                            f"{'torque' if rev[i] else 'force'} applied by actuator {i + 1}", start=0.0)
                   for i in range(n)]
         inputs += self._wrench_inputs()
-        params = tuple(Variable(p.name, p.symbol, p.unit, p.description, start=p.value)
-                       for p in robot.parameters)
+        params = robot_parameters(robot)
         return SymbolicModel(
             name=name or robot.name,
             description=robot.description or f"{robot.name}: {n}-link manipulator",
@@ -420,7 +426,7 @@ class Manipulator:
             for i, L in enumerate(robot.links))
         Jp = Program("_j")
         D = differentiate([P], tau, [v.symbol for v in inputs], Jp)
-        params = tuple(Variable(p.name, p.symbol, p.unit, p.description, start=p.value) for p in robot.parameters)
+        params = robot_parameters(robot)
         return SymbolicModel(
             name=name or f"{robot.name}_inverse_dynamics",
             description=f"{robot.name}: tau = M(q) qdd + h(q, qd), inverse dynamics",
