@@ -123,8 +123,8 @@ def build_lag(d: Path) -> Path:
                                 f"binaries/{fmpy.platform}/lag{fmpy.sharedLibraryExtension}": lib.read_bytes()})
 
 
-def broken_fmus(d: Path, lag: Path) -> dict:
-    """{kind: path} of FMUs that cannot run, each for one reason."""
+def broken_fmus(d: Path, lag: Path, huge: bool = True) -> dict:
+    """{kind: path} of FMUs that cannot run, each for one reason (``huge``: with the 300 MB one)."""
     binary = f"binaries/{fmpy.platform}/lag{fmpy.sharedLibraryExtension}"
     with zipfile.ZipFile(lag) as z:
         lib = z.read(binary)
@@ -146,6 +146,8 @@ def broken_fmus(d: Path, lag: Path) -> dict:
     out["not a library"] = _zip(d / "garbage.fmu", {"modelDescription.xml": good_xml, binary: b"\x7fELF junk"})
     out["wrong GUID"] = _zip(d / "guid.fmu", {"modelDescription.xml": good_xml.replace("lag-0001", "lag-0002"),
                                               binary: lib})
+    if not huge:
+        return out
     # 300 MB of description (whitespace compresses to ~300 KB)
     big = d / "huge.fmu"
     with zipfile.ZipFile(big, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as z:
