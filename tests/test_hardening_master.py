@@ -89,6 +89,6 @@ def test_broken_fmus_give_one_line_naming_the_fmu(lag, tmp_path):
         assert isinstance(info.value, CosimError) and "\n" not in msg, (kind, msg)
         assert f"FMU 'B' ({path})" in msg and EXPECTED[kind] in msg, (kind, msg)
     # a folder and a file that does not exist
-    for path, said in ((tmp_path, "not a regular file"), (tmp_path / "none.fmu", "cannot open the file")):
+    for path, said in ((tmp_path, "not a regular file"), (tmp_path / "none.fmu", "the file does not exist")):
         with pytest.raises(CosimError, match=said):
             run(chain(lag, path), scheme="jacobi")

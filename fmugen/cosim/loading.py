@@ -51,6 +51,8 @@ def read_description(name: str, path, interface: str):
     where = _label(name, path)
     try:
         st = path.stat()
+    except FileNotFoundError:
+        raise CosimError(f"{where}: the file does not exist") from None
     except OSError as e:
         raise CosimError(f"{where}: cannot open the file: {e.strerror or e}") from None
     if not stat.S_ISREG(st.st_mode):
