@@ -160,7 +160,7 @@ def _instance_keys(spec: dict) -> set:
     if "factory" in spec:
         return FACTORY_KEYS | COMMON_INSTANCE_KEYS
     typ = spec.get("type")
-    opts = set(COMPONENT_TYPES[typ][1]) if typ in COMPONENT_TYPES else set()
+    opts = set(COMPONENT_TYPES[typ][1]) if isinstance(typ, str) and typ in COMPONENT_TYPES else set()
     return {"type", "parameter_set"} | opts | COMMON_INSTANCE_KEYS
 
 
@@ -329,7 +329,7 @@ def _instance(iname: str, spec, path: Path) -> InstanceSpec:
             raise SceneError(f"{where} options must be a table")
         return InstanceSpec(iname, "factory", ref, dict(opts), pset, params, fixed, start, hold)
     typ = spec["type"]
-    if typ not in COMPONENT_TYPES:
+    if not isinstance(typ, str) or typ not in COMPONENT_TYPES:
         raise SceneError(f"{where} type = {typ!r} is not a component type{did_you_mean(str(typ), COMPONENT_TYPES)}; "
                          f"known: {', '.join(COMPONENT_TYPES)}")
     _, options = COMPONENT_TYPES[typ]
@@ -363,7 +363,7 @@ def _group(gname, g, instances, src) -> GroupSpec:
     if fmi_type not in ("cs", "me"):
         raise SceneError(f"{where} fmi_type must be \"cs\" or \"me\", got {fmi_type!r}")
     solver = g.get("solver", "rodas3")
-    if solver not in SOLVERS:
+    if not isinstance(solver, str) or solver not in SOLVERS:  # a table or array is no key (unhashable)
         raise SceneError(f"{where} solver = {solver!r}; choose one of {', '.join(SOLVERS)}")
     tol = g.get("tolerance")
     if tol is not None:

@@ -244,9 +244,12 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", type=int, default=400)
     ap.add_argument("--seed", type=int, default=20261202)
     ap.add_argument("--max-points", type=int, default=10 ** 6)
+    ap.add_argument("--keep", metavar="DIR", help="write the cases' files (scenes, FMUs) into DIR and keep them")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="fmugen_fuzz_") as d:
-        r = Runner(args.seed, Path(d), args.max_points)
+        if args.keep:
+            Path(args.keep).mkdir(parents=True, exist_ok=True)
+        r = Runner(args.seed, Path(args.keep or d), args.max_points)
         r.run(args.cases)
         for f in r.findings:
             print("FINDING", f)

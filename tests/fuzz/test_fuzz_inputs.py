@@ -3,6 +3,7 @@ files, ``--set`` values, sweep grids and the master with misbehaving FMUs.
 Every case must succeed or raise a one-line FmugenError; the long run is
 ``python tests/fuzz/fuzz_inputs.py --cases 2000``."""
 import os
+import re
 
 from fuzz_inputs import PENDING, Runner
 
@@ -16,3 +17,21 @@ def test_inputs_fuzz_has_no_findings(tmp_path):
     print(r.report())
     assert all(r.counts[k] >= CASES // 4 for k in r.counts)
     assert not r.findings, "\n".join(r.findings[:20])
+
+
+def test_a_table_where_a_name_is_expected_is_refused(tmp_path):
+    """Found by this fuzzer (seed 20261202, case 452): ``solver = {}`` was looked up in a dict
+    (TypeError: unhashable type) instead of refused."""
+    import pytest
+
+    from fuzz_inputs import SCENE
+    from fmugen.errors import FmugenError
+    from fmugen.scene import load_scene
+
+    text = SCENE.read_text()
+    for old, new, said in (('solver = "rodas3"', "solver = {}", "solver = {}"),
+                           ('type = "joint_inertia"', "type = [1]", "type = [1] is not a component type")):
+        path = tmp_path / "s.toml"
+        path.write_text(text.replace(old, new, 1))
+        with pytest.raises(FmugenError, match=re.escape(said)):
+            load_scene(path)
