@@ -187,6 +187,10 @@ def parse_samples(items: Union[Iterable[str], Mapping[str, object], None]) -> di
     return out
 
 
+#: most points one sweep makes (each is a co-simulation run: a million already takes days)
+MAX_POINTS = 1_000_000
+
+
 def make_points(grid: Optional[dict] = None, samples: Optional[dict] = None, n: Optional[int] = None,
                 seed: Optional[int] = None) -> list:
     """The sweep's points, each ``{name: value}``.
@@ -204,6 +208,13 @@ def make_points(grid: Optional[dict] = None, samples: Optional[dict] = None, n: 
     both = set(grid) & set(samples)
     if both:
         raise SweepError(f"{', '.join(sorted(both))}: given both as --grid and --sample")
+    total = math.prod(len(v) for v in grid.values())
+    if samples and isinstance(n, int) and not isinstance(n, bool) and n > 0:
+        total *= n
+    if total > MAX_POINTS:  # counted before a single point is made: two grids of 1e6 values are 1e12 points
+        raise SweepError(f"the sweep would have {total:.3g} points ({' x '.join(str(len(v)) for v in grid.values())}"
+                         f"{f' x {n} samples' if samples else ''}), more than the {MAX_POINTS:,} one sweep runs; "
+                         f"split it or use fewer values")
     rows = [dict(zip(grid, combo)) for combo in itertools.product(*grid.values())] if grid else [{}]
     if samples:
         if n is None or isinstance(n, bool) or int(n) != n or n < 1:

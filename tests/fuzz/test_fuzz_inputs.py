@@ -35,3 +35,23 @@ def test_a_table_where_a_name_is_expected_is_refused(tmp_path):
         path.write_text(text.replace(old, new, 1))
         with pytest.raises(FmugenError, match=re.escape(said)):
             load_scene(path)
+
+
+def test_a_sweep_counts_its_points_before_making_them():
+    """Two grids of a million values each were 1e12 points (the issue's unbounded sweep): refused at
+    once with the number; a small grid is still its Cartesian product."""
+    import time
+
+    import pytest
+
+    from fmugen.sweep.errors import SweepError
+    from fmugen.sweep.points import MAX_POINTS, make_points
+
+    big = {"joint.J": tuple(range(10 ** 6)), "joint.B_m": tuple(range(10 ** 6))}
+    t0 = time.perf_counter()
+    with pytest.raises(SweepError, match=r"would have 1e\+12 points \(1000000 x 1000000\), more than the "
+                                         r"1,000,000"):
+        make_points(big)
+    assert time.perf_counter() - t0 < 5
+    assert len(make_points({"joint.J": (1.0, 2.0), "joint.B_m": (0.0, 0.1, 0.2)})) == 6
+    assert MAX_POINTS == 10 ** 6
