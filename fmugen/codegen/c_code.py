@@ -397,7 +397,9 @@ def c_identifier(name: str) -> str:
     s = re.sub(r"_+", "_", s).strip("_") or "model"
     if s[0].isdigit():
         s = "m_" + s
-    if s in _C_KEYWORDS or s in _C_ALL_KEYWORDS or s in _PREDEFINED_MACROS or keyword.iskeyword(s):
+    # (the model identifier reaches C only inside a string literal and as a file name: a macro or GNU
+    # keyword name is harmless there, unlike a variable's)
+    if s in _C_KEYWORDS or keyword.iskeyword(s):
         s += "_"
     return s
 
