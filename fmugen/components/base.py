@@ -16,6 +16,7 @@ mapping.  Assembly never renames it.
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Mapping, Optional, Sequence
 
 import sympy as sp
@@ -69,11 +70,11 @@ def parameters(family: str, specs: Sequence[tuple], used: Sequence[str], paramet
         if name not in used:
             continue
         value = overrides[name] if name in overrides else pset.value(family, name)
-        # the sign the equations need becomes the parameter's min: the FMU
-        # refuses (fmi2SetReal) what a parameter file would have been refused for
-        sign = SIGNS.get(family, {}).get(name)
+        # the sign the equations need is also the parameter's min in the FMU: its
+        # fmi2SetReal refuses what a parameter file would have been refused for
+        sign = SIGNS.get(family, {}).get(name, "")
         low = POSITIVE_MIN if sign == ">0" else 0.0 if sign == ">=0" else None
-        out[name] = var(name, unit, description, start=float(value), min=low)
+        out[name] = replace(var(name, unit, description, start=float(value), min=low), sign=sign)
     return out
 
 

@@ -15,11 +15,12 @@ from pathlib import Path
 from typing import Optional
 
 from ..components.assembly import COMPONENT_TYPES
-from ..errors import read_text_file
+from ..errors import read_text_file, toml_problem
 from .errors import SceneError, did_you_mean
 
 SCENE_KEYS = {"name", "description", "parameter_set", "start", "stop", "step", "tolerance", "record",
-              "initial", "prune", "connections", "monolithic"}
+              "initial", "prune", "connections", "monolithic", "connect", "record_bonds",
+              "inputs"}
 COMMON_INSTANCE_KEYS = {"parameters", "fixed", "start", "hold"}
 ROBOT_KEYS = {"robot", "formulation", "locked", "outputs"}
 FACTORY_KEYS = {"factory", "options", "parameter_set"}
@@ -33,8 +34,8 @@ INITIAL_MODES = ("given", "equilibrium")
 @dataclass(frozen=True)
 class InstanceSpec:
     name: str
-    kind: str  # "robot", "component" or "factory"
-    source: str  # robot file (absolute), component type, or "module:function"
+    kind: str  # "robot", "component", "file" (a component file) or "factory"
+    source: str  # robot file (absolute), component type, component file (absolute), or "module:function"
     options: dict = field(default_factory=dict)  # fidelity options / factory keywords / formulation, outputs
     parameter_set: Optional[str] = None
     parameters: dict = field(default_factory=dict)  # overrides
@@ -73,9 +74,19 @@ class SceneSpec:
     groups: dict  # name -> GroupSpec
     monolithic: bool
     cosim: dict
+    connect: tuple = ()  # of (end, end): bonds between connectors or signals, causality inferred (scene/connect.py)
+    bonds: tuple = ()  # the expanded connect pairs (fmugen.scene.connect.Bond), set by Scene
+    record_bonds: bool = False  # also record each bond's effort and flow (fmugen/scene/bonds.py)
+    inputs: tuple = ()  # undriven inputs kept as inputs of the FMUs (not fixed) when pruning
 
 
 def _number(v, where, positive=False, nonneg=False) -> float:
+    if isinstance(v, int) and not isinstance(v, bool):
+        try:
+            v = float(v)
+        except OverflowError:  # an integer beyond the double range: a clear error, not a traceback
+            raise SceneError(f"{where} must be a finite number, got an integer of {len(str(abs(v)))} digits "
+                             f"(beyond the double-precision range)") from None
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
         raise SceneError(f"{where} must be a finite number, got {v!r}")
     if positive and v <= 0:
@@ -83,6 +94,28 @@ def _number(v, where, positive=False, nonneg=False) -> float:
     if nonneg and v < 0:
         raise SceneError(f"{where} must not be negative, got {v!r}")
     return float(v)
+
+
+#: most communication points one run may have (a step so small, or a run so long, that the
+#: master would take days and the results gigabytes is refused with the number)
+MAX_MACRO_STEPS = 10**8
+
+
+def check_time_grid(start: float, stop: float, step: float, where: str) -> int:
+    """The number of macro steps of a run, refused when no step fits between start and stop in
+    double precision (``start + step == start``: 1e15 to 1e15 + 1 ulp) or when there are more
+    than :data:`MAX_MACRO_STEPS`."""
+    span = stop - start
+    if start + step == start or span <= 4 * math.ulp(max(abs(start), abs(stop))):
+        raise SceneError(f"{where} no macro step fits between start {start!r} and stop {stop!r} "
+                         f"(double precision resolves about {math.ulp(max(abs(start), abs(stop))):.3g} s there; "
+                         f"step {step!r})")
+    n = (stop - start) / step
+    if not n <= MAX_MACRO_STEPS:
+        many = f"{n:.3g}" if math.isfinite(n) else "more than 1e308"
+        raise SceneError(f"{where} {many} macro steps of {step!r} s from {start!r} to {stop!r}: more than "
+                         f"{MAX_MACRO_STEPS:.0e}; use a larger step or a shorter run")
+    return int(math.ceil(n - 1e-9))
 
 
 def _identifier(v, where) -> str:
@@ -108,8 +141,8 @@ def read_toml(path: Path) -> dict:
     text = read_text_file(path, "scene file")
     try:
         return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"{path}: not valid TOML: {exc}") from None
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        raise SceneError(f"{path}: {toml_problem(exc)}") from None
 
 
 def apply_sets(data: dict, sets: dict, src: str) -> dict:
@@ -184,14 +217,17 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
     step = _number(sc.get("step", 1e-3), f"{src}: [scene] step", positive=True)
     if step > stop - start:
         raise SceneError(f"{src}: [scene] step ({step}) is longer than the run ({stop - start})")
+    check_time_grid(start, stop, step, f"{src}: [scene]")
     tolerance = _number(sc.get("tolerance", 1e-6), f"{src}: [scene] tolerance", positive=True)
     pset = sc.get("parameter_set", "default")
     if not isinstance(pset, str):
         raise SceneError(f"{src}: [scene] parameter_set must be a string")
+    if pset.endswith(".toml"):  # a file next to the scene, as every other file the scene names
+        pset = str(Path(pset) if Path(pset).is_absolute() else path.parent / pset)
     initial = sc.get("initial", "given")
     if initial not in INITIAL_MODES:
         raise SceneError(f"{src}: [scene] initial = {initial!r}; choose {' or '.join(map(repr, INITIAL_MODES))}")
-    for flag in ("prune", "monolithic"):
+    for flag in ("prune", "monolithic", "record_bonds"):
         if flag in sc and not isinstance(sc[flag], bool):
             raise SceneError(f"{src}: [scene] {flag} must be true or false")
     desc = sc.get("description", "")
@@ -232,6 +268,12 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
         conns.append((s_, t_, f_))
 
     record = _str_list(sc.get("record", []), f"{src}: [scene] record")
+    exposed = _str_list(sc.get("inputs", []), f"{src}: [scene] inputs")
+    connect = sc.get("connect", [])
+    if not isinstance(connect, list) or not all(isinstance(c, list) and len(c) == 2 and all(
+            isinstance(e, str) for e in c) for c in connect):
+        raise SceneError(f"{src}: [scene] connect must be a list of pairs [\"inst.connector\", \"inst.connector\"] "
+                         f"(or two variables)")
 
     groups = {}
     fm = data.get("fmus", {})
@@ -265,7 +307,9 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
     return SceneSpec(path=path, name=name, description=desc, parameter_set=pset, start=start, stop=stop,
                      step=step, tolerance=tolerance, record=record, initial=initial,
                      prune=sc.get("prune", True), connections=tuple(conns), instances=instances,
-                     groups=groups, monolithic=bool(monolithic), cosim=dict(cosim))
+                     groups=groups, monolithic=bool(monolithic), cosim=dict(cosim),
+                     connect=tuple(tuple(c) for c in connect), record_bonds=bool(sc.get("record_bonds", False)),
+                     inputs=exposed)
 
 
 def _instance(iname: str, spec, path: Path) -> InstanceSpec:
@@ -307,8 +351,9 @@ def _instance(iname: str, spec, path: Path) -> InstanceSpec:
             raise SceneError(f"{where} formulation must be 'newton_euler' or 'lagrange', got {form!r}")
         outs = _str_list(spec.get("outputs", []), f"{where} outputs")
         for o in outs:
-            if o not in ("p_ee", "qdd"):
-                raise SceneError(f"{where} outputs: {o!r} is not a robot output (p_ee, qdd)")
+            if o not in ("p_ee", "qdd") and not (o[:2] in ("p:", "R:", "J:") and len(o) > 2):
+                raise SceneError(f"{where} outputs: {o!r} is not a robot output (p_ee, qdd, p:FRAME, R:FRAME, "
+                                 "J:FRAME)")
         locked_raw = spec.get("locked", {})
         if not isinstance(locked_raw, dict):
             raise SceneError(f"{where} locked must be a table like {{ \"q[4]\" = 0.3 }}")
@@ -329,6 +374,8 @@ def _instance(iname: str, spec, path: Path) -> InstanceSpec:
             raise SceneError(f"{where} options must be a table")
         return InstanceSpec(iname, "factory", ref, dict(opts), pset, params, fixed, start, hold)
     typ = spec["type"]
+    if isinstance(typ, str) and typ.startswith(FILE_TYPE_PREFIXES):
+        return _file_instance(iname, typ, path, where, pset, params, fixed, start, hold)
     if not isinstance(typ, str) or typ not in COMPONENT_TYPES:
         raise SceneError(f"{where} type = {typ!r} is not a component type{did_you_mean(str(typ), COMPONENT_TYPES)}; "
                          f"known: {', '.join(COMPONENT_TYPES)}")
@@ -343,6 +390,25 @@ def _instance(iname: str, spec, path: Path) -> InstanceSpec:
     if typ == "table_trajectory" and (params or pset):
         raise SceneError(f"{where}: a table_trajectory has no parameters (its knots are data)")
     return InstanceSpec(iname, "component", typ, opts, pset, params, fixed, start, hold)
+
+
+FILE_TYPE_PREFIXES = ("file:", "lib:")
+
+
+def _file_instance(iname, typ, path: Path, where, pset, params, fixed, start, hold) -> InstanceSpec:
+    """``type = "file:components/x.toml"`` (relative to the scene) or ``"lib:<shipped name>"``."""
+    from ..components.equations import library_path, read_cached
+
+    try:
+        if typ.startswith("lib:"):
+            fp = library_path(typ[4:])
+        else:
+            fp = Path(typ[5:])
+            fp = fp if fp.is_absolute() else path.parent / fp
+        read_cached(fp)  # declarations, equations and dimensions checked now, with the file named
+    except ValueError as exc:
+        raise SceneError(f"{where} type = {typ!r}: {exc}") from None
+    return InstanceSpec(iname, "file", str(fp.resolve()), {}, pset, params, fixed, start, hold)
 
 
 def _group(gname, g, instances, src) -> GroupSpec:
