@@ -266,6 +266,9 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
         conns.append((s_, t_, f_))
 
     record = _str_list(sc.get("record", []), f"{src}: [scene] record")
+    twice = sorted({r for r in record if record.count(r) > 1})
+    if twice:  # a result table has one column per name: refused here, not after the run
+        raise SceneError(f"{src}: [scene] record lists {', '.join(twice)} more than once")
     connect = sc.get("connect", [])
     if not isinstance(connect, list) or not all(isinstance(c, list) and len(c) == 2 and all(
             isinstance(e, str) for e in c) for c in connect):
