@@ -211,3 +211,21 @@ def test_units_inside_expressions_are_checked():
     assert "argument of cos" in unit_problem(l * sp.cos(l), "m", {l: "m"})
     assert unit_problem(l * sp.cos(t), "m", {l: "m", t: "rad"}) is None
     assert unit_problem(m * l, "kg.m2", {m: "kg"}) is None  # l has no declared unit: nothing to check
+
+
+@pytest.mark.parametrize("command, bad", [("cosim", ["--step", "0"]), ("reference", ["--points", "5e7"]),
+                                          ("report", ["--target", "0"])])
+def test_cosim_reference_and_report_honour_allow_factories(tmp_path, capsys, monkeypatch, command, bad):
+    (tmp_path / "my_parts_i19.py").write_text(
+        "from fmugen.components import joint_inertia\n"
+        "def heavy_joint(name, parameter_set='default', overrides=None):\n"
+        "    return joint_inertia(parameter_set=parameter_set, overrides=overrides, name=name)\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    p = tmp_path / "f.toml"
+    p.write_text(SPLIT.read_text().replace('joint = { type = "joint_inertia" }',
+                                           'joint = { factory = "my_parts_i19:heavy_joint" }'))
+    assert "--allow-factories" in _refused(capsys, command, p, *bad, "--out", tmp_path / "o")
+    # allowed: the scene loads, and the command goes on to refuse its own bad argument
+    err = _refused(capsys, command, p, "--allow-factories", *bad, "--out", tmp_path / "o")
+    assert bad[0] in err and "factor" not in err
+    assert not (tmp_path / "o").exists()
