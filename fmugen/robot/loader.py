@@ -87,14 +87,24 @@ AXES = "xyz"
 PAIRS = ((0, 0, "xx"), (1, 1, "yy"), (2, 2, "zz"), (0, 1, "xy"), (0, 2, "xz"), (1, 2, "yz"))
 
 
+def is_urdf(path) -> bool:
+    """A URDF (or xacro) file, by its name: ``.urdf``, ``.xacro``."""
+    name = Path(path).name.lower()
+    return name.endswith((".urdf", ".xacro"))
+
+
 def load_robot_description(path) -> Robot:
-    """Read, check and convert the robot file at ``path``.
+    """Read, check and convert the robot file at ``path`` (TOML, or URDF: :mod:`fmugen.robot.urdf`).
 
     Raises :class:`RobotFileError` naming the file, link and field of the
     first problem found; warns (:class:`UnrealisableInertiaWarning`) for an
     unrealisable inertia the file explicitly allows.
     """
     path = Path(path)
+    if is_urdf(path):
+        from .urdf import load_urdf
+
+        return load_urdf(path)
     try:
         text = read_text_file(path, "robot file")
     except InputFileError as exc:

@@ -19,7 +19,8 @@ from ..errors import read_text_file, toml_problem
 from .errors import SceneError, did_you_mean
 
 SCENE_KEYS = {"name", "description", "parameter_set", "start", "stop", "step", "tolerance", "record",
-              "initial", "prune", "connections", "monolithic", "connect", "record_bonds"}
+              "initial", "prune", "connections", "monolithic", "connect", "record_bonds",
+              "inputs"}
 COMMON_INSTANCE_KEYS = {"parameters", "fixed", "start", "hold"}
 ROBOT_KEYS = {"robot", "formulation", "locked", "outputs"}
 FACTORY_KEYS = {"factory", "options", "parameter_set"}
@@ -76,6 +77,7 @@ class SceneSpec:
     connect: tuple = ()  # of (end, end): bonds between connectors or signals, causality inferred (scene/connect.py)
     bonds: tuple = ()  # the expanded connect pairs (fmugen.scene.connect.Bond), set by Scene
     record_bonds: bool = False  # also record each bond's effort and flow (fmugen/scene/bonds.py)
+    inputs: tuple = ()  # undriven inputs kept as inputs of the FMUs (not fixed) when pruning
 
 
 def _number(v, where, positive=False, nonneg=False) -> float:
@@ -269,6 +271,7 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
     twice = sorted({r for r in record if record.count(r) > 1})
     if twice:  # a result table has one column per name: refused here, not after the run
         raise SceneError(f"{src}: [scene] record lists {', '.join(twice)} more than once")
+    exposed = _str_list(sc.get("inputs", []), f"{src}: [scene] inputs")
     connect = sc.get("connect", [])
     if not isinstance(connect, list) or not all(isinstance(c, list) and len(c) == 2 and all(
             isinstance(e, str) for e in c) for c in connect):
@@ -308,7 +311,8 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
                      step=step, tolerance=tolerance, record=record, initial=initial,
                      prune=sc.get("prune", True), connections=tuple(conns), instances=instances,
                      groups=groups, monolithic=bool(monolithic), cosim=dict(cosim),
-                     connect=tuple(tuple(c) for c in connect), record_bonds=bool(sc.get("record_bonds", False)))
+                     connect=tuple(tuple(c) for c in connect), record_bonds=bool(sc.get("record_bonds", False)),
+                     inputs=exposed)
 
 
 def _instance(iname: str, spec, path: Path) -> InstanceSpec:
@@ -350,8 +354,9 @@ def _instance(iname: str, spec, path: Path) -> InstanceSpec:
             raise SceneError(f"{where} formulation must be 'newton_euler' or 'lagrange', got {form!r}")
         outs = _str_list(spec.get("outputs", []), f"{where} outputs")
         for o in outs:
-            if o not in ("p_ee", "qdd"):
-                raise SceneError(f"{where} outputs: {o!r} is not a robot output (p_ee, qdd)")
+            if o not in ("p_ee", "qdd") and not (o[:2] in ("p:", "R:", "J:") and len(o) > 2):
+                raise SceneError(f"{where} outputs: {o!r} is not a robot output (p_ee, qdd, p:FRAME, R:FRAME, "
+                                 "J:FRAME)")
         locked_raw = spec.get("locked", {})
         if not isinstance(locked_raw, dict):
             raise SceneError(f"{where} locked must be a table like {{ \"q[4]\" = 0.3 }}")
