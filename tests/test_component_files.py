@@ -463,9 +463,14 @@ def test_state_feedback_file_splits_long_rows(tmp_path, monkeypatch):
     b = NumericModel(load_component(fbm.state_feedback_file(tmp_path / "b.toml", K, plant, ["s", "v"], ["F"],
                                                             [0.1, 0.2], [1.0])))
     assert "s_1_2 = K_1_2*(v - ref_v)" in (tmp_path / "b.toml").read_text()
+    np.savetxt(tmp_path / "K.csv", K, delimiter=",")  # the gain from a file
+    c = NumericModel(load_component(fbm.state_feedback_file(tmp_path / "c.toml", tmp_path / "K.csv", plant,
+                                                            ["s", "v"], ["F"], [0.1, 0.2], [1.0])))
     u = [0.7, -0.4]
     assert a.g(0, [], u)[0] == pytest.approx(1.0 - 3.0 * 0.6 - 0.5 * (-0.6), rel=1e-14)
-    assert b.g(0, [], u)[0] == a.g(0, [], u)[0]
+    assert b.g(0, [], u)[0] == a.g(0, [], u)[0] == c.g(0, [], u)[0]
+    with pytest.raises(FmugenError, match="K is 1x3, expected 1x2"):
+        fbm.state_feedback_file(tmp_path / "d.toml", np.ones((1, 3)), plant, ["s", "v"], ["F"])
 
 
 def test_linearising_at_rest_inside_a_smoothed_coulomb_term_is_flagged(tmp_path):
