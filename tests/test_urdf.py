@@ -477,3 +477,10 @@ def test_shipped_ur5_scene_starts_at_rest_held_by_its_drives():
     assert abs(g[1]) > 30  # the shoulder carries the arm
     p = np.array([y[out.index(f"arm.p_tool0[{r}]")] for r in (1, 2, 3)])
     assert np.abs(p - arm.fk(q, "tool0")[:3, 3]).max() < 1e-12
+
+
+def test_a_joint_that_moves_nothing_is_refused(tmp_path):
+    text = arm_urdf(tool_mass="0.0").replace('<mass value="1.2"/>', '<mass value="0"/>').replace(
+        '<inertia ixx="0.002" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/>', '').replace(
+        '<inertia ixx="0.001" ixy="0.0001" ixz="0" iyy="0.002" iyz="0" izz="0.0015"/>', '')
+    refused(text, "joint 'elbow': moves no mass", tmp_path)
