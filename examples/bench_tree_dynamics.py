@@ -33,6 +33,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOTS = ["talos_data/robots/talos_full_v2.urdf", "tiago_description/robots/tiago_dual.urdf"]
+ARMS = ["ur_description/urdf/ur5_robot.urdf", "panda_description/urdf/panda.urdf"]
 
 TIMER = r"""
 #define _POSIX_C_SOURCE 199309L
@@ -105,6 +106,33 @@ def tree_of(model):
     return revolute, parents, bodies, to_q
 
 
+def robot_of(model, name: str):
+    """A fmugen Robot (general joint model, numbers) of a fixed-base Pinocchio model: the same tree,
+    placements, axes and inertias; continuous joints become revolute joints (their angle)."""
+    import sympy as sp
+
+    from fmugen.robot.description import JOINTS, PRISMATIC, REVOLUTE, Body, Robot
+
+    revolute, parents, bodies, to_q = tree_of(model)
+
+    def num(x):
+        # rpy angles of multiples of pi/2 leave cos = 6e-17 where the file meant 0: exact zeros and
+        # ones keep the straight-line code as sparse as the robot is (a change of 1e-16)
+        x = float(x)
+        for exact in (0.0, 1.0, -1.0):
+            if abs(x - exact) < 1e-12:
+                return sp.Integer(int(exact))
+        return sp.Float(x)
+
+    F = lambda v: tuple(num(x) for x in v)  # noqa: E731
+    FM = lambda M: tuple(F(row) for row in np.asarray(M))  # noqa: E731
+    out = tuple(Body(name=model.names[i + 1], joint=REVOLUTE if revolute[i] else PRISMATIC, parent=parents[i],
+                     rotation=FM(b["R"]), translation=F(b["p"]), axis=F(b["axis"]), mass=num(b["mass"]),
+                     com=F(b["com"]), inertia_com=FM(b["inertia"]), rotor_inertia=num(b["rotor_inertia"]))
+                for i, b in enumerate(bodies))
+    return Robot(name=name, convention=JOINTS, links=(), gravity=F(model.gravity.linear), bodies=out), to_q
+
+
 def library(tmp: Path):
     (tmp / "timer.c").write_text(TIMER)
     lib = tmp / "timer.so"
@@ -171,10 +199,70 @@ def measure(path: Path, states: int, repeat: int, so) -> dict:
             "r_jac": statistics.median(np.array(r["jac"]) / np.array(r["abad"]))}
 
 
+def arm_speed(path: Path, repeat: int, strategy: str) -> dict:
+    """Generated FD (the FMU's evaluate, straight-line or looped) and ID (tau = ID(q, qd, qdd)) of the
+    robot Pinocchio reads from ``path``, against ``aba`` and ``rnea`` (CPU µs per call)."""
+    import pinocchio as pin
+    from fmugen.codegen.benchmarks import inverse_dynamics_model
+    from fmugen.codegen.c_code import generate_c
+    from fmugen.codegen.c_harness import CompiledModel
+    from fmugen.dynamics.manipulator import Manipulator
+
+    model = pin.buildModelFromUrdf(str(path))
+    data = model.createData()
+    robot, to_q = robot_of(model, path.stem)
+    arm = Manipulator(robot)
+    n = robot.n
+    t0 = time.process_time()
+    fd_model = arm.state_space_model(outputs=(), strategy=strategy)
+    fd_model = fd_model.without_jacobian()
+    id_model = inverse_dynamics_model(arm)
+    t_derive = time.process_time() - t0
+    rng = np.random.default_rng(1)
+    th, qd, qdd, tau = (rng.uniform(-1, 1, n), rng.uniform(-1, 1, n), rng.uniform(-1, 1, n),
+                        rng.uniform(-5, 5, n))
+    q = to_q(th)
+    empty = pin.Model()
+    ed, z = empty.createData(), np.zeros(0)
+
+    def py(fn, args, k):
+        t = time.process_time()
+        for _ in range(k):
+            fn(*args)
+        return (time.process_time() - t) / k
+
+    def cloop(cm, x, u, k):  # CPU time of a C loop (the harness's own figure is wall time)
+        t = time.process_time()
+        cm.time_per_call([], x, u, "evaluate", k)
+        return (time.process_time() - t) / k
+
+    with CompiledModel.build(generate_c(fd_model).source) as cf, \
+            CompiledModel.build(generate_c(id_model).source) as ci:
+        dx, _ = cf.evaluate([], 0.0, np.r_[th, qd], tau, want_y=False)
+        err_fd = np.max(np.abs(dx[n:] - pin.aba(model, data, q, qd, tau))) / np.max(np.abs(dx[n:]))
+        _, y = ci.evaluate([], 0.0, [], np.r_[th, qd, qdd])
+        ref = pin.rnea(model, data, q, qd, qdd)
+        err_id = np.max(np.abs(y - ref)) / np.max(np.abs(ref))
+        r = {"fd": [], "aba": [], "id": [], "rnea": []}
+        for _ in range(repeat):
+            r["fd"].append(cloop(cf, np.r_[th, qd], tau, 100000))
+            r["aba"].append(py(pin.aba, (model, data, q, qd, tau), 20000) - py(pin.aba, (empty, ed, z, z, z), 20000))
+            r["id"].append(cloop(ci, [], np.r_[th, qd, qdd], 100000))
+            r["rnea"].append(py(pin.rnea, (model, data, q, qd, qdd), 20000) - py(pin.rnea, (empty, ed, z, z, z), 20000))
+    med = {k: statistics.median(v) for k, v in r.items()}
+    return {"n": n, "derive": t_derive, "err_fd": err_fd, "err_id": err_id, **med,
+            "r_fd": statistics.median(np.array(r["fd"]) / np.array(r["aba"])),
+            "r_id": statistics.median(np.array(r["id"]) / np.array(r["rnea"]))}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--robot", action="append", help=f"URDF path under example-robot-data's robots/ "
                                                       f"(default: {', '.join(ROBOTS)})")
+    ap.add_argument("--arm", action="append", help=f"URDF whose generated FD and ID are timed against aba and "
+                                                    f"rnea (default: {', '.join(ARMS)})")
+    ap.add_argument("--strategy", default="straight", choices=["straight", "auto", "loops"],
+                    help="code of the arms' forward dynamics (default: straight-line)")
     ap.add_argument("--states", type=int, default=3)
     ap.add_argument("--repeat", type=int, default=7)
     args = ap.parse_args(argv)
@@ -198,6 +286,15 @@ def main(argv=None) -> int:
             print(f"{rel:<44} {s['n']:4d} {s['branch points']:6d} {s['fd'] * 1e6:7.2f} {s['aba'] * 1e6:7.2f} "
                   f"{s['r_fd']:6.2f} {s['jac'] * 1e6:8.1f} {s['abad'] * 1e6:9.1f} {s['r_jac']:6.2f} "
                   f"{s['err_fd']:8.1e} {s['err_j']:8.1e}", flush=True)
+    print(f"\n== arms: generated forward dynamics ({args.strategy}) and inverse dynamics (straight-line) ==")
+    print(f"{'robot':<44} {'DoF':>4} {'derive s':>8} {'FD µs':>7} {'aba µs':>7} {'ratio':>6} {'ID µs':>7} "
+          f"{'rnea µs':>7} {'ratio':>6} {'err FD':>8} {'err ID':>8}")
+    for rel in args.arm or ARMS:
+        a = arm_speed(base / rel, args.repeat, args.strategy)
+        ok = ok and a["err_fd"] < 1e-9 and a["err_id"] < 1e-9
+        print(f"{rel:<44} {a['n']:4d} {a['derive']:8.2f} {a['fd'] * 1e6:7.2f} {a['aba'] * 1e6:7.2f} "
+              f"{a['r_fd']:6.2f} {a['id'] * 1e6:7.2f} {a['rnea'] * 1e6:7.2f} {a['r_id']:6.2f} "
+              f"{a['err_fd']:8.1e} {a['err_id']:8.1e}", flush=True)
     print(f"check against Pinocchio (relative, 1e-9): {'ok' if ok else 'FAILED'}")
     return 0 if ok else 1
 
