@@ -16,7 +16,8 @@
     fmugen report SCENE.toml [--steps H1,H2,...] [--schemes S/E,...] [--repeats 5] --out DIR   (error vs wall time)
 
 FILE is a robot file (a ``[robot]`` table), an assembly of actuator-chain
-components (an ``[assembly]`` table) or a scene (a ``[scene]`` table: one FMU
+components (an ``[assembly]`` table), a component file (a ``[component]``
+table, fmugen/components/README.md) or a scene (a ``[scene]`` table: one FMU
 per group into DIR).  ``--set NAME=VALUE`` (repeatable) gives any parameter or
 start value (``--set m=1`` for a robot with a symbolic m, ``--set joint.J=5``
 in a scene).
@@ -32,20 +33,25 @@ from pathlib import Path
 
 def _kind(path: Path) -> str:
     # user errors are InputFileError (a ValueError): main() prints one line and exits 2
-    from .errors import InputFileError, read_text_file
+    from .errors import InputFileError, read_text_file, toml_problem
+    from .robot.loader import is_urdf
 
+    if is_urdf(path):
+        return "robot"
     try:
         data = tomllib.loads(read_text_file(path, "TOML file"))
-    except tomllib.TOMLDecodeError as exc:
-        raise InputFileError(f"{path}: not valid TOML: {exc}") from None
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        raise InputFileError(f"{path}: {toml_problem(exc)}") from None
     if "robot" in data:
         return "robot"
     if "assembly" in data:
         return "assembly"
     if "scene" in data:
         return "scene"
-    raise InputFileError(f"{path}: neither a robot file ([robot] table), an assembly ([assembly] table) "
-                         f"nor a scene ([scene] table)")
+    if "component" in data:
+        return "component"
+    raise InputFileError(f"{path}: neither a robot file ([robot] table), an assembly ([assembly] table), "
+                         f"a scene ([scene] table) nor a component file ([component] table)")
 
 
 def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler", model="forward_dynamics",
@@ -68,6 +74,11 @@ def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler", mo
         arm = fmugen.load_robot(path, formulation)
         m = (arm.inverse_dynamics_model() if model == "inverse_dynamics"
              else arm.state_space_model(outputs=outputs, strategy=strategy))
+    elif kind == "component":  # a component file: parameters through its checks (ranges, exact ifs)
+        from .components.equations import load_component, read_component_file
+
+        params = {d.name for d in read_component_file(path).of_kind("parameter")}
+        m = load_component(path, overrides={k: v for k, v in sets.items() if k in params})
     else:
         from .components.assembly import load_assembly
 
@@ -82,6 +93,15 @@ def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler", mo
                                  f"{did_you_mean(k, names)}; parameters: {', '.join(p.name for p in m.parameters)}")
             if isinstance(v, bool) or not isinstance(v, (int, float)):
                 raise SceneError(f"{path}: --set {k}={v!r}: a number is needed")
+        from .values import as_number, check_model_values, robot_value_problem
+
+        sets = {k: as_number(v, f"{path}: --set {k}") for k, v in sets.items()}
+        check_model_values(m, sets, lambda k: f"{path}: --set {k}")  # the checks file values get
+        if kind == "robot":
+            params = {p.name for p in m.parameters}
+            problem = robot_value_problem(arm.robot, {k: v for k, v in sets.items() if k in params})
+            if problem:
+                raise SceneError(f"{path}: --set: {problem}")
         m = m.with_starts(sets)
     return m
 
@@ -98,10 +118,15 @@ def _cmd_equations(args) -> int:
 def _cmd_build_scene(args) -> int:
     from .scene import load_scene
 
+    from .arguments import output_folder
+
+    if args.output:
+        output_folder(args.output, "-o", inputs=[args.file])
     scene = load_scene(args.file, set=args.set, allow_factories=args.allow_factories)
     out = Path(args.output) if args.output else Path(scene.name)
     if out.suffix == ".fmu":
         raise ValueError(f"{args.file}: a scene builds one FMU per group: -o names a folder, not {out}")
+    output_folder(out, "-o", inputs=[args.file])
     built = scene.build(out, prune=not args.no_prune, use_cache=not args.no_cache)
     print(built.summary())
     print(f"wrote {len(built.fmus)} FMU(s) into {out}")
@@ -113,9 +138,12 @@ def _bytes(text: str) -> float:
     units = {"K": 2**10, "M": 2**20, "G": 2**30}
     t = text.strip().upper().rstrip("B").rstrip("I")
     try:
-        return float(t[:-1]) * units[t[-1]] if t and t[-1] in units else float(t)
-    except ValueError:
+        v = float(t[:-1]) * units[t[-1]] if t and t[-1] in units else float(t)
+    except (ValueError, OverflowError):
         raise ValueError(f"--budget-memory {text!r}: a size such as 800M, 1.5G or a number of bytes") from None
+    if not (v > 0 and v < float("inf")):
+        raise ValueError(f"--budget-memory {text!r}: a positive size such as 800M, 1.5G")
+    return v
 
 
 def _cmd_build(args) -> int:
@@ -124,7 +152,14 @@ def _cmd_build(args) -> int:
     path = Path(args.file)
     if _kind(path) == "scene":
         return _cmd_build_scene(args)
+    from .arguments import output_file
+
     t0 = time.perf_counter()
+    if args.output:  # checked before anything is derived: never the input, never a folder
+        output_file(args.output, "-o", inputs=[path])
+    memory = _bytes(args.budget_memory) if args.budget_memory else None
+    if args.budget_seconds is not None and not (args.budget_seconds > 0 and args.budget_seconds < float("inf")):
+        raise ValueError(f"--budget-seconds {args.budget_seconds!r}: must be a positive number of seconds")
     outputs = tuple(o for o in args.outputs.split(",") if o)
     if sys.stderr.isatty():  # progress of the first stage; build_fmu reports the others
         print(f"fmugen build {path.name}: derive ...", end="", file=sys.stderr, flush=True)
@@ -133,10 +168,9 @@ def _cmd_build(args) -> int:
     if sys.stderr.isatty():
         print(f" {t1 - t0:.1f} s", file=sys.stderr, flush=True)
     fold = None if args.fold == "none" else ("all" if args.fold == "all" else args.fold.split(","))
-    out = Path(args.output) if args.output else Path(f"{model.name}.fmu")
+    out = output_file(args.output or f"{model.name}.fmu", "-o", inputs=[path])
     result = build_fmu(model, out, fmi_type=args.fmi_type, fold_parameters=fold, budget_start=t0,
-                       budget_seconds=args.budget_seconds,
-                       budget_memory=_bytes(args.budget_memory) if args.budget_memory else None)
+                       budget_seconds=args.budget_seconds, budget_memory=memory)
     t2 = time.perf_counter()
     print(f"wrote {result.path}  (derive {t1 - t0:.2f} s, generate+compile+zip {t2 - t1:.2f} s)")
     if args.ops:
@@ -232,12 +266,26 @@ def main(argv=None) -> int:
 
     add_cosim_commands(sub)
 
+    from .components.arm_sizing import add_parser as add_size_parser  # fmugen size: actuator sets per joint
+
+    add_size_parser(sub)
+
     args = parser.parse_args(argv)
     try:
         return args.func(args)
     except (ValueError, KeyError, OSError) as exc:  # clear message, no traceback, for user errors
         text = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
         print("fmugen: " + str(text).replace("\n", " "), file=sys.stderr)  # one line
+        return 2
+    except RuntimeError as exc:  # a C compiler that failed: one line (the command and its first error)
+        if not any(c.__name__ == "BuildError" for c in type(exc).__mro__):
+            raise
+        lines = str(exc).splitlines() or [type(exc).__name__]
+        first = next((ln.strip() for ln in lines[1:] if "error" in ln.lower()), "")
+        print(f"fmugen: {lines[0].rstrip(':')}{': ' + first if first else ''}"[:1500], file=sys.stderr)
+        return 1
+    except RecursionError:  # an input nested deeper than any reader handles (a last resort: readers name it)
+        print(f"fmugen: {args.command}: an input is nested too deeply to be read", file=sys.stderr)
         return 2
 
 

@@ -466,3 +466,28 @@ def test_state_feedback_file_splits_long_rows(tmp_path, monkeypatch):
     u = [0.7, -0.4]
     assert a.g(0, [], u)[0] == pytest.approx(1.0 - 3.0 * 0.6 - 0.5 * (-0.6), rel=1e-14)
     assert b.g(0, [], u)[0] == a.g(0, [], u)[0]
+
+
+def test_linearising_at_rest_inside_a_smoothed_coulomb_term_is_flagged(tmp_path):
+    """At rest the smoothed sign acts as a viscous damper T_s/w_eps: the linearisation shows it
+    (closed form), fmugen says so, and the friction-free choice it offers removes it."""
+    from fmugen.control.kinks import kink_warnings
+
+    (tmp_path / "s.toml").write_text('[scene]\nname = "s"\n[instances]\nload = { type = "lib:stribeck" }\n')
+    sc = fmugen.load_scene(tmp_path / "s.toml")
+    m = fmugen.control.scene_model(sc)
+    op = fmugen.trim(m, at={"load.phi": 0.0, "load.w": 0.0}, free=["load.tau"])
+    A = np.asarray(fmugen.linearize(m, op).A)
+    assert A[1, 1] == pytest.approx(-(3.0 / 1e-3 + 0.02) / 0.05, rel=1e-12)
+    (line,) = kink_warnings(sc, m, op)
+    assert "load: sign(w, w_eps)" in line and "--set load.w_eps=1e12" in line
+    sc0 = fmugen.load_scene(tmp_path / "s.toml", set={"load.w_eps": 1e12})
+    m0 = fmugen.control.scene_model(sc0)
+    op0 = fmugen.trim(m0, at={"load.phi": 0.0, "load.w": 0.0}, free=["load.tau"])
+    assert kink_warnings(sc0, m0, op0) == []
+    assert np.asarray(fmugen.linearize(m0, op0).A)[1, 1] == pytest.approx(-0.02 / 0.05, rel=1e-6)
+    # outside the band (slipping at 1 rad/s): nothing to say
+    from types import SimpleNamespace
+
+    x1 = np.array([{"load.phi": 0.0, "load.w": 1.0}[v.name] for v in m.states])
+    assert kink_warnings(sc, m, SimpleNamespace(x=x1, u=np.array([2.0]), t=0.0)) == []

@@ -110,3 +110,21 @@ def test_repeat_errors(tmp_path):
     # --set reaches an expanded instance
     sc = fmugen.load_scene(NEW, set={"path2.q_end": 0.3})
     assert {v.name: v.start for v in sc.base_models["path2"].parameters}["q_end"] == 0.3
+
+
+def test_record_bonds_and_energy_per_bond(tmp_path):
+    from fmugen.scene.bonds import bond_power
+
+    sc = rig(tmp_path, '["act.port", "valve.port"], ["act.flange", "inert.flange"]')
+    assert sc.spec.record == ()
+    p = tmp_path / "rig.toml"
+    p.write_text(p.read_text().replace("stop = 0.5", "stop = 0.5\nrecord_bonds = true"))
+    sc = fmugen.load_scene(p)
+    assert sc.spec.record == ("act.P_L", "valve.Q_L", "act.tau", "inert.w")
+    t = np.linspace(0, 2, 201)
+    cols = {"act.P_L": np.full_like(t, 3e6), "valve.Q_L": 1e-5 * t, "act.tau": np.full_like(t, 4.0),
+            "inert.w": np.cos(t)}
+    (b1, p1, e1), (b2, p2, e2) = bond_power(sc.spec.bonds, t, cols.__getitem__)
+    assert str(b1) == "act.port <-> valve.port (hydraulic)" and p1[-1] == pytest.approx(60.0)
+    assert e1[-1] == pytest.approx(3e6 * 1e-5 * 2.0**2 / 2, rel=1e-12)  # integral of a ramp: trapezoid exact
+    assert e2[-1] == pytest.approx(4.0 * np.sin(2.0), rel=1e-4)

@@ -56,7 +56,7 @@ def add_cosim_commands(subparsers) -> None:
 
     p = subparsers.add_parser("reference", help="solve a scene as one model with Radau at 1e-12 (reference.csv)")
     _common(p)
-    p.add_argument("--points", type=int, default=2001, help="points of the uniform output grid (>= 1001)")
+    p.add_argument("--points", default=2001, help="points of the uniform output grid (>= 1001; at most 1e7)")
     p.set_defaults(func=cmd_reference)
 
     p = subparsers.add_parser("report", help="error against wall time over schemes and macro steps")
@@ -76,6 +76,37 @@ def add_cosim_commands(subparsers) -> None:
 
 WORKERS_HELP = ("threads that step the FMUs side by side under jacobi, iterative and newton, when a sweep of "
                 "them costs more than 0.5 ms (default 1; results are identical)")
+
+
+def _check_args(args, scene) -> None:
+    """Every argument of cosim/reference/report, checked before anything is built or written
+    (:mod:`fmugen.arguments`: each refusal names the argument)."""
+    from .. import arguments as a
+    from ..scene.file import check_time_grid
+
+    a.output_folder(args.out, "--out", inputs=[args.scene])
+    start, stop, step = scene.spec.start, scene.spec.stop, scene.spec.step
+    if args.stop is not None:
+        stop = a.number(args.stop, "--stop")
+        if not stop > start:
+            raise a.FmugenError(f"--stop {args.stop!r}: must be after the scene's start time {start!r}")
+    if getattr(args, "step", None) is not None:
+        step = a.positive(args.step, "--step", "a positive macro step [s]")
+    if getattr(args, "tol", None) is not None:
+        a.tolerance(args.tol, "--tol")
+    try:
+        check_time_grid(start, stop, min(step, stop - start), "--stop/--step:")
+    except a.FmugenError as exc:
+        raise a.FmugenError(str(exc)) from None
+    if getattr(args, "points", None) is not None:
+        args.points = a.count(args.points, "--points", 1, a.MAX_POINTS)
+    if getattr(args, "steps", None) is not None:
+        for h in a.number_list(args.steps, "--steps", lambda v, w: a.positive(v, w, "a positive macro step")):
+            check_time_grid(start, stop, min(h, stop - start), f"--steps {args.steps}:")
+    if getattr(args, "target", None) is not None:
+        a.positive(args.target, "--target", "a positive error target")
+    if getattr(args, "repeats", None) is not None:
+        args.repeats = a.count(args.repeats, "--repeats", 1, 1000)
 
 
 def _check_workers(n) -> None:
@@ -126,6 +157,7 @@ def cmd_cosim(args) -> int:
     from .master import check_choices, run
 
     scene = _load(args)
+    _check_args(args, scene)
     st = dict(scene.spec.cosim or {})
     # the choices are checked before anything is built or written
     scheme, ext = check_choices(args.scheme or st.get("scheme", "gauss-seidel"),
@@ -138,6 +170,14 @@ def cmd_cosim(args) -> int:
                  workers=args.workers)
     paths = write_results(result, out)
     print(result.summary)
+    if scene.spec.bonds:  # power and energy per bond of the scene's connect (those recorded)
+        from ..scene.bonds import bond_lines
+
+        lines = bond_lines(scene.spec.bonds, result.time, result.__getitem__)
+        if lines:
+            print("\n".join(lines))
+            with open(paths["summary"], "a") as fh:
+                fh.write("\n".join(lines) + "\n")
     print(f"wrote {paths['csv']}, {paths['npz']}, {paths['plot']}, {paths['summary']}")
     if not result.ok:
         print("fmugen cosim: " + str(result.summary.failure).splitlines()[0], file=sys.stderr)
@@ -152,6 +192,7 @@ def cmd_reference(args) -> int:
     from .system import ReferenceProblem
 
     scene = _load(args)
+    _check_args(args, scene)
     p = scene.reference_problem()
     if args.stop is not None:
         p = ReferenceProblem(p.model, p.x0, p.u, p.columns, p.start_time, float(args.stop), p.nominals)
@@ -178,15 +219,22 @@ def cmd_report(args) -> int:
     from .system import CosimSystem, Recorded, Unit
 
     scene = _load(args)
+    _check_args(args, scene)
     schemes = [tuple(s.split("/", 1)) if "/" in s else (s, "hold") for s in args.schemes.split(",")] \
         if args.schemes else DEFAULT_SCHEMES
     schemes = [check_choices(*sc) for sc in schemes]  # before anything is built or written
     _check_workers(args.workers)
+    internal = []
+    for item in (args.internal.split(",") if args.internal else []):
+        meth, _, tl = item.partition(":")
+        from .. import arguments as a
+
+        internal.append((meth.strip().lower(), a.tolerance(tl.strip(), f"--internal {item!r}: tolerance")))
     out = Path(args.out)
     built = scene.build(out / "fmus")
     system = built.system
     H = float(system.step)
-    steps = [float(h) for h in args.steps.split(",")] if args.steps else [8 * H, 4 * H, 2 * H, H, H / 2]
+    steps = [float(h) for h in args.steps.split(",")] if args.steps else [8 * H, 4 * H, 2 * H, H, H / 2]  # checked
     problem = scene.reference_problem()
     extra = []
     if not args.no_monolithic:
@@ -202,15 +250,6 @@ def cmd_report(args) -> int:
         rec = tuple(Recorded(r.column, "monolithic", r.column, r.physical_unit) for r in system.recorded)
         extra.append(("monolithic FMU", CosimSystem(system.name + "_monolithic", (unit,), (), rec,
                                                      system.start_time, system.stop_time, system.step)))
-    internal = []
-    for item in (args.internal.split(",") if args.internal else []):
-        meth, _, tl = item.partition(":")
-        try:
-            internal.append((meth.strip().lower(), float(tl)))
-        except ValueError:
-            from .errors import CosimError
-
-            raise CosimError(f"--internal: expected solver:tolerance, got {item!r}") from None
     rep = make_report(system, problem, steps, schemes, repeats=args.repeats, target=args.target, extra_rows=extra,
                       workers=args.workers,
                       stop=args.stop, progress=lambda s: print("  " + s, file=sys.stderr, flush=True),

@@ -20,7 +20,9 @@ Values are those of the solvers' dense output at the requested times
 (Radau's collocation polynomial), so the estimate covers the interpolation
 as well.  Solutions are cached on disk (``~/.cache/fmugen/reference`` or
 ``$FMUGEN_CACHE``), keyed by a hash of the model's equations, parameter values,
-x0, u, times and settings.
+x0, u, times and settings; an entry holds its key and a sha256 of its arrays,
+and is served only when both match (a truncated, swapped or edited file is
+solved again).
 """
 from __future__ import annotations
 
@@ -39,7 +41,7 @@ from .system import ReferenceProblem
 
 RTOL = 1e-12
 DOP853_MAX_STEPS = 300_000
-CACHE_VERSION = 1
+CACHE_VERSION = 2  # 2: entries carry their key and a digest, checked before use
 
 
 @dataclass
@@ -105,6 +107,17 @@ def _key(problem: ReferenceProblem, times: np.ndarray, rtol: float, param_values
     return h.hexdigest()[:32]
 
 
+def _digest(times, values, error, settings: str) -> str:
+    """sha256 of a stored solution's arrays and settings: an entry is served only when it still matches."""
+    h = hashlib.sha256()
+    for a in (times, values, error):
+        a = np.ascontiguousarray(np.asarray(a, dtype=float))
+        h.update(repr(a.shape).encode())
+        h.update(a.tobytes())
+    h.update(settings.encode())
+    return h.hexdigest()
+
+
 def default_times(problem: ReferenceProblem, n: int = 2001) -> np.ndarray:
     return np.linspace(problem.start_time, problem.stop_time, max(int(n), 1001))
 
@@ -136,8 +149,12 @@ def solve_reference(problem: ReferenceProblem, times: Optional[Sequence[float]] 
     if cache and path.is_file():
         try:
             with np.load(path, allow_pickle=False) as z:
-                return ReferenceSolution(z["time"], z["values"], tuple(problem.columns), z["error"],
-                                         json.loads(str(z["settings"])), cached=True)
+                t_, v_, e_, s_ = z["time"], z["values"], z["error"], str(z["settings"])
+                whole = (str(z["key"]) == key and str(z["digest"]) == _digest(t_, v_, e_, s_)
+                         and t_.shape == times.shape and np.array_equal(t_, times)
+                         and v_.shape == (len(times), len(cols)) and e_.shape == (len(cols),))
+            if whole:  # this entry, as written: a truncated, swapped or edited file is recomputed
+                return ReferenceSolution(t_, v_, tuple(problem.columns), e_, json.loads(s_), cached=True)
         except Exception:  # a damaged cache file is recomputed
             pass
     ev = ModelEvaluator(m, parameter_values)
@@ -198,8 +215,10 @@ def solve_reference(problem: ReferenceProblem, times: Optional[Sequence[float]] 
     if cache:
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_suffix(".tmp.npz")
-            np.savez(tmp, time=times, values=v1, error=err, settings=json.dumps(settings))
+            tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")  # one per writer
+            text = json.dumps(settings)
+            np.savez(tmp, time=times, values=v1, error=err, settings=text, key=key,
+                     digest=_digest(times, v1, err, text))
             os.replace(tmp, path)
         except OSError:
             pass  # a read-only home: no cache

@@ -45,6 +45,11 @@ def _real(name):
     return sp.Symbol(name, real=True)
 
 
+def _joint_label(body) -> str:
+    """A joint as its file names it: the URDF joint name, or the DH link name."""
+    return body.joint_name or body.name
+
+
 def _ee_label(robot) -> str:
     """Where p_ee is, in words: "frame 6" (DH), or the frame's name."""
     if robot.links and robot.end_frame == f"frame{robot.n}":
@@ -152,11 +157,15 @@ class Manipulator:
         d = self.derivation(formulation)
         return d.program, self._bias_into(d)
 
-    def kinematics_program(self) -> tuple:
-        """(Program, T_N as 4x4 Matrix, J as 6 x n Matrix)."""
+    def kinematics_program(self, frame: Optional[str] = None) -> tuple:
+        """(Program, pose of ``frame`` as 4x4 Matrix, its J as 6 x n Matrix).
+
+        ``frame``: any body or frame name (:meth:`Robot.frame_names`); default
+        ``robot.end_frame`` (the last DH frame, the thesis's TRANSP).
+        """
         P = Program("_k")
         Ts = kinematics.body_frames(P, self.robot, self.q)
-        body, T = kinematics.frame_pose(P, self.robot, Ts, self.robot.end_frame)
+        body, T = kinematics.frame_pose(P, self.robot, Ts, frame or self.robot.end_frame)
         J = kinematics.geometric_jacobian(P, self.robot, Ts, [T[r][3] for r in range(3)], body)
         return P, sp.Matrix(T), J
 
@@ -244,7 +253,7 @@ class Manipulator:
             for i in free:
                 unit = "rad/s2" if robot.bodies[i].joint == REVOLUTE else "m/s2"
                 out_vars.append(Variable(f"qdd[{i + 1}]", _real(f"qdd_out_{i + 1}"), unit,
-                                         f"acceleration of joint {i + 1} ({robot.bodies[i].name})"))
+                                         f"acceleration of joint {i + 1} ({_joint_label(robot.bodies[i])})"))
                 out_exprs.append(qdd[i])
 
         # exact Jacobians: ID(q, qd, qdd*) = tau  =>  dqdd/dz = -M^{-1} dID/dz
@@ -279,23 +288,7 @@ class Manipulator:
             dgdx[row:row + nf, :] = Y[:, :nx]
             dgdu[row:row + nf, :] = Y[:, nx:]
 
-        states = []
-        for i in free:
-            L = robot.bodies[i]
-            rev = L.joint == REVOLUTE
-            states.append(Variable(f"q[{i + 1}]", self.q[i], "rad" if rev else "m",
-                                   f"position of joint {i + 1} ({L.name}, {L.joint})", start=0.0, output=True))
-        for i in free:
-            L = robot.bodies[i]
-            rev = L.joint == REVOLUTE
-            states.append(Variable(f"qd[{i + 1}]", self.qd[i], "rad/s" if rev else "m/s",
-                                   f"velocity of joint {i + 1} ({L.name})", start=0.0, output=True))
-        inputs = []
-        for i in free:
-            L = robot.bodies[i]
-            rev = L.joint == REVOLUTE
-            inputs.append(Variable(f"tau[{i + 1}]", self.tau[i], "N.m" if rev else "N",
-                                   f"{'torque' if rev else 'force'} applied by actuator {i + 1}", start=0.0))
+        states, inputs = self._joint_variables(free)
         inputs += self._wrench_inputs()
         params = tuple(
             Variable(p.name, p.symbol, p.unit, p.description, start=p.value) for p in robot.parameters
@@ -356,7 +349,7 @@ class Manipulator:
             for i in range(n):
                 unit = "rad/s2" if robot.bodies[i].joint == REVOLUTE else "m/s2"
                 out_vars.append(Variable(f"qdd[{i + 1}]", _real(f"qdd_out_{i + 1}"), unit,
-                                         f"acceleration of joint {i + 1} ({robot.bodies[i].name})"))
+                                         f"acceleration of joint {i + 1} ({_joint_label(robot.bodies[i])})"))
                 out_exprs.append(qdd[i])
         dfdx = sp.zeros(2 * n, 2 * n)
         dfdx[:n, n:] = sp.eye(n)
@@ -372,15 +365,7 @@ class Manipulator:
         if "qdd" in outputs:
             dgdx[row:row + n, :] = Y[:, :2 * n]
             dgdu[row:row + n, :] = Y[:, 2 * n:]
-        states = [Variable(f"q[{i + 1}]", self.q[i], "rad" if rev[i] else "m",
-                           f"position of joint {i + 1} ({L.name}, {L.joint})", start=0.0, output=True)
-                  for i, L in enumerate(robot.bodies)]
-        states += [Variable(f"qd[{i + 1}]", self.qd[i], "rad/s" if rev[i] else "m/s",
-                            f"velocity of joint {i + 1} ({L.name})", start=0.0, output=True)
-                   for i, L in enumerate(robot.bodies)]
-        inputs = [Variable(f"tau[{i + 1}]", self.tau[i], "N.m" if rev[i] else "N",
-                           f"{'torque' if rev[i] else 'force'} applied by actuator {i + 1}", start=0.0)
-                  for i in range(n)]
+        states, inputs = self._joint_variables(range(n))
         inputs += self._wrench_inputs()
         params = tuple(Variable(p.name, p.symbol, p.unit, p.description, start=p.value)
                        for p in robot.parameters)
@@ -393,6 +378,37 @@ class Manipulator:
             provenance=f"{robot.source or robot.name}; looped articulated-body algorithm and analytical "
                        f"Newton-Euler derivatives (c_runtime/chain_dynamics.c)",
         )
+
+    def _joint_variables(self, joints) -> tuple:
+        """(states q[i] then qd[i], inputs tau[i]) of the given 0-based joints.
+
+        Names are indexed (``q[3]``, structured FMI names every scene and
+        command uses); each description names the joint as its file does
+        (the URDF joint name).  A URDF ``<limit>`` becomes the validity range
+        of q (lower, upper) and of tau (+-effort).
+        """
+        states, qds, inputs = [], [], []
+        for i in joints:
+            L = self.robot.bodies[i]
+            rev = L.joint == REVOLUTE
+            lim = L.limits
+            lo = None if lim is None else lim.lower
+            hi = None if lim is None else lim.upper
+            start = min(max(0.0, lo if lo is not None else 0.0), hi if hi is not None else 0.0) \
+                if (lo is not None and lo > 0) or (hi is not None and hi < 0) else 0.0
+            name = _joint_label(L)
+            states.append(Variable(f"q[{i + 1}]", self.q[i], "rad" if rev else "m",
+                                   f"position of joint {i + 1} ({name}, {L.joint})", start=start, output=True,
+                                   min=lo, max=hi))
+            qds.append(Variable(f"qd[{i + 1}]", self.qd[i], "rad/s" if rev else "m/s",
+                                f"velocity of joint {i + 1} ({name})", start=0.0, output=True))
+            effort = None if lim is None else lim.effort
+            inputs.append(Variable(f"tau[{i + 1}]", self.tau[i], "N.m" if rev else "N",
+                                   f"{'torque' if rev else 'force'} applied by actuator {i + 1} ({name})"
+                                   if L.joint_name else
+                                   f"{'torque' if rev else 'force'} applied by actuator {i + 1}", start=0.0,
+                                   min=None if effort is None else -effort, max=effort))
+        return states + qds, inputs
 
     def _wrench_inputs(self) -> list:
         """The external-wrench inputs, in the order of ``ext_symbols``."""
@@ -422,7 +438,7 @@ class Manipulator:
                                          (self.qdd, "qdd", ("rad/s2", "m/s2"), "acceleration")):
             for i, L in enumerate(robot.bodies):
                 unit = units[0] if L.joint == REVOLUTE else units[1]
-                inputs.append(Variable(f"{stem}[{i + 1}]", group[i], unit, f"{what} of joint {i + 1} ({L.name})",
+                inputs.append(Variable(f"{stem}[{i + 1}]", group[i], unit, f"{what} of joint {i + 1} ({_joint_label(L)})",
                                        start=0.0))
         inputs += self._wrench_inputs()
         outputs = tuple(
@@ -476,8 +492,8 @@ class Manipulator:
                 P, tau = self.inverse_dynamics_program(formulation)
                 fn = compile_program(P, [self.q, self.qd, self.qdd, self.ext_symbols, ps], [sp.Matrix(tau)],
                                      "inverse_dynamics")
-            elif key == "K":
-                P, T, J = self.kinematics_program()
+            elif isinstance(key, tuple) and key[0] == "K":
+                P, T, J = self.kinematics_program(key[1])
                 fn = compile_program(P, [self.q, ps], [T, J], "kinematics")
             else:
                 raise KeyError(key)
@@ -519,13 +535,21 @@ class Manipulator:
         L = np.linalg.cholesky(M)
         return np.linalg.solve(L.T, np.linalg.solve(L, self._vec("tau", tau) - h))
 
-    def fk(self, q, **params) -> np.ndarray:
-        """4x4 pose of the last link frame in base coordinates (thesis TRANSP)."""
-        return self._fn("K", None)(self._vec("q", q), self.parameter_vector(params))[0]
+    def fk(self, q, frame: Optional[str] = None, **params) -> np.ndarray:
+        """4x4 pose of ``frame`` in base coordinates (default: ``robot.end_frame``, the thesis's TRANSP).
 
-    def jacobian(self, q, **params) -> np.ndarray:
-        """6 x n geometric Jacobian of the last frame's origin, linear rows first."""
-        return self._fn("K", None)(self._vec("q", q), self.parameter_vector(params))[1]
+        ``frame``: a body (URDF link) or frame name: ``arm.fk(q, "tool0")``.
+        """
+        return self._fn(("K", frame or self.robot.end_frame), None)(self._vec("q", q),
+                                                                     self.parameter_vector(params))[0]
+
+    def jacobian(self, q, frame: Optional[str] = None, **params) -> np.ndarray:
+        """6 x n geometric Jacobian of ``frame``'s origin (default ``robot.end_frame``), linear rows first.
+
+        Columns of joints not between the frame and the base are zero.
+        """
+        return self._fn(("K", frame or self.robot.end_frame), None)(self._vec("q", q),
+                                                                     self.parameter_vector(params))[1]
 
     def energy(self, q, qd, **params) -> tuple:
         """(kinetic, potential) energy; kinetic = qd^T M qd / 2, potential from gravity.

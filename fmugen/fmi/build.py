@@ -441,7 +441,10 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
         files = [root / "modelDescription.xml", lib]
         if keep_sources:
             files += sorted(src.iterdir())
-        tmp_zip = out.with_name(out.name + ".part")
+        # a name of its own: never a user's file (an existing "x.fmu.part" stays as it was)
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent)
+        os.close(fd)
+        tmp_zip = Path(tmp_name)
         try:
             with zipfile.ZipFile(tmp_zip, "w", zipfile.ZIP_DEFLATED) as zf:
                 for f in files:

@@ -1,12 +1,17 @@
 """Build a scene: one FMU per group, reused from a cache when nothing changed.
 
 The cache key of an FMU is a hash of everything that shapes it: the group's
-instances (their files' contents, options, parameter values, what is
-fixed), the connections and records touching it, the initial values baked
-into it, the FMI type and internal-solver choice, whether pruning is on,
-and the generator itself (every source file of fmugen and of the C
-runtime).  Cached FMUs live in ``$FMUGEN_CACHE`` (default
-``~/.cache/fmugen``) and are copied into the output folder.
+instances (the contents of their robot files, parameter-set files -- the
+scene-level ``parameter_set`` included -- and factory modules, options,
+parameter values, what is fixed), the scene's name and description, the
+connections and records touching it, the validity ranges it takes from the
+inputs it drives, the initial values baked into it, the FMI type and
+internal-solver choice, whether pruning is on, and the generator itself
+(every source file of fmugen and of the C runtime).  Cached FMUs live in
+``$FMUGEN_CACHE`` (default ``~/.cache/fmugen``); an entry's metadata records
+its key and the sha256 of its FMU, and an entry is served only when both
+match (checked again on the copy written out), so a truncated, swapped or
+damaged entry is rebuilt, never copied out.
 """
 from __future__ import annotations
 
@@ -17,6 +22,7 @@ import os
 import shutil
 import sys
 import tempfile
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -97,12 +103,42 @@ def generator_fingerprint() -> str:
     return h.hexdigest()
 
 
+def _file_digest(path) -> str:
+    """sha256 of a file's content ("missing: <path>" when it cannot be read: the model step reports that)."""
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except OSError:
+        return f"missing: {path}"
+
+
+def _set_digest(pset) -> str:
+    """A parameter set as it enters a key: a file by its content; a shipped set by name (the
+    generator fingerprint holds the shipped files' contents)."""
+    if isinstance(pset, str) and pset.endswith(".toml"):
+        return _file_digest(pset)
+    return str(pset)
+
+
+def _factory_digest(ref: str) -> str:
+    """A factory's module by the content of its source file, where Python can find it."""
+    import importlib.util
+
+    try:
+        spec = importlib.util.find_spec(ref.split(":", 1)[0])
+    except (ImportError, ValueError):
+        spec = None
+    origin = getattr(spec, "origin", None)
+    return _file_digest(origin) if origin and Path(origin).is_file() else ref
+
+
 def _group_key(scene, group: str, prune: bool, x0: dict) -> str:
+    """Everything that shapes the group's FMU, files by their content (never by their names)."""
     g = scene.groups[group]
     members = set(g.members)
     parts = {
         "generator": generator_fingerprint(),
         "group": dataclasses.asdict(g),
+        "scene": [scene.spec.name, scene.spec.description],
         "prune": prune,
         "jacobian": scene.needs_jacobian(g),
         "instances": {},
@@ -110,20 +146,41 @@ def _group_key(scene, group: str, prune: bool, x0: dict) -> str:
         "record": [r for r in scene.spec.record if r.split(".", 1)[0] in members],
         "x0": {k: v for k, v in sorted(x0.items()) if k.split(".", 1)[0] in members},
         "run": [scene.spec.start, scene.spec.stop, scene.spec.step, scene.spec.tolerance],
-        "default_set": scene.spec.parameter_set,
+        "default_set": _set_digest(scene.spec.parameter_set),
+        # validity ranges the group's sources take from the inputs they drive (other instances' models)
+        "ranges": sorted((si, sv, scene._var(ti, tv, scene.src)[1].min, scene._var(ti, tv, scene.src)[1].max)
+                         for si, sv, ti, tv, f in scene.connections if si in members and f is None),
     }
     for inst in sorted(members):
         ins = scene.spec.instances[inst]
         d = dataclasses.asdict(ins)
         d["locked"] = {str(k): v for k, v in ins.locked.items()}
         if ins.kind in ("robot", "file"):
-            d["file"] = hashlib.sha256(Path(ins.source).read_bytes()).hexdigest()
-        if ins.parameter_set and ins.parameter_set.endswith(".toml"):
-            d["set_file"] = hashlib.sha256(Path(ins.parameter_set).read_bytes()).hexdigest()
+            d["file"] = _file_digest(ins.source)
+        elif ins.kind == "factory":
+            d["module"] = _factory_digest(ins.source)
+        if ins.kind != "robot":
+            d["set_file"] = _set_digest(ins.parameter_set or (scene.spec.parameter_set if ins.kind != "factory"
+                                                               else None))
         d["sets"] = scene._sets.get(inst, {})
         parts["instances"][inst] = d
     text = json.dumps(parts, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:32]
+
+
+def _cached_entry(cdir: Path, key: str):
+    """The metadata of cache entry ``key`` when the entry is whole (its FMU has the recorded hash,
+    its metadata names this key); None otherwise (a truncated, swapped or damaged entry is rebuilt)."""
+    fmu, meta = cdir / f"{key}.fmu", cdir / f"{key}.json"
+    try:
+        d = json.loads(meta.read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(d, dict) or d.get("key") != key or not isinstance(d.get("sha256"), str):
+        return None
+    if _file_digest(fmu) != d["sha256"]:
+        return None
+    return d
 
 
 def _total_ops(op_counts: dict) -> int:
@@ -151,15 +208,18 @@ def build_scene(scene, out_dir, prune: bool = True, progress=None, use_cache: bo
     plan = {}  # group -> (key, model or None when cached, removed)
     for gname, g in scene.groups.items():
         key = _group_key(scene, gname, prune, x0)
-        if use_cache and (cdir / f"{key}.fmu").is_file() and (cdir / f"{key}.json").is_file():
+        if use_cache and _cached_entry(cdir, key) is not None:
             plan[gname] = (key, None, [])
         else:
             progress(f"{gname}: derive ({', '.join(g.members)})")
             model, removed = scene.group_model(gname, prune=prune, x0=x0)
             plan[gname] = (key, model, removed)
 
+    created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=".building-", dir=out))
+    derive_lock = threading.Lock()
+    ok = False
     try:
         def one(gname):
             key, model, removed = plan[gname]
@@ -167,12 +227,18 @@ def build_scene(scene, out_dir, prune: bool = True, progress=None, use_cache: bo
             target = stage / f"{gname}.fmu"
             cached, meta = cdir / f"{key}.fmu", cdir / f"{key}.json"
             if model is None:
-                shutil.copyfile(cached, target)
-                r = FmuReport(**{**json.loads(meta.read_text()), "path": out / target.name, "cached": True,
-                                 "build_seconds": 0.0})
-                r.members = tuple(r.members)
-                progress(r.line())
-                return r
+                d = _cached_entry(cdir, key)
+                if d is not None:
+                    shutil.copyfile(cached, target)
+                if d is not None and _file_digest(target) == d["sha256"]:  # the copy is the entry hashed
+                    d = {k: v for k, v in d.items() if k not in ("key", "sha256")}
+                    r = FmuReport(**{**d, "path": out / target.name, "cached": True, "build_seconds": 0.0})
+                    r.members = tuple(r.members)
+                    progress(r.line())
+                    return r
+                progress(f"{gname}: cache entry {key} damaged or replaced: rebuilt")
+                with derive_lock:
+                    model, removed = scene.group_model(gname, prune=prune, x0=x0)
             t0 = time.perf_counter()
             progress(f"{gname}: generate and compile ({model.nx} states)")
             tol = g.tolerance or scene.spec.tolerance
@@ -190,12 +256,14 @@ def build_scene(scene, out_dir, prune: bool = True, progress=None, use_cache: bo
                           cached=False, has_jacobian=model.jacobian is not None, removed=removed)
             if use_cache:
                 cdir.mkdir(parents=True, exist_ok=True)
-                tmp = cdir / f"{key}.{os.getpid()}.part"
+                tmp = cdir / f"{key}.{os.getpid()}.{threading.get_ident()}.part"
                 shutil.copyfile(target, tmp)
                 os.replace(tmp, cached)
                 d = dataclasses.asdict(r)
                 d.pop("path")
-                meta.write_text(json.dumps(d, default=str))
+                d.update(key=key, sha256=_file_digest(target))
+                tmp.write_text(json.dumps(d, default=str))
+                os.replace(tmp, meta)
             progress(r.line())
             return r
 
@@ -205,8 +273,14 @@ def build_scene(scene, out_dir, prune: bool = True, progress=None, use_cache: bo
             reports = {g: f.result() for g, f in futures.items()}
         for g in plan:
             os.replace(stage / f"{g}.fmu", out / f"{g}.fmu")
+        ok = True
     finally:
         shutil.rmtree(stage, ignore_errors=True)
+        if not ok and created:  # a failed build leaves no (empty) output folder behind
+            try:
+                out.rmdir()
+            except OSError:
+                pass
     paths = {g: out / f"{g}.fmu" for g in plan}
     return BuiltScene(scene, out, reports, scene.cosim_system(paths))
 

@@ -64,6 +64,10 @@ class Scene:
 
             extra, bonds = expand_connect(self, spec.connect)
             self.spec = spec = replace(spec, connections=spec.connections + tuple(extra), connect=(), bonds=bonds)
+            if spec.record_bonds:
+                from .bonds import bond_variables
+
+                self.spec = spec = replace(spec, record=tuple(dict.fromkeys(spec.record + tuple(bond_variables(bonds)))))
         self.connections = self._checked_connections()
         self._check_record()
         self._check_loops()
