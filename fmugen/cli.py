@@ -4,6 +4,7 @@
     fmugen build FILE.toml --fmi-type me|cs|both -o OUT.fmu [--outputs p_ee,qdd] [--fold all]
                            [--model inverse_dynamics]
     fmugen info FILE.toml
+    fmugen export-urdf ROBOT.toml -o ROBOT.urdf [--set NAME=VALUE ...]   (any robot as URDF, fmugen/robot)
     fmugen build SCENE.toml -o DIR [--set NAME=VALUE ...] [--no-prune] [--no-cache]
     fmugen suite [FILE.toml] [--cases NAME ...] [--quick] --out DIR   (stiff and extreme cases, fmugen/suite)
     fmugen linearize FILE.toml [--at NAME=VALUES ...] [--trim NAMES] [--inputs ...] [--outputs ...]
@@ -112,6 +113,18 @@ def _cmd_equations(args) -> int:
 
     arm = fmugen.load_robot(args.robot, args.formulation)
     sys.stdout.write(final_equations(arm, latex=args.latex, form=args.form))
+    return 0
+
+
+def _cmd_export_urdf(args) -> int:
+    from .robot.loader import load_robot_description
+    from .robot.urdf_export import robot_to_urdf
+    from .scene import parse_sets
+
+    robot = load_robot_description(args.robot)
+    text = robot_to_urdf(robot, parse_sets(args.set) or None)
+    Path(args.output).write_text(text)
+    print(f"wrote {args.output}: {robot.n} joints, {len(robot.frames)} frames")
     return 0
 
 
@@ -241,6 +254,12 @@ def main(argv=None) -> int:
     p.add_argument("--allow-factories", action="store_true",
                    help="scenes: allow instances made by a Python factory (runs code named in the file)")
     p.set_defaults(func=_cmd_build)
+
+    p = sub.add_parser("export-urdf", help="write a robot (TOML or URDF) as a URDF file, parameters at their values")
+    p.add_argument("robot")
+    p.add_argument("-o", "--output", required=True, help="the .urdf file to write")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="parameter values")
+    p.set_defaults(func=_cmd_export_urdf)
 
     p = sub.add_parser("info", help="list the variables a file's model will have")
     p.add_argument("file")

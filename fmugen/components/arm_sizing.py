@@ -70,7 +70,7 @@ def pose_grid(arm, n_grid: int = 5, max_poses: int = 4096, seed: int = 0) -> np.
     axis it changes no gravity torque -- checked, not assumed: see :func:`requirements`), sampled at
     random down to ``max_poses`` when the grid is larger."""
     ranges = []
-    for k, link in enumerate(arm.robot.links):
+    for k, link in enumerate(arm.robot.bodies):
         lim = getattr(link, "limits", None)
         rev = str(link.joint).lower().startswith("r")
         lo, hi = (-math.pi, math.pi) if rev else PRISMATIC_RANGE
@@ -110,7 +110,7 @@ def requirements(robot, poses: Optional[np.ndarray] = None, trajectory: Optional
                                   for q, qd, qdd in zip(Q, Qd, Qdd)]), axis=0)
         w_peak = np.max(np.abs(Qd), axis=0)
     out = []
-    for j, link in enumerate(arm.robot.links):
+    for j, link in enumerate(arm.robot.bodies):
         lim = getattr(link, "limits", None)
         w = (w_peak[j] if w_peak is not None else
              lim.velocity if lim is not None and lim.velocity is not None else speed)

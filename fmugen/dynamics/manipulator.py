@@ -21,6 +21,7 @@ link's centre of mass).
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import Mapping, Optional, Sequence
 
@@ -48,6 +49,12 @@ def _real(name):
 def _joint_label(body) -> str:
     """A joint as its file names it: the URDF joint name, or the DH link name."""
     return body.joint_name or body.name
+
+
+def _frame_tag(name: str) -> str:
+    """A frame name as part of an FMI variable name: an identifier (never "ee": p_ee is taken)."""
+    tag = re.sub(r"[^A-Za-z0-9_]", "_", name)
+    return "ee_frame" if tag == "ee" else tag
 
 
 def _ee_label(robot) -> str:
@@ -195,9 +202,15 @@ class Manipulator:
         "loops" from :data:`~fmugen.codegen.chain.LOOP_MIN_LINKS` links on,
         for arms without locked joints.
 
-        ``outputs``: any of "p_ee" (end-effector position, frame N origin) and
-        "qdd" (joint accelerations, which have direct feedthrough from tau).
-        q and qd are outputs as states (no direct feedthrough).
+        ``outputs``: any of "p_ee" (end-effector position: the origin of
+        ``robot.end_frame``, frame N of a DH robot), "qdd" (joint
+        accelerations, which have direct feedthrough from tau) and, for any
+        body or frame NAME (a URDF link, a link merged by a fixed joint, a DH
+        ``frameI``), "p:NAME" (its origin, FMI ``p_NAME[1..3]``), "R:NAME"
+        (its orientation, ``R_NAME[r,c]``) and "J:NAME" (the 6 x n geometric
+        Jacobian of its origin, linear rows first, ``J_NAME[r,j]`` for each
+        free joint j); only the bodies between the named frames and the base
+        are computed.  q and qd are outputs as states (no direct feedthrough).
 
         ``locked`` ({joint number (1-based): position}) holds joints still:
         their q is the given number and their qd, qdd are zero, so the model
@@ -206,16 +219,16 @@ class Manipulator:
         M_ff qdd_f + h_f = tau_f; the locked links' mass and inertia act
         through the numbers they fold into.
         """
-        unknown = set(outputs) - {"p_ee", "qdd"}
-        if unknown:
-            raise ValueError(f"unknown outputs {sorted(unknown)}; choose from p_ee, qdd")
+        kin_outputs = self.frame_outputs(outputs)
         n, robot = self.n, self.robot
         locked = dict(locked or {})
         if strategy not in ("auto", "straight", "loops"):
             raise ValueError(f"strategy must be 'auto', 'straight' or 'loops', not {strategy!r}")
-        loopable = not locked  # the runtime's loops take any tree of the general joint model
+        # the runtime's loops take any tree of the general joint model (damping and Coulomb friction too)
+        loopable = not locked and not kin_outputs
         if strategy == "loops" and not loopable:
-            raise ValueError(f"{robot.name}: strategy='loops' does not handle locked joints; "
+            why = "locked joints" if locked else "frame outputs"
+            raise ValueError(f"{robot.name}: strategy='loops' does not handle {why}; "
                              f"use strategy='straight'")
         if strategy == "loops" or (strategy == "auto" and loopable and n >= LOOP_MIN_LINKS):
             return self._looped_state_space_model(outputs, name)
@@ -241,14 +254,45 @@ class Manipulator:
         for k, i in enumerate(free):
             qdd[i] = qdd_f[k]
         out_vars, out_exprs = [], []
-        if "p_ee" in outputs:
+        wanted = (["p_ee"] if "p_ee" in outputs else []) + kin_outputs
+        if wanted:
             transform = d.engine.rotation_translation if isinstance(d.engine, NestedBodyInverseDynamics) else None
-            Ts = kinematics.body_frames(P, robot, q, d.trig, transform)
-            _, T_ee = kinematics.frame_pose(P, robot, Ts, robot.end_frame)
-            for r in range(3):
-                out_vars.append(Variable(f"p_ee[{r + 1}]", _real(f"p_ee_{r + 1}"), "m",
-                                         f"end-effector position (origin of {_ee_label(robot)}), base {'xyz'[r]}"))
-                out_exprs.append(T_ee[r][3])
+            names = [robot.end_frame if w == "p_ee" else w[2:] for w in wanted]
+            Ts = kinematics.body_frames(P, robot, q, d.trig, transform, frames=names)
+            for w, frame in zip(wanted, names):
+                body, T = kinematics.frame_pose(P, robot, Ts, frame)
+                if w == "p_ee":
+                    for r in range(3):
+                        out_vars.append(Variable(f"p_ee[{r + 1}]", _real(f"p_ee_{r + 1}"), "m",
+                                                 f"end-effector position (origin of {_ee_label(robot)}), "
+                                                 f"base {'xyz'[r]}"))
+                        out_exprs.append(T[r][3])
+                    continue
+                kind, tag = w[0], _frame_tag(frame)
+                if kind == "p":
+                    for r in range(3):
+                        out_vars.append(Variable(f"p_{tag}[{r + 1}]", _real(f"out_p_{tag}_{r + 1}"), "m",
+                                                 f"position of frame {frame} (origin), base {'xyz'[r]}"))
+                        out_exprs.append(T[r][3])
+                elif kind == "R":
+                    for r in range(3):
+                        for c in range(3):
+                            out_vars.append(Variable(f"R_{tag}[{r + 1},{c + 1}]", _real(f"out_R_{tag}_{r + 1}_{c + 1}"),
+                                                     "1", f"orientation of frame {frame}: base {'xyz'[r]} component "
+                                                     f"of its {'xyz'[c]} axis"))
+                            out_exprs.append(T[r][c])
+                else:  # J: 6 x (free joints) geometric Jacobian of the frame origin
+                    J = kinematics.geometric_jacobian(P, robot, Ts, [T[r][3] for r in range(3)], body)
+                    for r in range(6):
+                        for i in free:
+                            unit = ("1" if robot.bodies[i].joint == REVOLUTE else "1/m") if r >= 3 else \
+                                ("m" if robot.bodies[i].joint == REVOLUTE else "1")
+                            out_vars.append(Variable(f"J_{tag}[{r + 1},{i + 1}]", _real(f"out_J_{tag}_{r + 1}_{i + 1}"),
+                                                     unit, f"geometric Jacobian of frame {frame}: "
+                                                     f"{('linear velocity', 'angular velocity')[r // 3]} "
+                                                     f"{'xyz'[r % 3]} per unit qd of joint {i + 1}"))
+                            out_exprs.append(J[r, i])
+        n_kin = len(out_vars)
         if "qdd" in outputs:
             for i in free:
                 unit = "rad/s2" if robot.bodies[i].joint == REVOLUTE else "m/s2"
@@ -280,10 +324,9 @@ class Manipulator:
         dgdx = sp.zeros(len(out_vars), nx)
         dgdu = sp.zeros(len(out_vars), nu)
         row = 0
-        if "p_ee" in outputs:
-            Jk = differentiate([P], out_exprs[:3], qf, Jp)
-            dgdx[:3, :nf] = Jk
-            row = 3
+        if n_kin:
+            dgdx[:n_kin, :nf] = differentiate([P], out_exprs[:n_kin], qf, Jp)
+            row = n_kin
         if "qdd" in outputs:
             dgdx[row:row + nf, :] = Y[:, :nx]
             dgdu[row:row + nf, :] = Y[:, nx:]
@@ -378,6 +421,24 @@ class Manipulator:
             provenance=f"{robot.source or robot.name}; looped articulated-body algorithm and analytical "
                        f"Newton-Euler derivatives (c_runtime/chain_dynamics.c)",
         )
+
+    def frame_outputs(self, outputs) -> list:
+        """The frame outputs among ``outputs`` ("p:NAME", "R:NAME", "J:NAME"), checked; ValueError names the choices."""
+        out = []
+        for o in outputs:
+            if o in ("p_ee", "qdd"):
+                continue
+            kind, _, frame = str(o).partition(":")
+            if kind not in ("p", "R", "J") or not frame:
+                raise ValueError(f"unknown output {o!r}; choose from p_ee, qdd, p:FRAME, R:FRAME, J:FRAME "
+                                 f"(FRAME: a body or frame name)")
+            try:
+                self.robot.locate(frame)
+            except KeyError as exc:
+                raise ValueError(f"output {o!r}: {exc.args[0]}") from None
+            if o not in out:
+                out.append(o)
+        return out
 
     def _joint_variables(self, joints) -> tuple:
         """(states q[i] then qd[i], inputs tau[i]) of the given 0-based joints.

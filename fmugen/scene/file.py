@@ -347,8 +347,9 @@ def _instance(iname: str, spec, path: Path) -> InstanceSpec:
             raise SceneError(f"{where} formulation must be 'newton_euler' or 'lagrange', got {form!r}")
         outs = _str_list(spec.get("outputs", []), f"{where} outputs")
         for o in outs:
-            if o not in ("p_ee", "qdd"):
-                raise SceneError(f"{where} outputs: {o!r} is not a robot output (p_ee, qdd)")
+            if o not in ("p_ee", "qdd") and not (o[:2] in ("p:", "R:", "J:") and len(o) > 2):
+                raise SceneError(f"{where} outputs: {o!r} is not a robot output (p_ee, qdd, p:FRAME, R:FRAME, "
+                                 "J:FRAME)")
         locked_raw = spec.get("locked", {})
         if not isinstance(locked_raw, dict):
             raise SceneError(f"{where} locked must be a table like {{ \"q[4]\" = 0.3 }}")

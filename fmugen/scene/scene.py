@@ -83,7 +83,7 @@ class Scene:
         """instance -> SymbolicModel with every robot output the scene may use."""
         out = {}
         for name, ins in self.spec.instances.items():
-            outs = ("p_ee", "qdd") if ins.kind == "robot" else ()
+            outs = ("p_ee", "qdd") + _frame_outputs(ins) if ins.kind == "robot" else ()
             out[name] = instance_model(ins, self.spec.parameter_set, self.src, self._sets.get(name), outs)
         return out
 
@@ -213,13 +213,13 @@ class Scene:
     def robot_outputs(self, inst: str, prune: bool = True) -> tuple:
         ins = self.spec.instances[inst]
         if not prune:
-            return ("p_ee", "qdd")
+            return ("p_ee", "qdd") + _frame_outputs(ins)
         used = set(ins.options.get("outputs", ()))
         for v in self.read_variables(inst):
             stem = v.split("[", 1)[0]
             if stem in ("p_ee", "qdd"):
                 used.add(stem)
-        return tuple(o for o in ("p_ee", "qdd") if o in used)
+        return tuple(o for o in ("p_ee", "qdd") if o in used) + _frame_outputs(ins)
 
     def needs_jacobian(self, group: GroupSpec) -> bool:
         if group.jacobian != "auto":
@@ -434,3 +434,8 @@ class Scene:
         u = np.array([v.start if v.start is not None else 0.0 for v in m.inputs])
         nominals = np.array([abs(v.nominal) if v.nominal else max(1.0, abs(x)) for v, x in zip(m.states, x0)])
         return ReferenceProblem(m, x0, u, tuple(self.spec.record), self.spec.start, self.spec.stop, nominals)
+
+
+def _frame_outputs(ins) -> tuple:
+    """A robot instance's declared frame outputs ("p:tool0", "J:left_gripper", ...): always built."""
+    return tuple(o for o in ins.options.get("outputs", ()) if ":" in o)
