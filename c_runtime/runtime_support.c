@@ -56,7 +56,7 @@ void fmugen_log(fmugen_instance *inst, fmi2Status status, fmugen_log_category ca
 
 int fmugen_check_state(fmugen_instance *inst, int mask, const char *fn)
 {
-    if (!inst) return 0;
+    if (!fmugen_live(inst)) return 0; /* NULL or freed: nobody to log to */
     if (inst->s.fmi_state & mask) return 1;
     fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "%s: not allowed in state %s", fn,
                fmugen_state_name(inst->s.fmi_state));
@@ -134,6 +134,8 @@ void fmugen_set_defaults(fmugen_instance *inst)
     inst->s.rt[FMUGEN_RT_MAX_STEP] = 0.0;
     inst->s.rt[FMUGEN_RT_FIXED_STEP] = 0.0;
     inst->s.solver = FMUGEN_SOLVER_DOPRI5;
+    if (m->rt_start) memcpy(inst->s.rt, m->rt_start, FMUGEN_RT_COUNT * sizeof(double));
+    if (m->solver_start) inst->s.solver = m->solver_start;
     inst->s.range_check = FMUGEN_RANGE_WARN;
     inst->range_messages = 0;
     inst->s.facold = 1e-4;

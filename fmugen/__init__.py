@@ -27,15 +27,25 @@ def load_robot(path, formulation: str = "newton_euler") -> Manipulator:
     return Manipulator(load_robot_description(path), formulation)
 
 
-def load_scene(path, set=None):
+def load_scene(path, set=None, allow_factories: bool = False):
     """Read a scene file (a whole system: arm, actuator chains, controllers, paths).
 
     ``set`` overrides values by name (``{"joint.J": 5}`` or ``["joint.J=5"]``);
-    see :mod:`fmugen.scene`.
+    ``allow_factories``: run the Python factories the scene names (code: only for files you
+    trust); see :mod:`fmugen.scene`.
     """
     from .scene import load_scene as _load
 
-    return _load(path, set=set)
+    return _load(path, set=set, allow_factories=allow_factories)
+
+
+def load_system(path, record=None):
+    """An SSP archive (``x.ssp``: fmugen's export or anyone's FMI 2.0 FMUs) as a co-simulation system
+    for :func:`fmugen.cosim.run`; ``record``: the "component.connector" columns to keep (default:
+    every output, or the scene's record list for an archive fmugen wrote).  See :mod:`fmugen.ssp`."""
+    from .ssp import load_system as _load
+
+    return _load(path, record=record)
 
 
 def build_fmu(model, output_path, fmi_type: str = "both", **options):
@@ -48,4 +58,4 @@ def build_fmu(model, output_path, fmi_type: str = "both", **options):
 from .codegen.evaluate import ModelEvaluator  # noqa: E402
 from .control import linearize, trim  # noqa: E402  (operating points and A, B, C, D for python-control)
 
-__all__ = ["load_robot", "load_scene", "build_fmu", "linearize", "trim", "ModelEvaluator", "Manipulator", "FORMULATIONS", "__version__"]
+__all__ = ["load_robot", "load_scene", "load_system", "build_fmu", "linearize", "trim", "ModelEvaluator", "Manipulator", "FORMULATIONS", "__version__"]

@@ -19,7 +19,8 @@ from ..errors import read_text_file, toml_problem
 from .errors import SceneError, did_you_mean
 
 SCENE_KEYS = {"name", "description", "parameter_set", "start", "stop", "step", "tolerance", "record",
-              "initial", "prune", "connections", "monolithic", "connect", "record_bonds"}
+              "initial", "prune", "connections", "monolithic", "connect", "record_bonds",
+              "inputs"}
 COMMON_INSTANCE_KEYS = {"parameters", "fixed", "start", "hold"}
 ROBOT_KEYS = {"robot", "formulation", "locked", "outputs"}
 FACTORY_KEYS = {"factory", "options", "parameter_set"}
@@ -76,6 +77,7 @@ class SceneSpec:
     connect: tuple = ()  # of (end, end): bonds between connectors or signals, causality inferred (scene/connect.py)
     bonds: tuple = ()  # the expanded connect pairs (fmugen.scene.connect.Bond), set by Scene
     record_bonds: bool = False  # also record each bond's effort and flow (fmugen/scene/bonds.py)
+    inputs: tuple = ()  # undriven inputs kept as inputs of the FMUs (not fixed) when pruning
 
 
 def _number(v, where, positive=False, nonneg=False) -> float:
@@ -266,6 +268,10 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
         conns.append((s_, t_, f_))
 
     record = _str_list(sc.get("record", []), f"{src}: [scene] record")
+    twice = sorted({r for r in record if record.count(r) > 1})
+    if twice:  # a result table has one column per name: refused here, not after the run
+        raise SceneError(f"{src}: [scene] record lists {', '.join(twice)} more than once")
+    exposed = _str_list(sc.get("inputs", []), f"{src}: [scene] inputs")
     connect = sc.get("connect", [])
     if not isinstance(connect, list) or not all(isinstance(c, list) and len(c) == 2 and all(
             isinstance(e, str) for e in c) for c in connect):
@@ -299,13 +305,14 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
     for k in cosim:
         if k not in COSIM_KEYS:
             raise SceneError(f"{src}: [cosim] has unknown key {k!r}{did_you_mean(k, COSIM_KEYS)}")
-        if isinstance(cosim[k], float) and not math.isfinite(cosim[k]):
-            raise SceneError(f"{src}: [cosim] {k} must be finite")
+        if isinstance(cosim[k], (int, float)) and not isinstance(cosim[k], bool):
+            _number(cosim[k], f"{src}: [cosim] {k}")  # finite, and an int within the double range
     return SceneSpec(path=path, name=name, description=desc, parameter_set=pset, start=start, stop=stop,
                      step=step, tolerance=tolerance, record=record, initial=initial,
                      prune=sc.get("prune", True), connections=tuple(conns), instances=instances,
                      groups=groups, monolithic=bool(monolithic), cosim=dict(cosim),
-                     connect=tuple(tuple(c) for c in connect), record_bonds=bool(sc.get("record_bonds", False)))
+                     connect=tuple(tuple(c) for c in connect), record_bonds=bool(sc.get("record_bonds", False)),
+                     inputs=exposed)
 
 
 def _instance(iname: str, spec, path: Path) -> InstanceSpec:
@@ -425,7 +432,7 @@ def _group(gname, g, instances, src) -> GroupSpec:
     if fmi_type not in ("cs", "me"):
         raise SceneError(f"{where} fmi_type must be \"cs\" or \"me\", got {fmi_type!r}")
     solver = g.get("solver", "rodas3")
-    if solver not in SOLVERS:
+    if not isinstance(solver, str) or solver not in SOLVERS:  # a table or array is no key (unhashable)
         raise SceneError(f"{where} solver = {solver!r}; choose one of {', '.join(SOLVERS)}")
     tol = g.get("tolerance")
     if tol is not None:
