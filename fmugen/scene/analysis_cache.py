@@ -1,0 +1,208 @@
+"""The scene analysis, cached with the FMUs: a run from cached FMUs starts in well under a second.
+
+Building a scene twice costs little when its FMUs are cached
+(:mod:`fmugen.scene.build`), but *knowing* that they are cached needs their
+keys, and the keys need the scene analysed: every instance's symbolic model
+derived (the PUMA's: seconds of sympy), the connections checked, the state of
+rest solved.  This module caches the outcome of that analysis -- the
+:class:`~fmugen.cosim.system.CosimSystem` (couplings, recorded columns, the
+consistent start values of every FMU), the report of the initial state and
+the cache keys of the group FMUs -- as a separate artefact, ``analysis/<key>.json``
+in the cache folder, under its own **content key**: the generator (every
+source file of fmugen and of its C runtime), the scene file's bytes and
+location, the ``--set`` overrides, and the bytes of every ``.toml`` file the
+scene names (robot files, parameter sets).  Change any of them and the scene
+is analysed again.  Scenes with Python factories are never cached this way
+(their code is not part of the key).
+
+:func:`build_scene_cached` is what the commands call: the cached analysis and
+FMUs when both are there (nothing of sympy, scipy or the scene models is
+imported), else :func:`fmugen.scene.load_scene` and ``Scene.build`` as
+before, then the analysis is stored.  The :class:`BuiltScene` it returns
+loads the full :class:`~fmugen.scene.Scene` only when something asks for it.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Optional
+
+from .build import BuiltScene, FmuReport, Progress, cache_dir, generator_fingerprint
+from .settings import parse_sets
+
+FORMAT = 1  # of the stored record
+
+
+def _toml_names(data, out: set) -> None:
+    """Every string in the file data that names a .toml file (robots, parameter sets)."""
+    if isinstance(data, dict):
+        for v in data.values():
+            _toml_names(v, out)
+    elif isinstance(data, list):
+        for v in data:
+            _toml_names(v, out)
+    elif isinstance(data, str) and data.endswith(".toml"):
+        out.add(data)
+
+
+def analysis_key(path, sets=None) -> Optional[str]:
+    """The content key of a scene's analysis, or None when it is not cacheable (factories, unreadable)."""
+    import tomllib
+
+    path = Path(path).resolve()
+    try:
+        raw = path.read_bytes()
+        data = tomllib.loads(raw.decode("utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return None  # the full load reports it
+    sets = parse_sets(sets)
+    instances = data.get("instances")
+    if not isinstance(instances, dict) or any(isinstance(i, dict) and "factory" in i for i in instances.values()):
+        return None
+    names: set = set()
+    _toml_names(data, names)
+    _toml_names(list(sets.values()), names)
+    files = {}
+    for name in sorted(names):
+        for base in (path.parent, Path.cwd()):
+            p = (base / name).resolve()
+            if p.is_file():
+                files[f"{base == path.parent}:{name}"] = hashlib.sha256(p.read_bytes()).hexdigest()
+    parts = {"format": FORMAT, "generator": generator_fingerprint(), "scene": str(path),
+             "bytes": hashlib.sha256(raw).hexdigest(), "sets": sets, "files": files}
+    return hashlib.sha256(json.dumps(parts, sort_keys=True, default=str).encode()).hexdigest()[:32]
+
+
+def _record_path(key: str) -> Path:
+    return cache_dir() / "analysis" / f"{key}.json"
+
+
+def _system_to_json(system) -> dict:
+    return {"name": system.name, "start": system.start_time, "stop": system.stop_time, "step": system.step,
+            "order": list(system.order) if system.order else None, "settings": dict(system.settings),
+            "units": [{"name": u.name, "fmi_type": u.fmi_type, "start_values": dict(u.start_values),
+                       "directional": bool(u.provides_directional_derivative), "members": list(u.members)}
+                      for u in system.units],
+            "couplings": [{"source": list(c.source), "target": list(c.target), "factor": c.factor, "unit": c.unit}
+                          for c in system.couplings],
+            "recorded": [[r.column, r.unit, r.variable, r.physical_unit] for r in system.recorded]}
+
+
+def _system_from_json(d: dict, paths: dict):
+    from ..cosim.system import CosimSystem, Coupling, Recorded, Unit
+
+    units = tuple(Unit(u["name"], Path(paths[u["name"]]), u["fmi_type"], dict(u["start_values"]), u["directional"],
+                       tuple(u["members"])) for u in d["units"])
+    couplings = tuple(Coupling(tuple(c["source"]), tuple(c["target"]), c["factor"], c["unit"]) for c in d["couplings"])
+    recorded = tuple(Recorded(*r) for r in d["recorded"])
+    return CosimSystem(d["name"], units, couplings, recorded, d["start"], d["stop"], d["step"],
+                       tuple(d["order"]) if d["order"] else None, dict(d["settings"]))
+
+
+class _CachedInitial:
+    """The initial state as cached: its report and values; anything else from the full scene."""
+
+    def __init__(self, report: str, values: dict, scene):
+        self._report, self.values, self._scene = report, values, scene
+
+    def report(self) -> str:
+        return self._report
+
+    def __getattr__(self, name):
+        return getattr(self._scene.full.initial, name)
+
+
+class DeferredScene:
+    """Stands in for the :class:`~fmugen.scene.Scene` of a cached analysis; loads it on first use."""
+
+    def __init__(self, path, sets, allow_factories, name, initial_report, x0):
+        self._args = (path, sets, allow_factories)
+        self._full = None
+        self.name = name
+        self.initial = _CachedInitial(initial_report, x0, self)
+
+    @property
+    def full(self):
+        if self._full is None:
+            from .scene import load_scene
+
+            path, sets, allow = self._args
+            self._full = load_scene(path, set=sets, allow_factories=allow)
+        return self._full
+
+    def __getattr__(self, name):
+        return getattr(self.full, name)
+
+
+def store(key: str, scene, built: BuiltScene) -> None:
+    """Write the analysis of ``scene`` (built as ``built``) under ``key``; failures to write are ignored."""
+    from .build import _group_key
+
+    x0 = {k: float(v) for k, v in scene.initial.values.items()}
+    record = {"format": FORMAT, "name": scene.name, "initial_report": scene.initial.report(), "x0": x0,
+              "fmus": {g: _group_key(scene, g, True, scene.initial.values) for g in scene.groups},
+              "system": _system_to_json(built.system)}
+    target = _record_path(key)
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=target.parent, suffix=".part")
+        with os.fdopen(fd, "w") as f:
+            json.dump(record, f)
+        os.replace(tmp, target)
+    except OSError:
+        pass
+
+
+def load_cached(path, out_dir, sets=None, allow_factories: bool = False,
+                progress=None) -> Optional[BuiltScene]:
+    """The built scene from the cached analysis and FMUs (copied into ``out_dir``), or None."""
+    key = analysis_key(path, sets)
+    if key is None:
+        return None
+    try:
+        record = json.loads(_record_path(key).read_text())
+        if record.get("format") != FORMAT:
+            return None
+    except (OSError, ValueError):
+        return None
+    cdir = cache_dir() / "fmus"
+    fmus = record["fmus"]
+    if not all((cdir / f"{k}.fmu").is_file() and (cdir / f"{k}.json").is_file() for k in fmus.values()):
+        return None
+    progress = progress or Progress()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    reports = {}
+    for g, k in fmus.items():
+        target = out / f"{g}.fmu"
+        tmp = out / f".{g}.fmu.{os.getpid()}.part"
+        shutil.copyfile(cdir / f"{k}.fmu", tmp)
+        os.replace(tmp, target)
+        r = FmuReport(**{**json.loads((cdir / f"{k}.json").read_text()), "path": target, "cached": True,
+                         "build_seconds": 0.0})
+        r.members = tuple(r.members)
+        reports[g] = r
+        progress(r.line())
+    scene = DeferredScene(path, sets, allow_factories, record["name"], record["initial_report"], record["x0"])
+    system = _system_from_json(record["system"], {g: out / f"{g}.fmu" for g in fmus})
+    return BuiltScene(scene, out, reports, system)
+
+
+def build_scene_cached(path, out_dir, sets=None, allow_factories: bool = False, progress=None) -> BuiltScene:
+    """The scene file ``path`` built into ``out_dir``: from the cached analysis and FMUs when both are there,
+    else analysed and built (and the analysis stored for next time)."""
+    built = load_cached(path, out_dir, sets, allow_factories, progress)
+    if built is not None:
+        return built
+    from .scene import load_scene
+
+    scene = load_scene(path, set=sets, allow_factories=allow_factories)
+    built = scene.build(out_dir, progress=progress)
+    key = analysis_key(path, sets)
+    if key is not None:
+        store(key, scene, built)
+    return built
