@@ -48,13 +48,17 @@ def add_cosim_commands(subparsers) -> None:
                    "(default: the scene's [cosim] scheme, else gauss-seidel)")
     p.add_argument("--extrapolation", default=None, help="hold | linear | quadratic | cubic (cubic: iterative and "
                    "newton only; default: the scene's, else linear)")
-    p.add_argument("--step", type=float, default=None, help="macro step H [s] (default: the scene's step)")
-    p.add_argument("--adaptive", action="store_true", help="control H by the interface defect (with --tol)")
-    p.add_argument("--tol", type=float, default=1e-4, help="adaptive: tolerance relative to each coupled signal")
-    p.add_argument("--workers", type=int, default=1, help=WORKERS_HELP)
+    p.add_argument("--step", type=float, default=None, help="macro step H [s] (default: the scene's [cosim] "
+                   "step, else its [scene] step)")
+    p.add_argument("--adaptive", action="store_true", default=None,
+                   help="control H by the interface defect (with --tol)")
+    p.add_argument("--tol", type=float, default=None, help="adaptive: tolerance relative to each coupled signal "
+                   "(default: the scene's, else 1e-4)")
+    _run_flags(p)
     p.set_defaults(func=cmd_cosim)
 
-    p = subparsers.add_parser("reference", help="solve a scene as one model with Radau at 1e-12 (reference.csv)")
+    p = subparsers.add_parser("reference", help="solve a scene as one model with Radau at 1e-12 (reference.csv, "
+                              "plot)")
     _common(p)
     p.add_argument("--points", type=int, default=2001, help="points of the uniform output grid (>= 1001)")
     p.set_defaults(func=cmd_reference)
@@ -68,21 +72,34 @@ def add_cosim_commands(subparsers) -> None:
     p.add_argument("--repeats", type=int, default=5, help="timed runs per setting after a warm-up (median)")
     p.add_argument("--target", type=float, default=1e-4, help="error target for the coarsest-setting summary")
     p.add_argument("--no-monolithic", action="store_true", help="leave out the monolithic FMU row")
-    p.add_argument("--workers", type=int, default=1, help=WORKERS_HELP)
+    _run_flags(p)
     p.add_argument("--internal", default=None, help="comma-separated internal solver:tolerance pairs to sweep "
                    "as well, e.g. rodas3:1e-10,dopri5:1e-8 (default: the scene's)")
     p.set_defaults(func=cmd_report)
 
 
 WORKERS_HELP = ("threads that step the FMUs side by side under jacobi, iterative and newton, when a sweep of "
-                "them costs more than 0.5 ms (default 1; results are identical)")
+                "them costs more than 0.5 ms (default: the scene's [cosim] workers, else 1; results are identical)")
 
 
-def _check_workers(n) -> None:
-    if n < 1:
-        from .errors import CosimError
+def _run_flags(p) -> None:
+    """Flags of run settings shared by ``cosim`` and ``report`` (fmugen.cosim.settings: file < --set < flag)."""
+    p.add_argument("--workers", type=int, default=None, help=WORKERS_HELP)
+    p.add_argument("--coupling-tol", type=float, default=None, help="iterative, newton: the coupled values "
+                   "converge to this, relative to each signal (default: the scene's [cosim] coupling_tol, else "
+                   "the master's)")
+    p.add_argument("--iterations", type=int, default=None, help="iterative, newton: most iterations per macro "
+                   "step (default: the scene's [cosim] iterations, else the master's)")
+    p.add_argument("--no-divergence-check", dest="detect_divergence", action="store_false", default=None,
+                   help="do not stop a run whose coupling the master judges divergent")
 
-        raise CosimError(f"--workers must be >= 1, not {n}")
+
+def _flags(args) -> dict:
+    """The run settings given on the command line (None: not given)."""
+    return {"scheme": getattr(args, "scheme", None), "extrapolation": getattr(args, "extrapolation", None),
+            "step": getattr(args, "step", None), "stop": args.stop, "adaptive": getattr(args, "adaptive", None),
+            "tol": getattr(args, "tol", None), "workers": args.workers, "coupling_tol": args.coupling_tol,
+            "iterations": args.iterations, "detect_divergence": args.detect_divergence}
 
 
 def _plot(result, path, title, units=None) -> None:
@@ -138,23 +155,18 @@ def write_results(result, out_dir, units=None) -> dict:
 
 
 def cmd_cosim(args) -> int:
-    from .master import check_choices, run
-
     from ..scene.analysis_cache import build_scene_cached
+    from .master import run
+    from .settings import resolve_file
 
-    _check_workers(args.workers)
-    if args.scheme or args.extrapolation:  # refused before anything is built or written
-        check_choices(args.scheme or "gauss-seidel", args.extrapolation or "linear")
+    # every setting checked before anything is built or written: the file's [cosim], --set, the flags
+    resolve_file(args.scene, args.set, **_flags(args))
     out = Path(args.out)
     # from the cached scene analysis and FMUs when nothing changed: simulating starts within a second
     built = build_scene_cached(args.scene, out / "fmus", sets=args.set,
                                allow_factories=getattr(args, "allow_factories", False))
     system = built.system
-    st = dict(system.settings or {})
-    scheme, ext = check_choices(args.scheme or st.get("scheme", "gauss-seidel"),
-                                args.extrapolation or st.get("extrapolation", "linear"))
-    result = run(system, scheme, ext, step=args.step, adaptive=args.adaptive, tol=args.tol, stop=args.stop,
-                 workers=args.workers)
+    result = run(system, **_flags(args))  # the scene's [cosim] (with --set), then the flags
     paths = write_results(result, out, {r.column: r.physical_unit for r in system.recorded})
     print(result.summary)
     print(f"wrote {paths['csv']}, {paths['npz']}, {paths['plot']}, {paths['summary']}")
@@ -178,6 +190,10 @@ def cmd_reference(args) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     write_reference_csv(ref, out / "reference.csv")
+    m = p.model
+    units = {v.name: v.unit for v in (*m.states, *m.outputs)}
+    _plot(ref, out / "reference.png", f"{scene.name}: reference ({ref.settings['method']} rtol "
+          f"{ref.settings['rtol']:g}; error estimate {max(ref.error):.2g})", units)
     lines = [f"{scene.name}: reference, {ref.settings['method']} rtol {ref.settings['rtol']:g}, "
              f"atol {ref.settings['atol']}, {ref.settings['steps']} steps" + (" (cached)" if ref.cached else ""),
              "confirmed by: " + "; ".join(ref.settings["confirm"]),
@@ -185,7 +201,7 @@ def cmd_reference(args) -> int:
     lines += [f"  {c:<28} {e:.3g}" for c, e in zip(ref.columns, ref.error)]
     (out / "reference.txt").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
-    print(f"wrote {out / 'reference.csv'}")
+    print(f"wrote {out / 'reference.csv'}, {out / 'reference.txt'}, {out / 'reference.png'}")
     return 0
 
 
@@ -194,17 +210,19 @@ def cmd_report(args) -> int:
 
     from .master import check_choices
     from .report import DEFAULT_SCHEMES, make_report, write_report
+    from .settings import resolve_file
     from .system import CosimSystem, Recorded, Unit
 
-    scene = _load(args)
     schemes = [tuple(s.split("/", 1)) if "/" in s else (s, "hold") for s in args.schemes.split(",")] \
         if args.schemes else DEFAULT_SCHEMES
     schemes = [check_choices(*sc) for sc in schemes]  # before anything is built or written
-    _check_workers(args.workers)
+    # the other run settings: the scene's [cosim] (with --set), then the flags; schemes and steps are the grid
+    settings = resolve_file(args.scene, args.set, **_flags(args))
+    scene = _load(args)
     out = Path(args.out)
     built = scene.build(out / "fmus")
     system = built.system
-    H = float(system.step)
+    H = float(settings.step or system.step)  # the scene's [cosim] step, else its [scene] step
     steps = [float(h) for h in args.steps.split(",")] if args.steps else [8 * H, 4 * H, 2 * H, H, H / 2]
     problem = scene.reference_problem()
     extra = []
@@ -231,8 +249,7 @@ def cmd_report(args) -> int:
 
             raise CosimError(f"--internal: expected solver:tolerance, got {item!r}") from None
     rep = make_report(system, problem, steps, schemes, repeats=args.repeats, target=args.target, extra_rows=extra,
-                      workers=args.workers,
-                      stop=args.stop, progress=lambda s: print("  " + s, file=sys.stderr, flush=True),
+                      settings=settings, stop=args.stop, progress=lambda s: print("  " + s, file=sys.stderr, flush=True),
                       internal=internal)
     paths = write_report(rep, out)
     print(rep.table())

@@ -1241,11 +1241,14 @@ def _explosive(recent) -> bool:
             and r[-1][1] >= 1e-3)  # above round-off: signals are scaled by their nominal values
 
 
-def run(system, scheme: str = "gauss-seidel", extrapolation: str = "hold", step: Optional[float] = None,
-        adaptive: bool = False, tol: float = 1e-4, stop: Optional[float] = None,
-        order: Optional[Sequence[str]] = None, workers: int = 1, **options) -> CosimResult:
-    """Co-simulate ``system`` (a :class:`CosimSystem`, or a scene: it is built into a temporary folder).
+def run(system, scheme: Optional[str] = None, extrapolation: Optional[str] = None, step: Optional[float] = None,
+        adaptive: Optional[bool] = None, tol: Optional[float] = None, stop: Optional[float] = None,
+        order: Optional[Sequence[str]] = None, workers: Optional[int] = None, **options) -> CosimResult:
+    """Co-simulate ``system``: a :class:`CosimSystem`, a built scene (``scene.build(...)``) or a scene
+    (built into a temporary folder).
 
+    Every setting not given here is the scene's (its ``[cosim]`` table, ``system.settings``), else the
+    default (:mod:`fmugen.cosim.settings`: gauss-seidel, linear): the same resolution as ``fmugen cosim``.
     scheme: ``jacobi`` | ``gauss-seidel`` | ``iterative`` | ``newton``;
     extrapolation: ``hold`` | ``linear`` | ``quadratic`` | ``cubic`` (iterated
     schemes only); step: macro step H [s] (default ``system.step``); adaptive:
@@ -1262,9 +1265,15 @@ def run(system, scheme: str = "gauss-seidel", extrapolation: str = "hold", step:
     ``summary``); a run that fails returns its values up to the failure and
     ``summary.failure``.
     """
-    if not isinstance(system, CosimSystem) and hasattr(system, "build"):
+    from .settings import resolve
+
+    if not isinstance(system, CosimSystem) and isinstance(getattr(system, "system", None), CosimSystem):
+        system = system.system  # a built scene
+    elif not isinstance(system, CosimSystem) and hasattr(system, "build"):
         import tempfile
 
         system = system.build(tempfile.mkdtemp(prefix="fmugen_scene_")).system
-    with Master(system, scheme, extrapolation, order=order, workers=workers) as m:
-        return m.run(step=step, stop=stop, adaptive=adaptive, tol=tol, **options)
+    settings = resolve(getattr(system, "settings", None), scheme=scheme, extrapolation=extrapolation, step=step,
+                       adaptive=adaptive, tol=tol, stop=stop, order=order, workers=workers, **options)
+    with Master(system, **settings.master_keywords()) as m:
+        return m.run(**settings.run_keywords())
