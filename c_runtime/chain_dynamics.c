@@ -1,4 +1,4 @@
-/* chain_dynamics.c -- looped dynamics of a serial chain (see chain_dynamics.h).
+/* chain_dynamics.c -- looped dynamics of a kinematic tree or serial chain (see chain_dynamics.h).
  *
  * Spatial vectors (Featherstone) in base coordinates, 6 doubles:
  *   motion m = [omega; v_O]  (v_O: velocity of the body point at the base origin)
@@ -79,34 +79,57 @@ static void mv6(const double *A, const double *x, double *o)
     for (int r = 0; r < 6; r++) o[r] = dot6(A + 6 * r, x);
 }
 
-/* World pose of every joint frame, motion subspaces S_i, link inertias at the
- * base origin (6x6, row-major) and the end-effector position. */
-static void kinematics(int n, const int *rev, const double *lc, const double *g, const double *q,
+static const double ZERO6[6] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+
+/* o = A B (3x3, row-major) */
+static void mul33(const double *A, const double *B, double *o)
+{
+    for (int r = 0; r < 3; r++)
+        for (int c = 0; c < 3; c++)
+            o[3 * r + c] = A[3 * r] * B[c] + A[3 * r + 1] * B[3 + c] + A[3 * r + 2] * B[6 + c];
+}
+
+/* World pose of every body frame, motion subspaces S_i, body inertias at the
+ * base origin (6x6, row-major; when I is not NULL) and the end-effector position. */
+static void kinematics(int n, const int *jt, const double *lc, const double *g, const double *q,
                        double *R, double *p, double *S, double *I, double *p_ee)
 {
-    double Rp[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1}, pp[3] = {0, 0, 0};
+    static const double R0[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1}, p0[3] = {0, 0, 0};
     for (int i = 0; i < n; i++) {
-        const double *L = lc + FMUGEN_CHAIN_NC * i;
-        double ca = L[FMUGEN_CHAIN_COS_ALPHA], sa = L[FMUGEN_CHAIN_SIN_ALPHA];
-        double th = L[FMUGEN_CHAIN_THETA0] + (rev[i] ? q[i] : 0.0);
-        double d = L[FMUGEN_CHAIN_D0] + (rev[i] ? 0.0 : q[i]);
-        double ct = cos(th), st = sin(th);
-        /* Rx(alpha) Rz(theta), and the origin [a, -sa d, ca d] in F_{i-1} */
-        double Rr[9] = {ct, -st, 0.0, ca * st, ca * ct, -sa, sa * st, sa * ct, ca};
-        double pr[3] = {L[FMUGEN_CHAIN_A], -sa * d, ca * d};
-        double *Ri = R + 9 * i, *pi = p + 3 * i;
+        const double *L = lc + FMUGEN_CHAIN_NC * i, *k = L + FMUGEN_CHAIN_AXIS, *pl = L + FMUGEN_CHAIN_POS;
+        int par = jt[n + i];
+        const double *Rp = par >= 0 ? R + 9 * par : R0, *pp = par >= 0 ? p + 3 * par : p0;
+        double *Ri = R + 9 * i, *pi = p + 3 * i, Rq[9], z[3];
+        mul33(Rp, L + FMUGEN_CHAIN_ROT, Rq); /* the placed frame F_parent P_i */
         for (int r = 0; r < 3; r++) {
-            pi[r] = pp[r] + Rp[3 * r] * pr[0] + Rp[3 * r + 1] * pr[1] + Rp[3 * r + 2] * pr[2];
-            for (int c = 0; c < 3; c++)
-                Ri[3 * r + c] = Rp[3 * r] * Rr[c] + Rp[3 * r + 1] * Rr[3 + c] + Rp[3 * r + 2] * Rr[6 + c];
+            pi[r] = pp[r] + Rp[3 * r] * pl[0] + Rp[3 * r + 1] * pl[1] + Rp[3 * r + 2] * pl[2];
+            z[r] = Rq[3 * r] * k[0] + Rq[3 * r + 1] * k[1] + Rq[3 * r + 2] * k[2]; /* world axis */
         }
-        /* S: rotation about / translation along z_i through p_i */
-        double z[3] = {Ri[2], Ri[5], Ri[8]};
         double *Si = S + 6 * i;
-        if (rev[i]) {
+        if (jt[i]) {
+            /* R_i = Rq Rot(k, q): Rodrigues, c 1 + s [k]x + (1 - c) k k^T; the z axis
+             * (every DH joint) without the products by zero */
+            double c = cos(q[i]), s = sin(q[i]);
+            if (k[0] == 0.0 && k[1] == 0.0 && k[2] == 1.0) {
+                for (int r = 0; r < 3; r++) {
+                    double x = Rq[3 * r], y = Rq[3 * r + 1];
+                    Ri[3 * r] = c * x + s * y;
+                    Ri[3 * r + 1] = c * y - s * x;
+                    Ri[3 * r + 2] = Rq[3 * r + 2];
+                }
+            } else {
+                double t = 1.0 - c;
+                double J[9] = {c + t * k[0] * k[0], t * k[0] * k[1] - s * k[2], t * k[0] * k[2] + s * k[1],
+                               t * k[0] * k[1] + s * k[2], c + t * k[1] * k[1], t * k[1] * k[2] - s * k[0],
+                               t * k[0] * k[2] - s * k[1], t * k[1] * k[2] + s * k[0], c + t * k[2] * k[2]};
+                mul33(Rq, J, Ri);
+            }
+            /* S: rotation about z through p_i */
             Si[0] = z[0]; Si[1] = z[1]; Si[2] = z[2];
             cross3(pi, z, Si + 3);
         } else {
+            memcpy(Ri, Rq, sizeof Rq);
+            for (int r = 0; r < 3; r++) pi[r] += z[r] * q[i];
             Si[0] = Si[1] = Si[2] = 0.0;
             Si[3] = z[0]; Si[4] = z[1]; Si[5] = z[2];
         }
@@ -118,50 +141,50 @@ static void kinematics(int n, const int *rev, const double *lc, const double *g,
             double c[3], RJ[9], Jw[9];
             for (int r = 0; r < 3; r++)
                 c[r] = pi[r] + Ri[3 * r] * cl[0] + Ri[3 * r + 1] * cl[1] + Ri[3 * r + 2] * cl[2];
+            mul33(Ri, Jl, RJ);
             for (int r = 0; r < 3; r++)
-                for (int k = 0; k < 3; k++)
-                    RJ[3 * r + k] = Ri[3 * r] * Jl[k] + Ri[3 * r + 1] * Jl[3 + k] + Ri[3 * r + 2] * Jl[6 + k];
-            for (int r = 0; r < 3; r++)
-                for (int k = r; k < 3; k++)
-                    Jw[3 * r + k] = Jw[3 * k + r] =
-                        RJ[3 * r] * Ri[3 * k] + RJ[3 * r + 1] * Ri[3 * k + 1] + RJ[3 * r + 2] * Ri[3 * k + 2];
+                for (int kk = r; kk < 3; kk++)
+                    Jw[3 * r + kk] = Jw[3 * kk + r] =
+                        RJ[3 * r] * Ri[3 * kk] + RJ[3 * r + 1] * Ri[3 * kk + 1] + RJ[3 * r + 2] * Ri[3 * kk + 2];
             double cc = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
             double h[3] = {m * c[0], m * c[1], m * c[2]};
             double *Ii = I + 36 * i;
             for (int r = 0; r < 3; r++)
-                for (int k = 0; k < 3; k++) {
-                    Ii[6 * r + k] = Jw[3 * r + k] + m * ((r == k ? cc : 0.0) - c[r] * c[k]);
-                    Ii[6 * (r + 3) + k + 3] = r == k ? m : 0.0;
+                for (int kk = 0; kk < 3; kk++) {
+                    Ii[6 * r + kk] = Jw[3 * r + kk] + m * ((r == kk ? cc : 0.0) - c[r] * c[kk]);
+                    Ii[6 * (r + 3) + kk + 3] = r == kk ? m : 0.0;
                 }
             /* [h]x top right, its transpose bottom left */
             double hx[9] = {0.0, -h[2], h[1], h[2], 0.0, -h[0], -h[1], h[0], 0.0};
             for (int r = 0; r < 3; r++)
-                for (int k = 0; k < 3; k++) {
-                    Ii[6 * r + k + 3] = hx[3 * r + k];
-                    Ii[6 * (k + 3) + r] = hx[3 * r + k];
+                for (int kk = 0; kk < 3; kk++) {
+                    Ii[6 * r + kk + 3] = hx[3 * r + kk];
+                    Ii[6 * (kk + 3) + r] = hx[3 * r + kk];
                 }
         }
-        memcpy(Rp, Ri, sizeof Rp);
-        memcpy(pp, pi, sizeof pp);
     }
     if (p_ee) {
-        double ea = g[3];
-        for (int r = 0; r < 3; r++) p_ee[r] = pp[r] + Rp[3 * r] * ea;
+        int eb = jt[2 * n];
+        for (int r = 0; r < 3; r++)
+            p_ee[r] = eb < 0 ? 0.0
+                             : p[3 * eb + r] + R[9 * eb + 3 * r] * g[3] + R[9 * eb + 3 * r + 1] * g[4]
+                                   + R[9 * eb + 3 * r + 2] * g[5];
     }
 }
 
 /* The articulated-body algorithm on world quantities already computed:
- * S (6n), IA (36n: the link inertias on entry, articulated inertias on
- * exit); scratch v, c, pA, U (6n each), D, u (n each). */
-static int aba(int n, const double *lc, const double *g, const double *qd, const double *tau,
+ * S (6n), IA (36n: the body inertias on entry, articulated inertias on
+ * exit); scratch v, c, pA, U, acc (6n each), D, u (n each).  Bodies are
+ * numbered parents first, so one sweep up and one down visit a tree. */
+static int aba(int n, const int *jt, const double *lc, const double *g, const double *qd, const double *tau,
                const double *fx, const double *S, double *IA, double *v, double *c, double *pA, double *U,
-               double *D, double *u, double *qdd)
+               double *D, double *u, double *acc, double *qdd)
 {
     /* pass 1: velocities, velocity-product accelerations c_i = v_i x S_i qd_i, bias forces */
-    double vp[6] = {0, 0, 0, 0, 0, 0};
     for (int i = 0; i < n; i++) {
+        int par = jt[n + i];
+        const double *vp = par >= 0 ? v + 6 * par : ZERO6, *Si = S + 6 * i;
         double *vi = v + 6 * i, h[6];
-        const double *Si = S + 6 * i;
         for (int k = 0; k < 6; k++) vi[k] = vp[k] + Si[k] * qd[i];
         crm(vi, Si, c + 6 * i);
         for (int k = 0; k < 6; k++) c[6 * i + k] *= qd[i];
@@ -169,18 +192,18 @@ static int aba(int n, const double *lc, const double *g, const double *qd, const
         crf(vi, h, pA + 6 * i);
         if (fx)
             for (int k = 0; k < 6; k++) pA[6 * i + k] -= fx[6 * i + k];
-        memcpy(vp, vi, sizeof vp);
     }
-    /* pass 2: articulated inertias and bias forces, tip to base */
+    /* pass 2: articulated inertias and bias forces, leaves to base */
     for (int i = n - 1; i >= 0; i--) {
         const double *L = lc + FMUGEN_CHAIN_NC * i, *Si = S + 6 * i;
         double *Ii = IA + 36 * i, *Ui = U + 6 * i, *pi = pA + 6 * i;
+        int par = jt[n + i];
         mv6(Ii, Si, Ui);
         D[i] = dot6(Si, Ui) + L[FMUGEN_CHAIN_ROTOR];
         if (!(D[i] > 0.0) || !isfinite(D[i])) return FMUGEN_NOT_POSITIVE_DEFINITE;
         u[i] = tau[i] - L[FMUGEN_CHAIN_DAMPING] * qd[i] - dot6(Si, pi);
-        if (i > 0) {
-            double *Ip = IA + 36 * (i - 1), *pp = pA + 6 * (i - 1), Ic[6], Ud[6];
+        if (par >= 0) {
+            double *Ip = IA + 36 * par, *pp = pA + 6 * par, Ic[6], Ud[6];
             double inv = 1.0 / D[i], uD = u[i] * inv;
             for (int k = 0; k < 6; k++) Ud[k] = Ui[k] * inv;
             for (int r = 0; r < 6; r++)
@@ -190,11 +213,13 @@ static int aba(int n, const double *lc, const double *g, const double *qd, const
             for (int k = 0; k < 6; k++) pp[k] += pi[k] + Ic[k] + Ui[k] * uD;
         }
     }
-    /* pass 3: accelerations, base to tip */
-    double a[6] = {0.0, 0.0, 0.0, -g[0], -g[1], -g[2]};
+    /* pass 3: accelerations, base to leaves */
+    const double a0[6] = {0.0, 0.0, 0.0, -g[0], -g[1], -g[2]};
     for (int i = 0; i < n; i++) {
-        const double *Si = S + 6 * i;
-        for (int k = 0; k < 6; k++) a[k] += c[6 * i + k];
+        int par = jt[n + i];
+        const double *Si = S + 6 * i, *ap = par >= 0 ? acc + 6 * par : a0;
+        double *a = acc + 6 * i;
+        for (int k = 0; k < 6; k++) a[k] = ap[k] + c[6 * i + k];
         qdd[i] = (u[i] - dot6(U + 6 * i, a)) / D[i];
         for (int k = 0; k < 6; k++) a[k] += Si[k] * qdd[i];
     }
@@ -204,8 +229,8 @@ static int aba(int n, const double *lc, const double *g, const double *qd, const
 }
 
 /* External wrenches as world spatial forces at the base origin, fx (6n):
- * [t + c x f; f] on link ext_link[e] (force f at its centre of mass c,
- * torque t, base coordinates); per link also c, f, t (9n: the derivatives
+ * [t + c x f; f] on body ext_link[e] (force f at its centre of mass c,
+ * torque t, base coordinates); per body also c, f, t (9n: the derivatives
  * need them).  Returns fx, or NULL when there are none. */
 static double *external_forces(int n, int ne, const int *ext_link, const double *ext, const double *lc,
                                const double *R, const double *p, double *fx, double *cft)
@@ -232,16 +257,16 @@ static double *external_forces(int n, int ne, const int *ext_link, const double 
     return fx;
 }
 
-int fmugen_chain_fd(int n, const int *rev, const double *lc, const double *g, const double *q,
+int fmugen_chain_fd(int n, const int *jt, const double *lc, const double *g, const double *q,
                     const double *qd, const double *tau, int ne, const int *ext_link, const double *ext,
                     double *qdd, double *p_ee, double *work)
 {
     double *R = work, *p = R + 9 * n, *S = p + 3 * n, *IA = S + 6 * n, *v = IA + 36 * n;
     double *c = v + 6 * n, *pA = c + 6 * n, *U = pA + 6 * n, *D = U + 6 * n, *u = D + n;
-    double *fx = u + n, *cft = fx + 6 * n;
-    kinematics(n, rev, lc, g, q, R, p, S, IA, p_ee);
+    double *fx = u + n, *cft = fx + 6 * n, *acc = cft + 9 * n;
+    kinematics(n, jt, lc, g, q, R, p, S, IA, p_ee);
     const double *f = external_forces(n, ne, ext_link, ext, lc, R, p, fx, cft);
-    return aba(n, lc, g, qd, tau, f, S, IA, v, c, pA, U, D, u, qdd);
+    return aba(n, jt, lc, g, qd, tau, f, S, IA, v, c, pA, U, D, u, acc, qdd);
 }
 
 /* K -= A + A^T with A = I crm(v): the velocity term of d(I a + v x* I v),
@@ -318,29 +343,32 @@ static int spd_inverse(int n, double *A, double *T, double *Minv)
     return FMUGEN_OK;
 }
 
-int fmugen_chain_fd_jacobian(int n, const int *rev, const double *lc, const double *g, const double *q,
+int fmugen_chain_fd_jacobian(int n, const int *jt, const double *lc, const double *g, const double *q,
                              const double *qd, const double *tau, int ne, const int *ext_link,
                              const double *ext, double *qdd, double *dqdd, double *dp_ee, double *work)
 {
+    size_t nn = (size_t)n * n, n15 = (size_t)15 * n;
     double *R = work, *p = R + 9 * n, *S = p + 3 * n, *I = S + 6 * n, *IA = I + 36 * n, *v = IA + 36 * n;
     double *a = v + 6 * n, *h = a + 6 * n, *f = h + 6 * n, *dv = f + 6 * n, *w = dv + 6 * n;
     double *uu = w + 6 * n, *al = uu + 6 * n, *P = al + 12 * n, *Q = P + 6 * n;
-    double *c = Q + 6 * n, *pA = c + 6 * n, *U = pA + 6 * n, *D = U + 6 * n, *u = D + n;
-    double *M = u + n, *T = M + (size_t)n * n, *Mi = T + (size_t)n * n;
-    double *G = Mi + (size_t)n * n, *H = G + 12 * n;
-    double *fx = H + 6 * n, *cft = fx + 6 * n, *ev = cft + 9 * n, *Ge = ev + 3 * n, *d = Ge + 3 * n;
-    double IC[36], K[36], HC[6], F[6], p_ee[3];
-    double Ts[3] = {0, 0, 0}, Fs[3] = {0, 0, 0}, CF = 0.0, CFm[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
-    kinematics(n, rev, lc, g, q, R, p, S, I, p_ee);
+    double *c = Q + 6 * n, *pA = c + 6 * n, *U = pA + 6 * n, *D = U + 6 * n, *u = D + n, *acc = u + n;
+    double *fx = acc + 6 * n, *cft = fx + 6 * n, *ev = cft + 9 * n, *d = ev + 3 * n;
+    double *ICn = d + n, *Kn = ICn + 36 * n, *HCn = Kn + 36 * n, *Fn = HCn + 6 * n, *XS = Fn + 6 * n;
+    double *M = XS + 16 * n, *T = M + nn, *Mi = T + nn, *Hn = Mi + nn, *Gb = Hn + 6 * nn;
+    int *gb = (int *)(Gb + 15 * nn), *freeb = gb + n, *path = freeb + n;
+    double p_ee[3];
+    kinematics(n, jt, lc, g, q, R, p, S, I, p_ee);
     const double *fxp = external_forces(n, ne, ext_link, ext, lc, R, p, fx, cft);
     /* forward dynamics first: the derivatives are those of ID at qdd = FD */
     memcpy(IA, I, (size_t)36 * n * sizeof(double));
-    int st = aba(n, lc, g, qd, tau, fxp, S, IA, v, c, pA, U, D, u, qdd);
+    int st = aba(n, jt, lc, g, qd, tau, fxp, S, IA, v, c, pA, U, D, u, acc, qdd);
     if (st != FMUGEN_OK) return st;
     /* forward: v_i, a_i, momenta h_i = I_i v_i, forces f_i = I_i a_i + v_i x* h_i, and per joint j
-     * dv_j = S_j x v_{j-1}, w_j = S_j x a_{j-1} - dv_j x v_{j-1}, u_j = 2 v_{j-1} x S_j */
-    double vp[6] = {0, 0, 0, 0, 0, 0}, ap[6] = {0.0, 0.0, 0.0, -g[0], -g[1], -g[2]};
+     * (parent pj) dv_j = S_j x v_pj, w_j = S_j x a_pj - dv_j x v_pj, u_j = 2 v_pj x S_j */
+    const double a0[6] = {0.0, 0.0, 0.0, -g[0], -g[1], -g[2]};
     for (int i = 0; i < n; i++) {
+        int par = jt[n + i];
+        const double *vp = par >= 0 ? v + 6 * par : ZERO6, *ap = par >= 0 ? a + 6 * par : a0;
         double *Si = S + 6 * i, *vi = v + 6 * i, *ai = a + 6 * i, t[6], t2[6];
         crm(Si, vp, dv + 6 * i);
         crm(Si, ap, t);
@@ -355,20 +383,19 @@ int fmugen_chain_fd_jacobian(int n, const int *rev, const double *lc, const doub
         mv6(I + 36 * i, ai, t);
         crf(vi, h + 6 * i, f + 6 * i);
         for (int k = 0; k < 6; k++) f[6 * i + k] += t[k] - (fxp ? fxp[6 * i + k] : 0.0);
-        memcpy(vp, vi, sizeof vp);
-        memcpy(ap, ai, sizeof ap);
     }
-    /* backward: composite sums IC, K, HC, F over the subtree i..n-1; the
-     * 12-vector al_i = [IC_i S_i ; K_i S_i + gamma_i] (S_i . (x x* HC_i) =
-     * gamma_i . x) gives the entries j <= i of row i of dID, the column
-     * vectors P_i, Q_i the entries i < j of column j; and M (lower) */
-    memset(IC, 0, sizeof IC);
-    memset(K, 0, sizeof K);
-    memset(HC, 0, sizeof HC);
-    memset(F, 0, sizeof F);
+    /* backward: composite sums IC, K, HC, F over the subtree of i (each body's
+     * own, then added to its parent's); the 12-vector al_i = [IC_i S_i ; K_i S_i +
+     * gamma_i] (S_i . (x x* HC_i) = gamma_i . x) gives the entries of row i of dID
+     * for the joints j on the path from i to the base, the vectors P_i, Q_i those
+     * of column i for the joints before i; and M (lower) */
+    memset(ICn, 0, (size_t)100 * n * sizeof(double)); /* ICn, Kn, HCn, Fn, XS */
+    memset(M, 0, nn * sizeof(double));
     for (int i = n - 1; i >= 0; i--) {
         const double *L = lc + FMUGEN_CHAIN_NC * i;
         double *Si = S + 6 * i, *Ii = I + 36 * i, t[6], t2[6], t3[6];
+        double *IC = ICn + 36 * i, *K = Kn + 36 * i, *HC = HCn + 6 * i, *F = Fn + 6 * i;
+        int par = jt[n + i];
         for (int k = 0; k < 36; k++) IC[k] += Ii[k];
         add_K(K, Ii, v + 6 * i);
         for (int k = 0; k < 6; k++) {
@@ -396,18 +423,20 @@ int fmugen_chain_fd_jacobian(int n, const int *rev, const double *lc, const doub
         mv6(K, dv + 6 * i, t2);
         crf(dv + 6 * i, HC, t3);
         for (int k = 0; k < 6; k++) Qi[k] -= t[k] + t2[k] + t3[k];
+        double *xs = XS + 16 * i; /* subtree sums of c.f, t, f, c f^T */
         if (fxp) {
             /* external wrenches do not turn with the subtree: with the sums over
-             * k >= i of t_k, f_k, c_k . f_k and c_k f_k^T, S_i . sum E_k(w) = e_i . w
+             * the subtree of t_k, f_k, c_k . f_k and c_k f_k^T, S_i . sum E_k(w) = e_i . w
              * for E_k(w) = [w x t_k + c_k x (w x f_k); w x f_k], and Q_i += sum E_k(w_i) */
             const double *ck = cft + 9 * i, *fk = ck + 3, *tk = ck + 6, *sw = Si, *sv = Si + 3;
-            CF += ck[0] * fk[0] + ck[1] * fk[1] + ck[2] * fk[2];
+            double *Ts = xs + 1, *Fs = xs + 4, *CFm = xs + 7;
+            xs[0] += ck[0] * fk[0] + ck[1] * fk[1] + ck[2] * fk[2];
             for (int r = 0; r < 3; r++) {
                 Ts[r] += tk[r];
                 Fs[r] += fk[r];
                 for (int k = 0; k < 3; k++) CFm[3 * r + k] += ck[r] * fk[k];
             }
-            double *ei = ev + 3 * i, a1[3], a2[3], Ew[3];
+            double CF = xs[0], *ei = ev + 3 * i, a1[3], a2[3], Ew[3];
             cross3(Ts, sw, a1);
             cross3(Fs, sv, a2);
             for (int r = 0; r < 3; r++)
@@ -421,27 +450,45 @@ int fmugen_chain_fd_jacobian(int n, const int *rev, const double *lc, const doub
                 Qi[3 + r] += a2[r];
             }
         }
-        for (int j = 0; j <= i; j++) M[i * n + j] = dot6(ali, S + 6 * j);
-        M[i * n + i] += L[FMUGEN_CHAIN_ROTOR];
+        for (int j = i; j >= 0; j = jt[n + j]) M[(size_t)i * n + j] = dot6(ali, S + 6 * j);
+        M[(size_t)i * n + i] += L[FMUGEN_CHAIN_ROTOR];
+        if (par >= 0) {
+            double *ICp = ICn + 36 * par, *Kp = Kn + 36 * par, *xp = XS + 16 * par;
+            for (int k = 0; k < 36; k++) {
+                ICp[k] += IC[k];
+                Kp[k] += K[k];
+            }
+            for (int k = 0; k < 6; k++) {
+                HCn[6 * par + k] += HC[k];
+                Fn[6 * par + k] += F[k];
+            }
+            if (fxp)
+                for (int k = 0; k < 16; k++) xp[k] += xs[k];
+        }
     }
     st = spd_inverse(n, M, T, Mi);
     if (st != FMUGEN_OK) return st;
     /* dqdd/dq = -Minv dID/dq, dqdd/dqd = -Minv dID/dqd, column by column, without forming dID:
-     *   dID[i][j] (j <= i) = -al_i . [w_j; dv_j]  (q),   al_i . [u_j; S_j] + b_j delta_ij  (qd)
-     *   dID[i][j] (i < j)  =  S_i . Q_j           (q),   S_i . P_j                        (qd)
-     * so column j of Minv dID is G_j W_j + H_j Q_j with the running sums
-     * G_j = sum_{i >= j} Minv[:, i] al_i^T (n x 12) and H_j = sum_{i < j} Minv[:, i] S_i^T (n x 6). */
+     *   dID[i][j] (j on the path from i to the base) = -al_i . [w_j; dv_j]  (q),
+     *                                                  al_i . [u_j; S_j] + b_j delta_ij  (qd)
+     *   dID[i][j] (i before j, on its path)           =  S_i . Q_j  (q),   S_i . P_j  (qd)
+     *   dID[i][j] = 0 for joints on different branches,
+     * so column j of Minv dID is G_j W_j + H_pj Q_j with the sums over the subtree of j
+     * G_j = sum_i Minv[:, i] al_i^T (n x 12) and over the path from j to the base
+     * H_j = sum_i Minv[:, i] S_i^T (n x 6). */
     size_t k3 = 3 * (size_t)n + 6 * (size_t)(ne > 0 ? ne : 0);
-    memset(H, 0, (size_t)6 * n * sizeof(double));
-    for (int j = 0; j < n; j++) { /* upper parts, j ascending; H in registers row by row */
+    for (int j = 0; j < n; j++) { /* upper parts, j ascending (parents first) */
         const double *Qj = Q + 6 * j, *Pj = P + 6 * j, *Mj = Mi + (size_t)j * n, *Sj = S + 6 * j;
+        int par = jt[n + j];
+        const double *Hp = par >= 0 ? Hn + 6 * (size_t)n * par : NULL;
+        double *Hj = Hn + 6 * (size_t)n * j;
         for (int r = 0; r < n; r++) {
             double m = Mj[r], sq = 0.0, sd = 0.0;
             for (int k = 0; k < 6; k++) {
-                double hk = H[(size_t)k * n + r];
+                double hk = Hp ? Hp[(size_t)k * n + r] : 0.0;
                 sq -= Qj[k] * hk;
                 sd -= Pj[k] * hk;
-                H[(size_t)k * n + r] = hk + Sj[k] * m;
+                Hj[(size_t)k * n + r] = hk + Sj[k] * m;
             }
             double *row = dqdd + r * k3;
             row[j] = sq;
@@ -449,9 +496,16 @@ int fmugen_chain_fd_jacobian(int n, const int *rev, const double *lc, const doub
             row[2 * n + j] = m;
         }
     }
-    memset(G, 0, (size_t)12 * n * sizeof(double));
-    memset(Ge, 0, (size_t)3 * n * sizeof(double));
-    for (int j = n - 1; j >= 0; j--) { /* lower parts, j descending */
+    /* lower parts, j descending (children first): the subtree sum G of j lives in a
+     * buffer that j's first finished child hands over (a chain: one buffer throughout) */
+    int nfree = 0, nnew = 0;
+    for (int j = 0; j < n; j++) gb[j] = -1;
+    for (int j = n - 1; j >= 0; j--) {
+        if (gb[j] < 0) {
+            gb[j] = nfree ? freeb[--nfree] : nnew++;
+            memset(Gb + n15 * gb[j], 0, n15 * sizeof(double));
+        }
+        double *G = Gb + n15 * gb[j], *Ge = G + 12 * (size_t)n;
         const double *Mj = Mi + (size_t)j * n, *alj = al + 12 * j;
         double Wq[12], Wd[12], b = -lc[FMUGEN_CHAIN_NC * j + FMUGEN_CHAIN_DAMPING];
         for (int k = 0; k < 6; k++) {
@@ -472,7 +526,7 @@ int fmugen_chain_fd_jacobian(int n, const int *rev, const double *lc, const doub
             row[j] += sq;
             row[n + j] += sd;
         }
-        if (fxp) { /* dID[i][j] += e_i . w_j (j <= i): -M^-1 of it, by the running sum Ge */
+        if (fxp) { /* dID[i][j] += e_i . w_j (i in the subtree of j): -M^-1 of it, by the sum Ge */
             const double *ej = ev + 3 * j, *wj = S + 6 * j;
             for (int r = 0; r < n; r++) {
                 double m = Mj[r], s = 0.0;
@@ -484,32 +538,49 @@ int fmugen_chain_fd_jacobian(int n, const int *rev, const double *lc, const doub
                 dqdd[r * k3 + j] -= s;
             }
         }
+        int par = jt[n + j];
+        if (par >= 0) {
+            if (gb[par] < 0) {
+                gb[par] = gb[j];
+            } else {
+                double *Gp = Gb + n15 * gb[par];
+                size_t len = (fxp ? 15 : 12) * (size_t)n;
+                for (size_t k = 0; k < len; k++) Gp[k] += G[k];
+                freeb[nfree++] = gb[j];
+            }
+        }
     }
-    /* dqdd/dext = -M^-1 dID/dext: tau_i = ... - S_i . [t + c x f; f] for the links k >= i,
-     * so dID_i/df = -(s_w x c + s_v), dID_i/dt = -s_w */
+    /* dqdd/dext = -M^-1 dID/dext: tau_i = ... - S_i . [t + c x f; f] for the joints i on the path
+     * from body k to the base, so dID_i/df = -(s_w x c + s_v), dID_i/dt = -s_w */
     for (int e = 0; e < ne; e++) {
-        int k = ext_link[e];
+        int k = ext_link[e], np = 0;
         const double *ck = cft + 9 * k;
+        for (int i = k; i >= 0; i = jt[n + i]) path[np++] = i;
         for (int comp = 0; comp < 6; comp++) {
-            for (int i = 0; i < n; i++) {
+            for (int t = 0; t < np; t++) {
+                int i = path[t];
                 const double *Si = S + 6 * i;
                 double x[3];
-                if (i > k) {
-                    d[i] = 0.0;
-                } else if (comp < 3) {
+                if (comp < 3) {
                     cross3(Si, ck, x);
-                    d[i] = x[comp] + Si[3 + comp]; /* -dID_i/df_comp */
+                    d[t] = x[comp] + Si[3 + comp]; /* -dID_i/df_comp */
                 } else {
-                    d[i] = Si[comp - 3]; /* -dID_i/dt */
+                    d[t] = Si[comp - 3]; /* -dID_i/dt */
                 }
             }
             size_t col = 3 * (size_t)n + 6 * (size_t)e + comp;
-            for (int r = 0; r < n; r++) dqdd[r * k3 + col] = dot_n(Mi + (size_t)r * n, d, k + 1);
+            for (int r = 0; r < n; r++) {
+                const double *Mr = Mi + (size_t)r * n;
+                double s = 0.0;
+                for (int t = 0; t < np; t++) s += Mr[path[t]] * d[t];
+                dqdd[r * k3 + col] = s;
+            }
         }
     }
     /* (finiteness of the Jacobian is checked by the runtime that asked for it) */
-    if (dp_ee) { /* point velocity of S_j at p_ee: v_O + w x p_ee */
-        for (int j = 0; j < n; j++) {
+    if (dp_ee) { /* point velocity of S_j at p_ee for the joints that move the end effector */
+        memset(dp_ee, 0, (size_t)3 * n * sizeof(double));
+        for (int j = jt[2 * n]; j >= 0; j = jt[n + j]) {
             double t[3], *Sj = S + 6 * j;
             cross3(Sj, p_ee, t);
             for (int r = 0; r < 3; r++) dp_ee[r * n + j] = Sj[3 + r] + t[r];

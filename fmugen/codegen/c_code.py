@@ -13,10 +13,12 @@ Each function body is straight-line C produced from a
 
 1. the steps' expressions and the results (derivatives, outputs, Jacobian
    entries) go through **one joint** common-subexpression elimination
-   (:func:`sympy.cse`), so a quantity used by several steps -- sin(q1) in the
-   kinematics, the dynamics and the end-effector position -- is computed once;
+   (:mod:`fmugen.codegen.cse`: hash-consing of repeated subtrees and of
+   common groups of factors, no expression rebuilt), so a quantity used by
+   several steps -- sin(q1) in the kinematics, the dynamics and the
+   end-effector position -- is computed once;
 2. integer powers whose base is not a plain variable get their base named
-   first, so ``sin(a)**2`` never evaluates ``sin(a)`` twice;
+   too, so ``sin(a)**2`` never evaluates ``sin(a)`` twice;
 3. statements are emitted in program order, each CSE temporary just before
    its first use, dead statements dropped (no unused variables under
    ``-Wall -Wextra``);
@@ -53,9 +55,11 @@ from typing import Iterable, Optional, Sequence
 
 import sympy as sp
 from sympy.printing.c import C99CodePrinter
+from sympy.printing.precedence import precedence
 
 from .model import SymbolicModel, Variable
 from .chain import ChainDynamics, chain_call_lines, chain_ops
+from .cse import common_subexpressions
 from .program import Assign, Program, SolveSPD
 
 __all__ = [
@@ -66,17 +70,7 @@ __all__ = [
     "count_operations",
     "c_identifier",
     "deterministic_guid",
-    "CSE_OPTIMIZATIONS",
 ]
-
-#: Optimisations handed to :func:`sympy.cse`.  ``None`` (no pre/post passes):
-#: the programs fmugen prints already name every non-trivial intermediate, so
-#: each expression is one step of a recursion and the 'basic' passes
-#: (``factor_terms`` and the negation rewriting) find next to nothing to
-#: factor while costing time superlinear in the program size.  Measured on the
-#: test models: identical multiplication counts, several times slower with
-#: 'basic'.
-CSE_OPTIMIZATIONS = None
 
 #: longest C name printed for a variable (C99 guarantees 63 significant
 #: characters of an internal identifier; suffixes keep names unique)
@@ -266,9 +260,53 @@ def count_c_expression(code: str) -> OpCount:
 class _Printer(C99CodePrinter):
     """C99 printer with named symbols, double literals and cheap powers."""
 
-    def __init__(self, names: dict):
-        super().__init__({"strict": False})
+    def __init__(self, names: dict, cse=None):
+        # order "none": the terms of a sum in sympy's canonical argument order
+        # (deterministic, and no sorting at print time)
+        super().__init__({"strict": False, "order": "none"})
         self._names = names
+        self._cse = cse  # a fmugen.codegen.cse.CSE: its temporaries are printed by name
+        self._root = None
+        self._not_supported = set()
+
+    def print_ref(self, ref) -> str:
+        """C of a reduced expression (:class:`~fmugen.codegen.cse.Ref`) or of a symbol."""
+        if isinstance(ref, sp.Symbol):
+            return self._print_Symbol(ref)
+        self._root = ref.expr
+        self._not_supported = set()
+        code = self._print(ref.expr)
+        if self._not_supported:
+            raise ValueError(f"cannot print {', '.join(sorted(map(str, self._not_supported)))} as C")
+        return code
+
+    def _temp(self, expr):
+        """The temporary that stands for ``expr`` here, or None."""
+        if self._cse is None or expr is self._root or expr.is_Atom:
+            return None
+        return self._cse.named.get(expr)
+
+    def _print(self, expr, **kwargs):
+        t = self._temp(expr) if isinstance(expr, sp.Basic) else None
+        if t is not None:
+            return self._names[t]
+        return super()._print(expr, **kwargs)
+
+    def _print_Add(self, expr, order=None):
+        prec = 40  # sympy's precedence of Add
+        parts = []
+        for term in expr.args:
+            named = self._temp(term) is not None
+            t = self._print(term)
+            if t.startswith("-") and not named and not term.is_Add:
+                sign, t = "-", t[1:]
+            else:
+                sign = "+"
+            if not named and (term.is_Add or precedence(term) < prec):
+                t = f"({t})"
+            parts += [sign, t]
+        sign = parts.pop(0)
+        return ("" if sign == "+" else sign) + " ".join(parts)
 
     def _print_Symbol(self, expr):
         try:
@@ -291,6 +329,8 @@ class _Printer(C99CodePrinter):
         return repr(float(expr))
 
     def parenthesize(self, item, level, strict=False):
+        if isinstance(item, sp.Basic) and self._temp(item) is not None:
+            return self._print(item)  # a name
         # A small integer power is printed as a product or a quotient, so it
         # binds like a Mul, not like a power: a/L**2 must become a/(L*L).
         if isinstance(item, sp.Pow) and item.exp.is_Integer and item.exp != 1 \
@@ -308,11 +348,17 @@ class _Printer(C99CodePrinter):
         sign = ""
         if c < 0:
             sign, c = "-", -c
-        factors = ([] if c == 1 else [c]) + list(sp.Mul.make_args(rest))
+        split = self._cse.factors.get(expr) if self._cse is not None else None
+        # factors in sympy's canonical argument order, or the CSE's grouping of them
+        # (which holds the size of the coefficient)
+        if split is not None:
+            factors = list(split)
+        else:
+            factors = ([] if c == 1 else [c]) + list(sp.Mul.make_args(rest))
         factors = [f for f in factors if f != 1]
         num, den = [], []
-        for f in sorted(factors, key=sp.default_sort_key):
-            if f.is_Pow and f.exp.is_Rational and f.exp.is_negative:
+        for f in factors:
+            if f.is_Pow and f.exp.is_Rational and f.exp.is_negative and self._temp(f) is None:
                 den.append(f.base if f.exp == -1 else sp.Pow(f.base, -f.exp, evaluate=False))
             else:
                 num.append(f)
@@ -464,48 +510,13 @@ def _block_copies(copies: list, ind: str, shortest: int = 4) -> list:
     return out
 
 
-def _name_pow_bases(repl: list, exprs: list, symbols) -> tuple:
-    """Name every non-symbol base of a small integer power.
-
-    ``sin(a)**2`` printed as ``sin(a)*sin(a)`` would call sin twice (a C
-    compiler may not merge the calls: sin can set errno).
-    """
-    named: dict = {}
-    new: list = []
-
-    def visit(e):
-        if not isinstance(e, sp.Basic) or e.is_Atom:
-            return e
-        args = tuple(visit(a) for a in e.args)
-        if args != e.args:
-            e = e.func(*args)
-        if (e.is_Pow and e.exp.is_Integer and 2 <= abs(int(e.exp)) <= MAX_PRODUCT_POWER
-                and not e.base.is_Symbol):
-            if e.base not in named:
-                s = next(symbols)
-                named[e.base] = s
-                new.append([s, e.base])
-            return sp.Pow(named[e.base], e.exp)
-        return e
-
-    repl = [(s, visit(v)) for s, v in repl]
-    exprs = [visit(v) for v in exprs]
-    i = 0
-    while i < len(new):  # a named base may hold such a power itself
-        new[i][1] = visit(new[i][1])
-        i += 1
-    return repl + [tuple(x) for x in new], exprs
-
-
-def _cse_prefix(pool: Sequence[sp.Expr], names: "_Names", prefix: str) -> str:
+def _cse_prefix(pool_symbols: Iterable[sp.Symbol], names: "_Names", prefix: str) -> str:
     """A prefix whose numbered symbols collide with no symbol of the pool.
 
     (sympy identifies symbols by name and assumptions, so a CSE temporary
     ``c0`` would silently *be* a program symbol ``c0``.)
     """
-    taken = set(names.used)
-    for e in pool:
-        taken |= {s.name for s in e.free_symbols}
+    taken = set(names.used) | {s.name for s in pool_symbols}
     while any(re.fullmatch(re.escape(prefix) + r"\d+", t) for t in taken):
         prefix += "c"
     return prefix
@@ -559,11 +570,10 @@ def lower(
         group_start.append(len(pool))
         pool.extend(sp.sympify(s.expr) for s in g.sinks)
 
-    symbols = sp.numbered_symbols(_cse_prefix(pool, names, "c"), real=True)
-    repl, reduced = sp.cse(pool, symbols=symbols, optimizations=CSE_OPTIMIZATIONS,
-                           order="canonical")
-    repl, reduced = _name_pow_bases(list(repl), list(reduced), symbols)
-    temps = dict(repl)
+    cse = common_subexpressions(
+        pool, lambda pool_symbols: sp.numbered_symbols(_cse_prefix(pool_symbols, names, "c"), real=True),
+        MAX_PRODUCT_POWER)
+    temps, reduced = dict(cse.temps), cse.reduced
 
     # 2. liveness, backwards from each group's results
     def closure(syms: Iterable) -> set:
@@ -601,13 +611,13 @@ def lower(
         all_need |= need
 
     # 3. emission
-    printer = _Printer(names.map)
+    printer = _Printer(names.map, cse)
     body = Body()
     defined: set = set(known)
     cost = [OpCount(), OpCount()]  # expressions, linear solves
 
     def code_of(e) -> str:
-        code = printer.doprint(e)
+        code = printer.print_ref(e)
         cost[0] = cost[0] + count_c_expression(code)
         return code
 

@@ -1,14 +1,20 @@
-"""Looped dynamics for large arms: a program step that calls ``c_runtime/chain_dynamics.c``.
+"""Looped dynamics for large arms and trees: a program step that calls ``c_runtime/chain_dynamics.c``.
 
 Straight-line code for the forward dynamics of an N-link arm has O(N^2)
 statements and its exact Jacobian O(N^2) to O(N^3): at N = 24 the generated
 ``model.c`` is 63,000 lines that gcc -O2 needs a quarter of an hour for.
 Past :data:`LOOP_MIN_LINKS` links the arm's model therefore holds no
-dynamics at all: one :class:`ChainDynamics` step evaluates the link
-constants (17 numbers per link, expressions of the parameters) and calls the
+dynamics at all: one :class:`ChainDynamics` step evaluates the body
+constants (27 numbers per body, expressions of the parameters) and calls the
 hand-written loops of the runtime -- Featherstone's articulated-body algorithm
 for the forward dynamics (O(N)) and the analytical derivatives of recursive
-Newton-Euler with one Cholesky solve for its Jacobian.  The generated file
+Newton-Euler with one Cholesky solve for its Jacobian.
+
+The runtime works on the general joint model of a kinematic tree: per body a
+parent, a fixed placement (R, p) in the parent's frame, a unit joint axis, a
+joint type (revolute/prismatic), mass, centre of mass, inertia, rotor
+inertia and damping (:func:`tree_constants`).  A Denavit-Hartenberg chain
+is the special case :func:`link_constants` writes.  The generated file
 grows linearly with N (the constants, and one copy per Jacobian entry), so
 deriving, generating and compiling take seconds at N = 60.
 
@@ -32,15 +38,15 @@ import tempfile
 import threading
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Optional, Sequence
 
 import numpy as np
 import sympy as sp
 
 from .program import SolveSPD
 
-__all__ = ["ChainDynamics", "LOOP_MIN_LINKS", "NC", "NG", "link_constants", "chain_work_doubles", "chain_ops",
-           "evaluate_chain"]
+__all__ = ["ChainDynamics", "LOOP_MIN_LINKS", "NC", "NG", "link_constants", "tree_constants", "robot_tree",
+           "chain_work_doubles", "chain_ops", "evaluate_chain"]
 
 #: Arms with at least this many links get the looped dynamics by default
 #: (``state_space_model(strategy="auto")``).  Measured with
@@ -53,41 +59,67 @@ __all__ = ["ChainDynamics", "LOOP_MIN_LINKS", "NC", "NG", "link_constants", "cha
 #: against 8 s.  Six links and fewer -- the PUMA -- keep straight-line code.
 LOOP_MIN_LINKS = 7
 
-#: per-link constants (layout of c_runtime/chain_dynamics.h)
-NC = 17
-#: global constants: gravity (3), end_a
-NG = 4
+#: per-body constants (layout of c_runtime/chain_dynamics.h): placement R (9, row-major) and p (3),
+#: joint axis (3), mass, COM (3), inertia about the COM (xx yy zz xy xz yz), rotor inertia, damping
+NC = 27
+#: global constants: gravity (3), end-effector position in its body's frame (3)
+NG = 6
 
 
 def chain_work_doubles(n: int, kind: str) -> int:
     """Work space of the runtime call, in doubles (``FMUGEN_CHAIN_FD_WORK``, ``FMUGEN_CHAIN_WORK`` of chain_dynamics.h)."""
-    return n * (230 + 3 * n) + 64 if kind == "jacobian" else 96 * n + 16
+    return n * (312 + 24 * n) + 64 if kind == "jacobian" else 104 * n + 16
 
 
 @dataclass(frozen=True)
 class ChainDynamics(SolveSPD):
-    """``X = chain(B)``: the forward dynamics (``kind="fd"``) or its Jacobian of an n-link chain.
+    """``X = chain(B)``: the forward dynamics (``kind="fd"``) or its Jacobian of an n-body tree or chain.
 
-    ``B`` (column) = [q (n), qd (n), tau (n), link constants (n x NC, row by
+    ``B`` (column) = [q (n), qd (n), tau (n), body constants (n x NC, row by
     row), global constants (NG), external wrenches (6 per entry of
-    ``external``: force at the link's centre of mass, torque; base
+    ``external``: force at the body's centre of mass, torque; base
     coordinates)]; ``A`` is empty.  ``X`` (column):
 
     * ``fd``:        [qdd (n), p_ee (3)]
     * ``jacobian``:  [qdd (n), dqdd (n x (3n + 6e), row-major: d/dq, d/dqd, d/dtau, d/dext),
                       dp_ee/dq (3 x n)]
 
-    ``revolute`` holds one bool per joint (False: prismatic); ``external``
-    the 0-based links with an external wrench, in input order.
+    ``revolute`` holds one bool per joint (False: prismatic); ``parent`` the
+    parent of each body (-1: the base; parents are numbered first; empty:
+    a serial chain, body i - 1); ``ee_body`` the body whose frame carries
+    the end effector (None: the last body; -1: none); ``external`` the
+    0-based bodies with an external wrench, in input order.
     """
 
     kind: str = "fd"
     revolute: tuple = ()
     external: tuple = ()
+    parent: tuple = ()
+    ee_body: Optional[int] = None
+
+    def __post_init__(self):
+        n = len(self.revolute)
+        par = self.parents
+        if len(par) != n or any(not (-1 <= p < i) for i, p in enumerate(par)):
+            raise ValueError(f"chain dynamics: parents {par} must number every body after its parent")
+        if not -1 <= self.end_effector < max(n, 1):
+            raise ValueError(f"chain dynamics: end-effector body {self.ee_body} out of range")
 
     @property
     def n(self) -> int:
         return len(self.revolute)
+
+    @property
+    def parents(self) -> tuple:
+        return tuple(self.parent) if self.parent else tuple(range(-1, self.n - 1))
+
+    @property
+    def end_effector(self) -> int:
+        return self.n - 1 if self.ee_body is None else self.ee_body
+
+    def joint_array(self) -> list:
+        """The ``joint`` ints of the runtime call: types, parents, end-effector body."""
+        return [1 if r else 0 for r in self.revolute] + list(self.parents) + [self.end_effector]
 
     def outputs_size(self) -> int:
         n, e = self.n, len(self.external)
@@ -95,18 +127,83 @@ class ChainDynamics(SolveSPD):
 
 
 def link_constants(chain, gravity: Sequence) -> list:
-    """The NC constants of every link and the NG globals as sympy expressions.
+    """The NC constants of every link and the NG globals of a Denavit-Hartenberg chain (sympy).
 
     ``chain`` is :func:`fmugen.dynamics.joint_frames.joint_frame_chain` of the
     robot (payload merged into the last link, inertial data in joint frames).
+    Joint frame F_i = F_{i-1} Tx(a) Rx(alpha) Rz(theta0) Tz(d0) J(q): the placement
+    R = Rx(alpha) Rz(theta0), p = [a, -sin(alpha) d0, cos(alpha) d0], axis z; the end
+    effector is the origin of F_n Tx(end_a).
     """
     out = []
     for L in chain:
-        I = L.inertia_com
-        out += [sp.cos(L.alpha), sp.sin(L.alpha), L.a, L.theta0, L.d0, L.mass, *L.com,
-                I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2], L.rotor_inertia, L.damping]
-    out += [sp.sympify(g) for g in gravity] + [chain[-1].end_a]
+        ca, sa, ct, st = sp.cos(L.alpha), sp.sin(L.alpha), sp.cos(L.theta0), sp.sin(L.theta0)
+        R = [ct, -st, 0, ca * st, ca * ct, -sa, sa * st, sa * ct, ca]
+        p = [L.a, -sa * L.d0, ca * L.d0]
+        out += _body(R, p, (0, 0, 1), L.mass, L.com, L.inertia_com, L.rotor_inertia, L.damping)
+    out += [sp.sympify(g) for g in gravity] + [chain[-1].end_a, sp.Integer(0), sp.Integer(0)]
     return [sp.sympify(e) for e in out]
+
+
+def tree_constants(bodies, gravity: Sequence, ee_position: Sequence = (0, 0, 0)) -> list:
+    """The NC constants of every body and the NG globals of the general joint model (sympy).
+
+    ``bodies``: per body a mapping or object with ``R`` (3x3 placement rotation in the
+    parent frame), ``p`` (3), ``axis`` (3, unit, in the placed frame), ``mass``, ``com``
+    (3, body frame), ``inertia`` (3x3 about the COM, body axes), ``rotor_inertia`` and
+    ``damping``; ``ee_position`` the end effector in its body's frame.
+    """
+    def get(b, k):
+        return b[k] if isinstance(b, dict) else getattr(b, k)
+
+    out = []
+    for b in bodies:
+        R = sp.Matrix(get(b, "R"))
+        out += _body(list(R), list(get(b, "p")), list(get(b, "axis")), get(b, "mass"), list(get(b, "com")),
+                     sp.Matrix(get(b, "inertia")), get(b, "rotor_inertia"), get(b, "damping"))
+    out += [sp.sympify(g) for g in gravity] + [sp.sympify(e) for e in ee_position]
+    return [sp.sympify(e) for e in out]
+
+
+def robot_tree(robot) -> tuple:
+    """``(revolute, parents, ee_body, constants)`` of a robot written in the general joint model.
+
+    ``robot.bodies`` (fmugen.robot.description.Body: parent, rotation, translation, axis, offset,
+    joint, inertial data), ``robot.frames`` and ``robot.end_frame`` (the frame whose origin is
+    p_ee) and ``robot.gravity``.  A joint's constant ``offset`` (a DH theta or d) moves into the
+    placement: R Rot(k, offset) for a revolute joint (a rotation about k commutes with the
+    motion), p + offset R k for a prismatic one.
+    """
+    bodies = []
+    for b in robot.bodies:
+        R, p = sp.Matrix(b.rotation), sp.Matrix(b.translation)
+        k = sp.Matrix(b.axis)
+        off = sp.sympify(getattr(b, "offset", 0))
+        if off != 0:
+            if b.joint == "prismatic":
+                p = p + R * k * off
+            else:
+                c, s = sp.cos(off), sp.sin(off)
+                kx = sp.Matrix([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+                R = R * (c * sp.eye(3) + s * kx + (1 - c) * k * k.T)
+        bodies.append(dict(R=R, p=list(p), axis=list(k), mass=b.mass, com=list(b.com),
+                           inertia=sp.Matrix(b.inertia_com), rotor_inertia=b.rotor_inertia, damping=b.damping))
+    frames = {f.name: f for f in getattr(robot, "frames", ())}
+    end = frames.get(getattr(robot, "end_frame", ""))
+    if end is None:
+        ee, ee_pos = len(bodies) - 1, (0, 0, 0)
+    elif end.parent < 0:
+        raise ValueError(f"{robot.name}: the end-effector frame {end.name!r} is fixed to the base")
+    else:
+        ee, ee_pos = end.parent, tuple(end.translation)
+    revolute = tuple(b.joint != "prismatic" for b in robot.bodies)
+    parents = tuple(int(b.parent) for b in robot.bodies)
+    return revolute, parents, ee, tree_constants(bodies, robot.gravity, ee_pos)
+
+
+def _body(R, p, axis, mass, com, I, rotor, damping) -> list:
+    I = sp.Matrix(I)
+    return [*R, *p, *axis, mass, *com, I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2], rotor, damping]
 
 
 def chain_call_lines(st: ChainDynamics, index: int, b_code: list, ind: str) -> tuple:
@@ -119,19 +216,21 @@ def chain_call_lines(st: ChainDynamics, index: int, b_code: list, ind: str) -> t
     """
     n, ne = st.n, len(st.external)
     tag = f"chain{index}"
-    rev = ", ".join("1" if r else "0" for r in st.revolute)
+    joint = ", ".join(str(j) for j in st.joint_array())
     nb = 3 * n + NC * n + NG + 6 * ne
     nx = st.outputs_size()
     lines = [f"{ind}/* {'forward dynamics' if st.kind == 'fd' else 'Jacobian of the forward dynamics'} "
-             f"of the {n}-link chain: loops of c_runtime/chain_dynamics.c */",
-             f"{ind}static const int {tag}_rev[{n}] = {{{rev}}};"]
+             f"of the {n}-body {'chain' if st.parents == tuple(range(-1, n - 1)) else 'tree'}: "
+             f"loops of c_runtime/chain_dynamics.c */",
+             f"{ind}/* joint types (1 revolute, 0 prismatic), parents (-1 base), end-effector body */",
+             f"{ind}static const int {tag}_jt[{2 * n + 1}] = {{{joint}}};"]
     if ne:
         lines.append(f"{ind}static const int {tag}_ext[{ne}] = {{{', '.join(str(k) for k in st.external)}}};")
     lines.append(f"{ind}double {tag}_in[{nb}];")
     lines += [f"{ind}{tag}_in[{k}] = {c};" for k, c in enumerate(b_code)]
     q, lc, g = f"{tag}_in", f"{tag}_in + {3 * n}", f"{tag}_in + {3 * n + NC * n}"
     ext = f"{ne}, {tag}_ext, {tag}_in + {3 * n + NC * n + NG}" if ne else "0, NULL, NULL"
-    args = f"{n}, {tag}_rev, {lc}, {g}, {q}, {q} + {n}, {q} + {2 * n}, {ext}"
+    args = f"{n}, {tag}_jt, {lc}, {g}, {q}, {q} + {n}, {q} + {2 * n}, {ext}"
     if st.kind == "fd":
         lines += [f"{ind}double {tag}_x[{nx}], {tag}_w[{chain_work_doubles(n, 'fd')}];",
                   f"{ind}status = fmugen_chain_fd({args}, {tag}_x, {tag}_x + {n}, {tag}_w);",
@@ -147,22 +246,26 @@ def chain_call_lines(st: ChainDynamics, index: int, b_code: list, ind: str) -> t
 
 
 def chain_ops(n: int, kind: str, ne: int = 0):
-    """Floating-point operations of one runtime call for n links (:class:`~fmugen.codegen.c_code.OpCount`).
+    """Floating-point operations of one runtime call for n bodies (:class:`~fmugen.codegen.c_code.OpCount`).
 
     Counted by hand from the loops of ``c_runtime/chain_dynamics.c`` with the
     rules of :class:`~fmugen.codegen.c_code.OpCount`, so that looped and
-    straight-line models report comparable figures.  Per link: kinematics
-    122 mul / 95 add / sin and cos; the articulated-body algorithm 229 mul /
-    241 add / 2 div.  The Jacobian adds, per link, the forward (180 / 144)
-    and backward (348 / 399) derivative passes; per pair of joints the mass
-    matrix (6 / 5, lower triangle) and the columns of M^-1 dID (55 / 56); and
-    the Cholesky factorisation, L^-1 and M^-1 = L^-T L^-1 (each ~n^3/6);
-    with ``ne`` external wrenches about 40 mul per link and 9 per pair more,
-    and n^2 per wrench component.
+    straight-line models report comparable figures; joint axes along z (every
+    DH chain; another axis costs 27 mul / 27 add more per body).  Per body:
+    kinematics 137 mul / 107 add / sin and cos; the articulated-body algorithm
+    229 mul / 241 add / 2 div.  The Jacobian adds, per body, the forward (180 /
+    144) and backward (348 / 483, composite sums handed to the parent included)
+    derivative passes; per pair of joints on one path the mass matrix (6 / 5,
+    lower triangle) and, for every pair, the columns of M^-1 dID (55 / 56); and
+    the Cholesky factorisation, L^-1 and M^-1 = L^-T L^-1 (each ~n^3/6); with
+    ``ne`` external wrenches about 40 mul per body and 9 per pair more, and n^2
+    per wrench component.  For a tree the pairs on one path are fewer than the
+    chain's n(n+1)/2 counted here; the subtree sums of the branches add 12 n
+    additions per branch point.
     """
     from .c_code import OpCount
 
-    fd = OpCount(mul=351 * n + 12 * ne, add=336 * n + 18 * ne, div=2 * n, calls=(("cos", n), ("sin", n)))
+    fd = OpCount(mul=366 * n + 12 * ne, add=348 * n + 18 * ne, div=2 * n, calls=(("cos", n), ("sin", n)))
     if kind == "fd":
         return fd
     if ne:
@@ -174,7 +277,7 @@ def chain_ops(n: int, kind: str, ne: int = 0):
     minv = n * (n + 1) * (n + 2) // 6
     return fd + OpCount(
         mul=(180 + 348) * n + 6 * tri + chol + linv + n * (n - 1) // 2 + minv + 55 * n * n,
-        add=(144 + 399) * n + 5 * tri + chol + linv + minv + 56 * n * n,
+        add=(144 + 483) * n + 5 * tri + chol + linv + minv + 56 * n * n,
         div=n * (n - 1) // 2 + n,
         calls=(("sqrt", n),),
     )
@@ -219,15 +322,19 @@ def _library():
         return _lib
 
 
-def evaluate_chain(kind: str, revolute: Sequence[bool], b: Sequence[float], external: Sequence[int] = ()) -> np.ndarray:
+def evaluate_chain(kind: str, revolute: Sequence[bool], b: Sequence[float], external: Sequence[int] = (),
+                   parent: Sequence[int] = (), ee_body: Optional[int] = None) -> np.ndarray:
     """X of a :class:`ChainDynamics` step for the numbers ``b`` (its B), by the runtime's loops."""
+    st = ChainDynamics(sp.zeros(0, 1), sp.zeros(0, 0), sp.zeros(0, 1), kind=kind, revolute=tuple(revolute),
+                       external=tuple(external), parent=tuple(parent), ee_body=ee_body)
     n, ne = len(revolute), len(external)
     b = np.ascontiguousarray(np.asarray(b, dtype=float))
     if b.size != 3 * n + NC * n + NG + 6 * ne:
         raise ValueError(f"chain dynamics of {n} links: {b.size} inputs, expected {3 * n + NC * n + NG + 6 * ne}")
     out = np.zeros(n + 3 if kind == "fd" else n + n * (3 * n + 6 * ne) + 3 * n)
     work = np.zeros(chain_work_doubles(n, kind))
-    rev = (ctypes.c_int * n)(*[1 if r else 0 for r in revolute])
+    joint = st.joint_array()
+    rev = (ctypes.c_int * len(joint))(*joint)
     xl = (ctypes.c_int * max(ne, 1))(*(list(external) or [0]))
     dp = ctypes.POINTER(ctypes.c_double)
 

@@ -19,6 +19,15 @@ from .chain import ChainDynamics
 from .program import Assign, Program, SolveSPD
 
 
+def _finite_signs(expr):
+    """``sign(a)**-k`` -> ``sign(a)**k`` (equal where a != 0, finite at a = 0): sympy differentiates some
+    nested ``Abs`` (smooth kinks of component files) into ``1/sign(a)``, 0/0 in C exactly at the kink."""
+    if not expr.has(sp.sign):
+        return expr
+    return expr.replace(lambda e: e.is_Pow and isinstance(e.base, sp.sign) and e.exp.is_negative,
+                        lambda e: e.base ** (-e.exp))
+
+
 def differentiate(
     sources: Sequence[Program],
     exprs: Sequence[sp.Expr],
@@ -62,7 +71,7 @@ def differentiate(
                 ds = deriv[s]
             else:
                 continue
-            partial = expr.diff(s)
+            partial = _finite_signs(expr.diff(s))
             if partial == 0:
                 continue
             if len(ds) > 1:

@@ -59,7 +59,7 @@ def compile_program(
         elif isinstance(st, ChainDynamics):  # the runtime's own loops, through ctypes
             args = ", ".join(pr.doprint(e) for e in st.B)
             lines.append(f"    _X = _chain({st.kind!r}, {tuple(bool(r) for r in st.revolute)!r}, [{args}], "
-                         f"{tuple(int(k) for k in st.external)!r})")
+                         f"{tuple(int(k) for k in st.external)!r}, {st.parents!r}, {st.end_effector!r})")
             lines += [f"    v_{xs.name} = _X[{i}]" for i, xs in enumerate(st.X)]
         else:
             n, k = st.B.shape

@@ -5,6 +5,7 @@
 * :func:`linearize_fmu` -- the same matrices from a built FMU through
   ``fmi2GetDirectionalDerivative`` (what any other FMI tool would see);
 * :func:`scene_model` -- a scene closed as written, or opened (controllers removed);
+* :func:`state_feedback_file` -- u = u_ff - K (x - x_ref) written as a component file (K from ``lqr``);
 * :mod:`.names` -- the naming rule (FMI names; '.' written '_' for python-control).
 
 Every function takes a SymbolicModel or a scene (an object with
@@ -14,8 +15,10 @@ from .names import signal_name
 from .linearize import linearize
 from .trim import OperatingPoint, TrimError, trim
 from .scene import scene_model
+from .feedback import state_feedback_file
 
-__all__ = ["trim", "linearize", "linearize_fmu", "scene_model", "OperatingPoint", "TrimError", "signal_name"]
+__all__ = ["trim", "linearize", "linearize_fmu", "scene_model", "OperatingPoint", "TrimError", "signal_name",
+           "state_feedback_file"]
 
 
 def __getattr__(name):

@@ -1,19 +1,21 @@
-"""The chain in joint frames: one form for both Denavit-Hartenberg conventions.
+"""Joint transforms of the general joint model, and the DH chain in joint frames.
 
-Both conventions are alternating products of constant transforms and joint
-transforms J(q) = Rz(theta) Tz(d):
+Every body i of a :class:`~fmugen.robot.description.Robot` is placed in its
+parent's frame by ``[R, p] * M(axis, q_i + offset)`` (see
+:mod:`fmugen.robot.description`).  :func:`joint_transform` binds, in a
+Program, the rotation ``^{parent}R_i`` and translation ``^{parent}p_i`` of the
+body frame for joint value q_i: both formulations' tree recursions, the
+composite-rigid-body mass matrix and the forward kinematics read it.
 
-* standard (thesis eq. 1):  A_i = J_i X_i            with X_i = Tx(a_i) Rx(alpha_i)
-* modified (Craig):         A_i = X'_i J_i           with X'_i = Rx(alpha_{i-1}) Tx(a_{i-1})
+The motion about a unit axis k by the angle theta is Rodrigues' rotation
+``c E + s [k]x + (1 - c) k k^T``; for an exact axis (z of a DH chain, an
+aligned URDF axis) sympy folds the structural zeros and ones, so a DH chain
+gives exactly the statements of ``Rx(alpha) Rz(theta)`` and a URDF joint
+placed without rotation gives the bare Rodrigues matrix.
 
-Writing the standard chain as J_1 X_1 J_2 X_2 ... shows it is a modified chain
-with the a and alpha of the *previous* link in front of each joint.  The
-Newton-Euler recursion therefore works in *joint frames* F_i, in which joint
-i acts about or along z, and F_i = F_{i-1} Rx(alpha'_i) Tx(a'_i) J_i.  A link's
-inertial data, given in its own DH frame L_i = F_i D_i (D_i = X_i for the
-standard convention, identity for the modified one), are moved into F_i once,
-as parameter-only expressions.  This is also why Khalil's customised symbolic
-models use the modified convention: every joint axis is z of its own frame.
+:func:`joint_frame_chain` keeps the Denavit-Hartenberg view (a, alpha, theta,
+d per joint frame) that the looped runtime of large chains
+(:mod:`fmugen.codegen.chain`) and the Pinocchio model of the benchmarks read.
 """
 from __future__ import annotations
 
@@ -34,9 +36,38 @@ def rot_z(theta):
     return sp.Matrix([[c, -s, 0], [s, c, 0], [0, 0, 1]])
 
 
+def axis_rotation(k, c, s) -> list:
+    """Rodrigues' rotation about the unit axis k with cos c and sin s (rows, unbound)."""
+    k = [sp.sympify(x) for x in k]
+    K = [[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]]
+    # formal cos/sin first, so that c + (1 - c) folds to an exact 1 even for numeric angles
+    C, S = sp.Dummy("c"), sp.Dummy("s")
+    rows = [[(C if r == m else 0) + S * K[r][m] + (1 - C) * k[r] * k[m] for m in range(3)] for r in range(3)]
+    return [[sp.expand(e).xreplace({C: c, S: s}) for e in row] for row in rows]
+
+
+def joint_transform(P, trig, body, q_i) -> tuple:
+    """``(R, p)``: body frame in its parent's frame for joint value ``q_i``, entries bound in P."""
+    R0 = [[sp.sympify(x) for x in row] for row in body.rotation]
+    p0 = [sp.sympify(x) for x in body.translation]
+    k = [sp.sympify(x) for x in body.axis]
+    theta = q_i + body.offset
+    if body.joint == REVOLUTE:
+        c, s = trig.cos_sin(theta)
+        Rm = axis_rotation(k, c, s)
+        R = [[P.let(sum(R0[r][m] * Rm[m][col] for m in range(3))) for col in range(3)] for r in range(3)]
+        p = [P.let(x) for x in p0]
+    elif body.joint == PRISMATIC:
+        R = [[P.let(x) for x in row] for row in R0]
+        p = [P.let(p0[r] + sum(R0[r][m] * k[m] for m in range(3)) * theta) for r in range(3)]
+    else:
+        raise ValueError(f"unknown joint type {body.joint!r}")
+    return R, p
+
+
 @dataclass(frozen=True)
 class JointFrameLink:
-    """Link i seen from its joint frame F_i (all entries sympy expressions)."""
+    """Link i of a DH chain seen from its joint frame F_i (all entries sympy expressions)."""
 
     joint: str
     alpha: sp.Expr  # constant rotation Rx(alpha) in front of the joint
@@ -55,7 +86,9 @@ class JointFrameLink:
 
 
 def joint_frame_chain(robot: Robot) -> tuple:
-    """The robot's links (payload merged) expressed in joint frames."""
+    """The links of a DH robot (payload merged) expressed in joint frames."""
+    if not robot.links:
+        raise ValueError(f"{robot.name}: written as joints, not as a Denavit-Hartenberg chain")
     links = combined_last_link(robot)
     out = []
     for i, L in enumerate(links):
@@ -69,10 +102,7 @@ def joint_frame_chain(robot: Robot) -> tuple:
             end_a, end_alpha = sp.Integer(0), sp.Integer(0)
         else:  # the loader rejects this; keep a clear message for direct callers
             raise ValueError(f"unknown DH convention {robot.convention!r}")
-        # data given in L_i = F_i Tx(end_a) Rx(end_alpha): r_F = [end_a,0,0] + Rx r_L
-        Rx = rot_x(end_alpha)
-        com = Rx * sp.Matrix(L.com) + sp.Matrix([end_a, 0, 0])
-        inertia = Rx * sp.Matrix(L.inertia_com) * Rx.T
+        body = robot.bodies[i]
         out.append(
             JointFrameLink(
                 joint=L.joint,
@@ -80,9 +110,9 @@ def joint_frame_chain(robot: Robot) -> tuple:
                 a=a_in,
                 theta0=L.theta,
                 d0=L.d,
-                mass=L.mass,
-                com=tuple(com),
-                inertia_com=inertia,
+                mass=body.mass,
+                com=tuple(body.com),
+                inertia_com=sp.Matrix(body.inertia_com),
                 rotor_inertia=L.rotor_inertia,
                 damping=L.damping,
                 external_wrench=L.external_wrench,
@@ -91,12 +121,3 @@ def joint_frame_chain(robot: Robot) -> tuple:
             )
         )
     return tuple(out)
-
-
-def joint_angle_and_offset(link, q):
-    """(theta, d) of the joint transform for joint value q."""
-    if link.joint == REVOLUTE:
-        return link.theta0 + q, link.d0
-    if link.joint == PRISMATIC:
-        return link.theta0, link.d0 + q
-    raise ValueError(f"unknown joint type {link.joint!r}")

@@ -46,6 +46,13 @@ def _real(name):
     return sp.Symbol(name, real=True)
 
 
+def _ee_label(robot) -> str:
+    """Where p_ee is, in words: "frame 6" (DH), or the frame's name."""
+    if robot.links and robot.end_frame == f"frame{robot.n}":
+        return f"frame {robot.n}"
+    return robot.end_frame
+
+
 @dataclass
 class Derivation:
     """One Program with the inverse-dynamics engine that writes into it."""
@@ -74,7 +81,7 @@ class Manipulator:
         self.qd = [_real(f"qd_{i + 1}") for i in range(n)]
         self.qdd = [_real(f"qdd_{i + 1}") for i in range(n)]
         self.tau = [_real(f"tau_{i + 1}") for i in range(n)]
-        self.external_links = [i for i, L in enumerate(robot.links) if L.external_wrench]
+        self.external_links = [i for i, L in enumerate(robot.bodies) if L.external_wrench]
         self.ext = {}
         for k in self.external_links:
             f = [_real(f"f_ext_{k + 1}_{c}") for c in "xyz"]
@@ -98,8 +105,11 @@ class Manipulator:
         P = Program(prefix)
         trig = TrigCache(P)
         if formulation == "newton_euler":
-            engine = NestedBodyInverseDynamics(P, joint_frame_chain(self.robot), trig)
+            engine = NestedBodyInverseDynamics(P, self.robot.bodies, trig)
         elif formulation == "lagrange":
+            if not self.robot.links:
+                raise ValueError(f"{self.robot.name}: the recursive Lagrange formulation reads "
+                                 "Denavit-Hartenberg files; this robot is written as joints (use newton_euler)")
             engine = RecursiveLagrange(P, self.robot, trig)
         else:
             raise ValueError(f"formulation must be one of {FORMULATIONS}, not {formulation!r}")
@@ -146,9 +156,10 @@ class Manipulator:
     def kinematics_program(self) -> tuple:
         """(Program, T_N as 4x4 Matrix, J as 6 x n Matrix)."""
         P = Program("_k")
-        Ts = kinematics.link_frames(P, self.robot, self.q)
-        J = kinematics.geometric_jacobian(P, self.robot, Ts)
-        return P, sp.Matrix(Ts[-1]), J
+        Ts = kinematics.body_frames(P, self.robot, self.q)
+        body, T = kinematics.frame_pose(P, self.robot, Ts, self.robot.end_frame)
+        J = kinematics.geometric_jacobian(P, self.robot, Ts, [T[r][3] for r in range(3)], body)
+        return P, sp.Matrix(T), J
 
     # closed forms (small robots, tests and printing only)
     def closed_form(self, formulation=None) -> tuple:
@@ -194,9 +205,10 @@ class Manipulator:
         locked = dict(locked or {})
         if strategy not in ("auto", "straight", "loops"):
             raise ValueError(f"strategy must be 'auto', 'straight' or 'loops', not {strategy!r}")
-        loopable = not locked
+        loopable = not locked and bool(robot.links)
         if strategy == "loops" and not loopable:
-            raise ValueError(f"{robot.name}: strategy='loops' does not handle locked joints; "
+            why = "locked joints" if locked else "robots written as joints (URDF), only DH chains"
+            raise ValueError(f"{robot.name}: strategy='loops' does not handle {why}; "
                              f"use strategy='straight'")
         if strategy == "loops" or (strategy == "auto" and loopable and n >= LOOP_MIN_LINKS):
             return self._looped_state_space_model(outputs, name)
@@ -223,16 +235,18 @@ class Manipulator:
             qdd[i] = qdd_f[k]
         out_vars, out_exprs = [], []
         if "p_ee" in outputs:
-            Ts = kinematics.link_frames(P, robot, q, d.trig)
+            transform = d.engine.rotation_translation if isinstance(d.engine, NestedBodyInverseDynamics) else None
+            Ts = kinematics.body_frames(P, robot, q, d.trig, transform)
+            _, T_ee = kinematics.frame_pose(P, robot, Ts, robot.end_frame)
             for r in range(3):
                 out_vars.append(Variable(f"p_ee[{r + 1}]", _real(f"p_ee_{r + 1}"), "m",
-                                         f"end-effector position (origin of frame {n}), base {'xyz'[r]}"))
-                out_exprs.append(Ts[-1][r][3])
+                                         f"end-effector position (origin of {_ee_label(robot)}), base {'xyz'[r]}"))
+                out_exprs.append(T_ee[r][3])
         if "qdd" in outputs:
             for i in free:
-                unit = "rad/s2" if robot.links[i].joint == REVOLUTE else "m/s2"
+                unit = "rad/s2" if robot.bodies[i].joint == REVOLUTE else "m/s2"
                 out_vars.append(Variable(f"qdd[{i + 1}]", _real(f"qdd_out_{i + 1}"), unit,
-                                         f"acceleration of joint {i + 1} ({robot.links[i].name})"))
+                                         f"acceleration of joint {i + 1} ({robot.bodies[i].name})"))
                 out_exprs.append(qdd[i])
 
         # exact Jacobians: ID(q, qd, qdd*) = tau  =>  dqdd/dz = -M^{-1} dID/dz
@@ -269,18 +283,18 @@ class Manipulator:
 
         states = []
         for i in free:
-            L = robot.links[i]
+            L = robot.bodies[i]
             rev = L.joint == REVOLUTE
             states.append(Variable(f"q[{i + 1}]", self.q[i], "rad" if rev else "m",
                                    f"position of joint {i + 1} ({L.name}, {L.joint})", start=0.0, output=True))
         for i in free:
-            L = robot.links[i]
+            L = robot.bodies[i]
             rev = L.joint == REVOLUTE
             states.append(Variable(f"qd[{i + 1}]", self.qd[i], "rad/s" if rev else "m/s",
                                    f"velocity of joint {i + 1} ({L.name})", start=0.0, output=True))
         inputs = []
         for i in free:
-            L = robot.links[i]
+            L = robot.bodies[i]
             rev = L.joint == REVOLUTE
             inputs.append(Variable(f"tau[{i + 1}]", self.tau[i], "N.m" if rev else "N",
                                    f"{'torque' if rev else 'force'} applied by actuator {i + 1}", start=0.0))
@@ -318,7 +332,7 @@ class Manipulator:
         program another.
         """
         n, robot = self.n, self.robot
-        rev = tuple(L.joint == REVOLUTE for L in robot.links)
+        rev = tuple(L.joint == REVOLUTE for L in robot.bodies)
         ext, ne = self.ext_symbols, len(self.external_links)
         B = sp.Matrix(self.q + self.qd + self.tau
                       + link_constants(joint_frame_chain(robot), robot.gravity) + ext)
@@ -343,9 +357,9 @@ class Manipulator:
                 out_exprs.append(pee[r])
         if "qdd" in outputs:
             for i in range(n):
-                unit = "rad/s2" if robot.links[i].joint == REVOLUTE else "m/s2"
+                unit = "rad/s2" if robot.bodies[i].joint == REVOLUTE else "m/s2"
                 out_vars.append(Variable(f"qdd[{i + 1}]", _real(f"qdd_out_{i + 1}"), unit,
-                                         f"acceleration of joint {i + 1} ({robot.links[i].name})"))
+                                         f"acceleration of joint {i + 1} ({robot.bodies[i].name})"))
                 out_exprs.append(qdd[i])
         dfdx = sp.zeros(2 * n, 2 * n)
         dfdx[:n, n:] = sp.eye(n)
@@ -363,10 +377,10 @@ class Manipulator:
             dgdu[row:row + n, :] = Y[:, 2 * n:]
         states = [Variable(f"q[{i + 1}]", self.q[i], "rad" if rev[i] else "m",
                            f"position of joint {i + 1} ({L.name}, {L.joint})", start=0.0, output=True)
-                  for i, L in enumerate(robot.links)]
+                  for i, L in enumerate(robot.bodies)]
         states += [Variable(f"qd[{i + 1}]", self.qd[i], "rad/s" if rev[i] else "m/s",
                             f"velocity of joint {i + 1} ({L.name})", start=0.0, output=True)
-                   for i, L in enumerate(robot.links)]
+                   for i, L in enumerate(robot.bodies)]
         inputs = [Variable(f"tau[{i + 1}]", self.tau[i], "N.m" if rev[i] else "N",
                            f"{'torque' if rev[i] else 'force'} applied by actuator {i + 1}", start=0.0)
                   for i in range(n)]
@@ -409,7 +423,7 @@ class Manipulator:
         for group, stem, units, what in ((self.q, "q", ("rad", "m"), "position"),
                                          (self.qd, "qd", ("rad/s", "m/s"), "velocity"),
                                          (self.qdd, "qdd", ("rad/s2", "m/s2"), "acceleration")):
-            for i, L in enumerate(robot.links):
+            for i, L in enumerate(robot.bodies):
                 unit = units[0] if L.joint == REVOLUTE else units[1]
                 inputs.append(Variable(f"{stem}[{i + 1}]", group[i], unit, f"{what} of joint {i + 1} ({L.name})",
                                        start=0.0))
@@ -417,7 +431,7 @@ class Manipulator:
         outputs = tuple(
             Variable(f"tau[{i + 1}]", _real(f"tau_out_{i + 1}"), "N.m" if L.joint == REVOLUTE else "N",
                      f"{'torque' if L.joint == REVOLUTE else 'force'} that joint {i + 1} needs")
-            for i, L in enumerate(robot.links))
+            for i, L in enumerate(robot.bodies))
         Jp = Program("_j")
         D = differentiate([P], tau, [v.symbol for v in inputs], Jp)
         params = tuple(Variable(p.name, p.symbol, p.unit, p.description, start=p.value) for p in robot.parameters)
@@ -529,14 +543,12 @@ class Manipulator:
     def _potential(self, q, params) -> float:
         k = ("PE", None)
         if k not in self._compiled:
-            from ..robot.description import combined_last_link
-
             P = Program("_e")
-            Ts = kinematics.link_frames(P, self.robot, self.q)
+            Ts = kinematics.body_frames(P, self.robot, self.q)
             g = [sp.sympify(x) for x in self.robot.gravity]
             pe = 0
-            for i, L in enumerate(combined_last_link(self.robot)):
-                T = Ts[i + 1]
+            for i, L in enumerate(self.robot.bodies):
+                T = Ts[i]
                 c = [sum(T[r][m] * L.com[m] for m in range(3)) + T[r][3] for r in range(3)]
                 pe += -L.mass * sum(g[r] * c[r] for r in range(3))
             self._compiled[k] = compile_program(P, [self.q, self.parameter_symbols], [pe], "potential")

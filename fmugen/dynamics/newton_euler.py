@@ -13,6 +13,10 @@ so the projection of the nest's momentum balance on the axis is the joint's
 generalized force.  Collected for all joints this is the report's eq. (17),
 B(x) x'' = f(x, x') + e(x, F^ext, T^ext, F^motor, T^motor).
 
+On a kinematic tree nest i is body i and all its descendants; the inward
+pass adds each child's nest force and moment into its parent's (Featherstone's
+RNEA over lambda(i), in the report's nested-body form).
+
 The report writes every vector in inertial coordinates.  Here the same nest
 sums are accumulated in each link's *joint frame* (see
 :mod:`fmugen.dynamics.joint_frames`), where the joint axis is z: the nest
@@ -41,30 +45,49 @@ import sympy as sp
 from ..codegen.program import Program
 from ..robot.description import PRISMATIC, REVOLUTE
 from . import vectors as V
-from .joint_frames import joint_angle_and_offset
+from .joint_frames import joint_transform
 from .trig import TrigCache
 
 
-class NestedBodyInverseDynamics:
-    """Builds tau = M(q) qdd + h(q, qd) into a Program, link by link.
+def _cross(a, b):
+    """a x b, unbound (for products with structural zeros, such as w x (qd z))."""
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 
-    One instance per Program: the per-link parameter combinations (first
+
+class NestedBodyInverseDynamics:
+    """Builds tau = M(q) qdd + h(q, qd) into a Program, body by body, over a tree.
+
+    ``bodies`` are the robot's :class:`~fmugen.robot.description.Body`
+    entries (topological order, parent index per body).  On a tree, nest i
+    is body i with all its descendants: the outward pass carries velocities
+    and accelerations from each body's parent, the inward pass sums each
+    body's children into its nest force and moment.
+
+    One instance per Program: the per-body parameter combinations (first
     moments, inertia about the joint origin) and the sin/cos of every joint
     angle are bound once and shared by every call of :meth:`torques`.
     """
 
-    def __init__(self, program: Program, chain: Sequence, trig: Optional[TrigCache] = None):
+    def __init__(self, program: Program, bodies: Sequence, trig: Optional[TrigCache] = None):
         self.P = program
-        self.chain = tuple(chain)
+        self.bodies = tuple(bodies)
+        self.children = [[] for _ in self.bodies]
+        for i, b in enumerate(self.bodies):
+            if b.parent >= 0:
+                self.children[b.parent].append(i)
         self.trig = trig or TrigCache(program)
         self._inertial = {}
         self._frames = {}
 
-    # --- per-link constants -----------------------------------------------
+    @property
+    def chain(self) -> tuple:
+        return self.bodies
+
+    # --- per-body constants -----------------------------------------------
     def inertial(self, i: int):
-        """(m, m*c, I_o) of link i in its joint frame, bound once."""
+        """(m, m*c, I_o) of body i in its body frame, bound once."""
         if i not in self._inertial:
-            L, P = self.chain[i], self.P
+            L, P = self.bodies[i], self.P
             m = P.let(L.mass, "m")
             c = [sp.sympify(x) for x in L.com]
             mc = [P.let(m * ck, "mc") for ck in c]
@@ -74,29 +97,17 @@ class NestedBodyInverseDynamics:
             Io = [[None] * 3 for _ in range(3)]
             for r in range(3):
                 for k in range(r, 3):
-                    e = Ic[r, k] + m * ((cc if r == k else 0) - c[r] * c[k])
+                    e = Ic[r][k] + m * ((cc if r == k else 0) - c[r] * c[k])
                     Io[r][k] = Io[k][r] = P.let(e, "I")
             self._inertial[i] = (m, mc, Io)
         return self._inertial[i]
 
     def rotation_translation(self, i: int, q_i):
-        """^{i-1}R_i = Rx(alpha) Rz(theta) and ^{i-1}p_i = [a, -s_a d, c_a d], bound once."""
+        """^{parent}R_i and ^{parent}p_i of body i (:func:`~.joint_frames.joint_transform`), bound once."""
         key = (i, q_i)
-        if key in self._frames:
-            return self._frames[key]
-        L = self.chain[i]
-        theta, d = joint_angle_and_offset(L, q_i)
-        ca, sa = self.trig.cos_sin(L.alpha)
-        ct, st = self.trig.cos_sin(theta)
-        P = self.P
-        R = [
-            [ct, -st, sp.Integer(0)],
-            [P.let(ca * st), P.let(ca * ct), -sa],
-            [P.let(sa * st), P.let(sa * ct), ca],
-        ]
-        p = [sp.sympify(L.a), P.let(-sa * d), P.let(ca * d)]
-        self._frames[key] = (R, p)
-        return R, p
+        if key not in self._frames:
+            self._frames[key] = joint_transform(self.P, self.trig, self.bodies[i], q_i)
+        return self._frames[key]
 
     def u_matrix(self, w, dw):
         """U = skew(w') + skew(w) skew(w), so that w' x r + w x (w x r) = U r.
@@ -128,76 +139,74 @@ class NestedBodyInverseDynamics:
         """Generalized forces tau_i for i >= ``first`` (others returned as None).
 
         ``gravity``: base-frame gravitational acceleration, or None for none.
-        ``external``: {link index: (force[3], torque[3])} in base coordinates,
-        the force acting at the link's centre of mass.
+        ``external``: {body index: (force[3], torque[3])} in base coordinates,
+        the force acting at the body's centre of mass.
         ``joint_terms``: add rotor inertia Ia_i qdd_i and damping b_i qd_i.
         """
-        P, n = self.P, len(self.chain)
+        P, n = self.P, len(self.bodies)
         external = external or {}
-        w = list(V.ZERO3)
-        dw = list(V.ZERO3)
-        acc = [-sp.sympify(g) for g in gravity] if gravity is not None else list(V.ZERO3)
-        R0 = [[sp.Integer(int(r == k)) for k in range(3)] for r in range(3)]
-        frames, Fs, Ns = [], [], []
-        U = None  # Khalil's U = skew(w') + skew(w)^2 of the previous link
-        for i, L in enumerate(self.chain):
+        base_acc = [-sp.sympify(g) for g in gravity] if gravity is not None else list(V.ZERO3)
+        E = [[sp.Integer(int(r == k)) for k in range(3)] for r in range(3)]
+        ws, dws, accs, Us, Rbs = [None] * n, [None] * n, [None] * n, [None] * n, [None] * n
+        Fs, Ns = [None] * n, [None] * n
+        for i, L in enumerate(self.bodies):
+            par = L.parent
+            if par < 0:
+                w_p, dw_p, a_p, U_p, Rb_p = list(V.ZERO3), list(V.ZERO3), base_acc, None, E
+            else:
+                w_p, dw_p, a_p, U_p, Rb_p = ws[par], dws[par], accs[par], Us[par], Rbs[par]
             R, p = self.rotation_translation(i, q[i])
-            frames.append((R, p))
-            # acceleration of this frame's origin: a_{i-1} + U_{i-1} p, then into frame i
-            a_prev = V.add(P, acc, V.matvec(P, U, p)) if U is not None else acc
+            k = [sp.sympify(x) for x in L.axis]
+            # acceleration of this frame's origin: a_parent + U_parent p, then into frame i
+            a_prev = V.add(P, a_p, V.matvec(P, U_p, p)) if U_p is not None else a_p
             acc = V.matTvec(P, R, a_prev, "a")
-            w_in = V.matTvec(P, R, w, "w")
-            dw_in = V.matTvec(P, R, dw, "dw")
+            w_in = V.matTvec(P, R, w_p, "w")
+            dw_in = V.matTvec(P, R, dw_p, "dw")
             if L.joint == REVOLUTE:
-                w = [w_in[0], w_in[1], P.let(w_in[2] + qd[i], "w")]
-                # w_in x (qd z) = [w_y qd, -w_x qd, 0]
-                dw = [
-                    P.let(dw_in[0] + w_in[1] * qd[i], "dw"),
-                    P.let(dw_in[1] - w_in[0] * qd[i], "dw"),
-                    P.let(dw_in[2] + qdd[i], "dw"),
-                ]
-            else:  # prismatic: Coriolis 2 w x (qd z) and qdd along z
+                w = [P.let(w_in[r] + k[r] * qd[i], "w") for r in range(3)]
+                # w_in x (qd k) + qdd k; for k = z: [w_y qd, -w_x qd, qdd]
+                wk = _cross(w_in, [k[r] * qd[i] for r in range(3)])
+                dw = [P.let(dw_in[r] + wk[r] + k[r] * qdd[i], "dw") for r in range(3)]
+            else:  # prismatic: Coriolis 2 w x (qd k) and qdd along k
                 w, dw = w_in, dw_in
-                acc = [
-                    P.let(acc[0] + 2 * w[1] * qd[i], "a"),
-                    P.let(acc[1] - 2 * w[0] * qd[i], "a"),
-                    P.let(acc[2] + qdd[i], "a"),
-                ]
+                wk = _cross(w, [k[r] * qd[i] for r in range(3)])
+                acc = [P.let(acc[r] + 2 * wk[r] + k[r] * qdd[i], "a") for r in range(3)]
             U = self.u_matrix(w, dw)
+            ws[i], dws[i], accs[i], Us[i] = w, dw, acc, U
             m, mc, Io = self.inertial(i)
             # F = m a + w' x mc + w x (w x mc) = m a + U mc
             F = V.add(P, V.scale(P, m, acc), V.matvec(P, U, mc), "F")
             N = V.add(P, V.add(P, V.matvec(P, Io, dw), V.cross(P, w, V.matvec(P, Io, w))), V.cross(P, mc, acc), "N")
             if external:
-                R0 = V.matmul(P, R0, R, "R0")
+                Rbs[i] = V.matmul(P, Rb_p, R, "R0")
                 if i in external:
                     f_b, t_b = external[i]
-                    f = V.matTvec(P, R0, f_b, "fe")
-                    t = V.matTvec(P, R0, t_b, "te")
+                    f = V.matTvec(P, Rbs[i], f_b, "fe")
+                    t = V.matTvec(P, Rbs[i], t_b, "te")
                     c = [sp.sympify(x) for x in L.com]
                     F = V.sub(P, F, f, "F")
                     N = V.sub(P, N, V.add(P, V.cross(P, c, f), t), "N")
-            Fs.append(F)
-            Ns.append(N)
+            Fs[i], Ns[i] = F, N
 
         tau: list = [None] * n
-        f_next = n_next = None
+        fs, ns = [None] * n, [None] * n
         for i in range(n - 1, first - 1, -1):
             f, nm = Fs[i], Ns[i]
-            if f_next is not None:
-                R, p = frames[i + 1]
-                Rf = V.matvec(P, R, f_next, "Rf")
+            for c in self.children[i]:  # the nest of i: its own body and its children's nests
+                R, p = self.rotation_translation(c, q[c])
+                Rf = V.matvec(P, R, fs[c], "Rf")
                 f = V.add(P, f, Rf, "f")
-                nm = V.add(P, nm, V.add(P, V.matvec(P, R, n_next), V.cross(P, p, Rf)), "n")
-            f_next, n_next = f, nm
-            L = self.chain[i]
-            t = nm[2] if L.joint == REVOLUTE else f[2]
+                nm = V.add(P, nm, V.add(P, V.matvec(P, R, ns[c]), V.cross(P, p, Rf)), "n")
+            fs[i], ns[i] = f, nm
+            L = self.bodies[i]
+            k = [sp.sympify(x) for x in L.axis]
+            t = V.dot(k, nm) if L.joint == REVOLUTE else V.dot(k, f)
             if joint_terms:
                 t = t + L.rotor_inertia * qdd[i] + L.damping * qd[i]
             tau[i] = P.let(t, "tau")
         return tau
 
 
-def inverse_dynamics(program: Program, chain, q, qd, qdd, gravity, external=None, trig=None) -> list:
+def inverse_dynamics(program: Program, bodies, q, qd, qdd, gravity, external=None, trig=None) -> list:
     """tau = M(q) qdd + h(q, qd) (+ external-force terms) as program expressions."""
-    return NestedBodyInverseDynamics(program, chain, trig).torques(q, qd, qdd, gravity, external)
+    return NestedBodyInverseDynamics(program, bodies, trig).torques(q, qd, qdd, gravity, external)

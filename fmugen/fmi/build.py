@@ -14,6 +14,7 @@ to compile it on another platform (listed in ``<SourceFiles>`` and in
 """
 from __future__ import annotations
 
+import hashlib
 import os
 import shlex
 import shutil
@@ -249,24 +250,80 @@ def _run_jobs(jobs: list, cwd: Path, what: str, budget: _Budget, stage: str) -> 
             proc.log.close()
 
 
+def object_cache_dir() -> Optional[Path]:
+    """Where compiled runtime objects are kept (``$FMUGEN_CACHE/objects``, default
+    ``~/.cache/fmugen/objects``); None when ``FMUGEN_OBJECT_CACHE=0``."""
+    if os.environ.get("FMUGEN_OBJECT_CACHE", "1") == "0":
+        return None
+    return Path(os.environ.get("FMUGEN_CACHE") or Path.home() / ".cache" / "fmugen") / "objects"
+
+
+def _runtime_key(cc: str, flags: list, src: Path, runtime: list) -> str:
+    """Hash of what the runtime objects depend on: the compiler (its resolved path, size and
+    time), the flags, and every source and header of the build folder but model.c."""
+    h = hashlib.sha256()
+    path = shutil.which(cc) or cc
+    try:
+        st = os.stat(os.path.realpath(path))
+        h.update(f"{os.path.realpath(path)}\0{st.st_size}\0{st.st_mtime_ns}\0".encode())
+    except OSError:
+        h.update(path.encode())
+    h.update("\0".join(flags).encode() + b"\1")
+    for p in sorted(src.iterdir()):
+        if p.name != "model.c" and p.suffix in (".c", ".h"):
+            h.update(p.name.encode() + b"\0" + p.read_bytes() + b"\1")
+    h.update("\0".join(runtime).encode())
+    return h.hexdigest()[:32]
+
+
 def _compile(cc: str, extra: list, sources: list, src: Path, lib: Path, what: str,
              budget: _Budget) -> list:
     """Compile each source to an object file in parallel, then link ``lib``.
 
     Equivalent to one ``cc ... -o lib *.c`` call (the command of the README),
     but the generated model.c -- the longest file by far for a manipulator --
-    compiles while the runtime files do.  Returns the link command.
+    compiles while the runtime files do.  The runtime's objects depend only
+    on the runtime's files, the compiler and the flags: they are compiled
+    once and kept in :func:`object_cache_dir` (2.4 s of CPU of every build
+    before), so a build compiles model.c alone.  Returns the link command.
     """
     flags = [f for f in CFLAGS if f != "-shared"] + extra + ["-I."]
     objs = [src.parent / "obj" / (Path(c).stem + ".o") for c in sources]
     objs[0].parent.mkdir(exist_ok=True)
+    runtime = [i for i, c in enumerate(sources) if c != "model.c"]
+    cache = object_cache_dir()
+    cached = cache / _runtime_key(cc, flags, src, [sources[i] for i in runtime]) if cache and runtime else None
+    hit = cached is not None and all((cached / objs[i].name).is_file() for i in runtime)
+    if hit:
+        for i in runtime:
+            objs[i] = cached / objs[i].name
+    todo = [i for i in range(len(sources)) if not (hit and i in runtime)]
     # largest first, so the long model.c starts at once
-    order = sorted(range(len(sources)), key=lambda i: -(src / sources[i]).stat().st_size)
+    order = sorted(todo, key=lambda i: -(src / sources[i]).stat().st_size)
     jobs = [[cc, *flags, "-c", sources[i], "-o", str(objs[i])] for i in order]
     _run_jobs(jobs, src, what, budget, "compile")
+    if cached is not None and not hit:
+        _store_objects(cached, [objs[i] for i in runtime])
     link = [cc, "-shared", *extra, "-o", str(lib), *map(str, objs), "-lm"]
     _run_jobs([link], src, what, budget, "link")
     return link
+
+
+def _store_objects(target: Path, objs: list) -> None:
+    """Put freshly compiled runtime objects into the cache: a complete folder appears by one
+    rename (builds running in parallel never see half of it); a cache that cannot be
+    written is no error."""
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=".part-", dir=target.parent))
+        for o in objs:
+            shutil.copy2(o, tmp / o.name)
+        try:
+            os.rename(tmp, target)
+        except OSError:  # another build stored them first
+            shutil.rmtree(tmp, ignore_errors=True)
+    except OSError:
+        pass
 
 
 def build_fmu(

@@ -117,7 +117,7 @@ def _group_key(scene, group: str, prune: bool, x0: dict) -> str:
         ins = scene.spec.instances[inst]
         d = dataclasses.asdict(ins)
         d["locked"] = {str(k): v for k, v in ins.locked.items()}
-        if ins.kind == "robot":
+        if ins.kind in ("robot", "file"):
             d["file"] = hashlib.sha256(Path(ins.source).read_bytes()).hexdigest()
         if ins.parameter_set and ins.parameter_set.endswith(".toml"):
             d["set_file"] = hashlib.sha256(Path(ins.parameter_set).read_bytes()).hexdigest()

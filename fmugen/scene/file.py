@@ -20,7 +20,7 @@ from ..errors import read_text_file
 from .errors import SceneError, did_you_mean
 
 SCENE_KEYS = {"name", "description", "parameter_set", "start", "stop", "step", "tolerance", "record",
-              "initial", "prune", "connections", "monolithic"}
+              "initial", "prune", "connections", "monolithic", "connect"}
 COMMON_INSTANCE_KEYS = {"parameters", "fixed", "start", "hold"}
 ROBOT_KEYS = {"robot", "formulation", "locked", "outputs"}
 FACTORY_KEYS = {"factory", "options", "parameter_set"}
@@ -33,8 +33,8 @@ INITIAL_MODES = ("given", "equilibrium")
 @dataclass(frozen=True)
 class InstanceSpec:
     name: str
-    kind: str  # "robot", "component" or "factory"
-    source: str  # robot file (absolute), component type, or "module:function"
+    kind: str  # "robot", "component", "file" (a component file) or "factory"
+    source: str  # robot file (absolute), component type, component file (absolute), or "module:function"
     options: dict = field(default_factory=dict)  # fidelity options / factory keywords / formulation, outputs
     parameter_set: Optional[str] = None
     parameters: dict = field(default_factory=dict)  # overrides
@@ -73,6 +73,8 @@ class SceneSpec:
     groups: dict  # name -> GroupSpec
     monolithic: bool
     cosim: dict
+    connect: tuple = ()  # of (end, end): bonds between connectors or signals, causality inferred (scene/connect.py)
+    bonds: tuple = ()  # the expanded connect pairs (fmugen.scene.connect.Bond), set by Scene
 
 
 def _number(v, where, positive=False, nonneg=False) -> float:
@@ -161,7 +163,7 @@ def _instance_keys(spec: dict) -> set:
     if "factory" in spec:
         return FACTORY_KEYS | COMMON_INSTANCE_KEYS
     typ = spec.get("type")
-    opts = set(COMPONENT_TYPES[typ][1]) if typ in COMPONENT_TYPES else set()
+    opts = set(COMPONENT_TYPES[typ][1]) if isinstance(typ, str) and typ in COMPONENT_TYPES else set()
     return {"type", "parameter_set"} | opts | COMMON_INSTANCE_KEYS
 
 
@@ -233,6 +235,11 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
         conns.append((s_, t_, f_))
 
     record = _str_list(sc.get("record", []), f"{src}: [scene] record")
+    connect = sc.get("connect", [])
+    if not isinstance(connect, list) or not all(isinstance(c, list) and len(c) == 2 and all(
+            isinstance(e, str) for e in c) for c in connect):
+        raise SceneError(f"{src}: [scene] connect must be a list of pairs [\"inst.connector\", \"inst.connector\"] "
+                         f"(or two variables)")
 
     groups = {}
     fm = data.get("fmus", {})
@@ -265,7 +272,8 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
     return SceneSpec(path=path, name=name, description=desc, parameter_set=pset, start=start, stop=stop,
                      step=step, tolerance=tolerance, record=record, initial=initial,
                      prune=sc.get("prune", True), connections=tuple(conns), instances=instances,
-                     groups=groups, monolithic=bool(monolithic), cosim=dict(cosim))
+                     groups=groups, monolithic=bool(monolithic), cosim=dict(cosim),
+                     connect=tuple(tuple(c) for c in connect))
 
 
 def _instance(iname: str, spec, path: Path) -> InstanceSpec:
@@ -329,7 +337,9 @@ def _instance(iname: str, spec, path: Path) -> InstanceSpec:
             raise SceneError(f"{where} options must be a table")
         return InstanceSpec(iname, "factory", ref, dict(opts), pset, params, fixed, start, hold)
     typ = spec["type"]
-    if typ not in COMPONENT_TYPES:
+    if isinstance(typ, str) and typ.startswith(FILE_TYPE_PREFIXES):
+        return _file_instance(iname, typ, path, where, pset, params, fixed, start, hold)
+    if not isinstance(typ, str) or typ not in COMPONENT_TYPES:
         raise SceneError(f"{where} type = {typ!r} is not a component type{did_you_mean(str(typ), COMPONENT_TYPES)}; "
                          f"known: {', '.join(COMPONENT_TYPES)}")
     _, options = COMPONENT_TYPES[typ]
@@ -343,6 +353,25 @@ def _instance(iname: str, spec, path: Path) -> InstanceSpec:
     if typ == "table_trajectory" and (params or pset):
         raise SceneError(f"{where}: a table_trajectory has no parameters (its knots are data)")
     return InstanceSpec(iname, "component", typ, opts, pset, params, fixed, start, hold)
+
+
+FILE_TYPE_PREFIXES = ("file:", "lib:")
+
+
+def _file_instance(iname, typ, path: Path, where, pset, params, fixed, start, hold) -> InstanceSpec:
+    """``type = "file:components/x.toml"`` (relative to the scene) or ``"lib:<shipped name>"``."""
+    from ..components.equations import library_path, read_cached
+
+    try:
+        if typ.startswith("lib:"):
+            fp = library_path(typ[4:])
+        else:
+            fp = Path(typ[5:])
+            fp = fp if fp.is_absolute() else path.parent / fp
+        read_cached(fp)  # declarations, equations and dimensions checked now, with the file named
+    except ValueError as exc:
+        raise SceneError(f"{where} type = {typ!r}: {exc}") from None
+    return InstanceSpec(iname, "file", str(fp.resolve()), {}, pset, params, fixed, start, hold)
 
 
 def _group(gname, g, instances, src) -> GroupSpec:

@@ -87,6 +87,14 @@ def _robot_model(spec: InstanceSpec, where: str, outputs, strategy: str = "strai
 
 
 def _component(spec: InstanceSpec, default_set: str, where: str, overrides: dict) -> SymbolicModel:
+    if spec.kind == "file":  # a component file: its own [sets.<name>]; the scene's default only if defined
+        from ..components.equations import load_component
+
+        try:
+            return load_component(spec.source, name=spec.name, parameter_set=spec.parameter_set or default_set,
+                                  overrides=overrides, strict_set=spec.parameter_set is not None)
+        except ValueError as exc:
+            raise SceneError(f"{where}: {exc}") from None
     if spec.kind == "factory":
         module_name, func_name = spec.source.split(":", 1)
         try:

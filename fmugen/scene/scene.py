@@ -25,6 +25,7 @@ from ..components.connect import assemble, same_unit
 from .errors import SceneError, did_you_mean
 from .file import GroupSpec, SOLVERS, apply_sets, parse_scene, read_toml
 from .instances import instance_model
+from .repeat import expand_repeats
 from .settings import parse_sets
 
 #: instance kinds whose FMU integrates torques into motion: first in Gauss-Seidel
@@ -41,7 +42,7 @@ def load_scene(path, set=None, allow_factories: bool = False) -> "Scene":
     """
     path = Path(path)
     sets = parse_sets(set)
-    data = read_toml(path)
+    data = expand_repeats(read_toml(path), str(path))
     deferred = apply_sets(data, sets, str(path))
     spec = parse_scene(data, path)
     return Scene(spec, deferred, allow_factories=allow_factories)
@@ -58,6 +59,11 @@ class Scene:
                 raise SceneError(f"{self.src}: [instances.{name}] factory = {ins.source!r} runs Python code from "
                                  f"your environment; allow it with --allow-factories (API: allow_factories=True, "
                                  f"or FMUGEN_ALLOW_FACTORIES=1) if you trust this file")
+        if spec.connect:  # bonds -> signal connections (checked below like any other); done once per spec
+            from .connect import expand_connect
+
+            extra, bonds = expand_connect(self, spec.connect)
+            self.spec = spec = replace(spec, connections=spec.connections + tuple(extra), connect=(), bonds=bonds)
         self.connections = self._checked_connections()
         self._check_record()
         self._check_loops()

@@ -16,6 +16,15 @@ same SymbolicModel, confirmed by a second solve):
 >>> rows = run_suite(["stiff_P"], quick=True, out="suite_out")      # doctest: +SKIP
 """
 from .cases import CASES, Case, Method, case_names
-from .run import SuiteRow, run_suite
+
+
+def __getattr__(name):
+    # .run imports scipy (the references): loaded on first use, not by every `fmugen` command
+    if name in ("SuiteRow", "run_suite"):
+        from . import run
+
+        return getattr(run, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = ["CASES", "Case", "Method", "SuiteRow", "case_names", "run_suite"]

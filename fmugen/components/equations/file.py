@@ -1,0 +1,424 @@
+"""Read a component file (TOML) into a SymbolicModel: declare, check dimensions, generate.
+
+The format, key by key, is in ``fmugen/components/README.md`` ("Component
+files").  Every key is checked where it is read; errors are
+:class:`fmugen.errors.InputFileError` naming the file, the table or equation
+and the reason.  The file is parsed by :mod:`tomllib`; equations go through
+:mod:`.language` (never evaluated) and :mod:`.dimensions`.
+"""
+from __future__ import annotations
+
+import ast
+import keyword
+import tomllib
+from dataclasses import dataclass, field
+from fractions import Fraction
+from pathlib import Path
+from typing import Mapping, Optional
+
+import sympy as sp
+
+from ...codegen.model import SymbolicModel
+from ...errors import InputFileError, check_identifier, read_text_file
+from ...robot.expressions import ExpressionError
+from ..base import var
+from . import language
+from .dimensions import DimensionError, SECOND, check_equation, dimension_of_unit, sub
+
+TOP_KEYS = {"component", "parameters", "inputs", "states", "intermediates", "outputs", "sets", "connectors"}
+COMPONENT_KEYS = {"name", "description", "equations", "provenance"}
+PARAMETER_KEYS = {"value", "unit", "min", "max", "description"}
+INPUT_KEYS = {"unit", "start", "min", "max", "description"}
+STATE_KEYS = {"unit", "start", "nominal", "min", "max", "description", "output"}
+INTERMEDIATE_KEYS = {"unit", "description"}
+OUTPUT_KEYS = {"unit", "min", "max", "description"}
+MAX_DECLARATIONS = 200  # per table: a component file is a component, not a model of everything
+MAX_EQUATIONS = 400
+
+
+@dataclass(frozen=True)
+class Declared:
+    name: str
+    kind: str  # parameter, input, state, intermediate, output
+    unit: str
+    description: str = ""
+    value: Optional[float] = None  # parameter value / start value
+    nominal: Optional[float] = None
+    min: Optional[float] = None
+    max: Optional[float] = None
+    output: bool = True
+
+
+@dataclass
+class ComponentFile:
+    """The checked declarations and equations of one file (before parameter values are chosen)."""
+
+    path: Path
+    name: str
+    description: str
+    provenance: str
+    declared: dict  # name -> Declared, in file order
+    equations: dict  # lhs name (state for der) -> (lhs text, rhs text, tree, python text)
+    order: list  # intermediates and outputs in dependency order
+    sets: dict  # set name -> {parameter: value}
+    connectors: dict = field(default_factory=dict)  # name -> (type, {connector var: variable}), checked
+
+    def of_kind(self, kind: str) -> list:
+        return [d for d in self.declared.values() if d.kind == kind]
+
+
+def _err(src, msg):
+    return InputFileError(f"{src}: {msg}")
+
+
+def _name_problem(name) -> Optional[str]:
+    if not isinstance(name, str) or not language_identifier(name):
+        return "must be an identifier (ASCII letters, digits and single '_', starting with a letter, at most 64)"
+    if keyword.iskeyword(name) or keyword.issoftkeyword(name):
+        return "is a Python keyword"
+    if name in language.RESERVED:
+        return "is a function or reserved name of the equation language"
+    return None
+
+
+def language_identifier(name: str) -> bool:
+    return (name.isascii() and name.isidentifier() and name[0].isalpha() and "__" not in name
+            and len(name) <= 64)
+
+
+def _number(v, where, src) -> float:
+    try:
+        return language.finite(v, where)
+    except ExpressionError as exc:
+        raise _err(src, str(exc)) from None
+
+
+def read_component_file(path) -> ComponentFile:
+    """Parse and check ``path`` (declarations, equations, dimensions); no parameter values chosen yet."""
+    path = Path(path)
+    src = str(path)
+    try:
+        data = tomllib.loads(read_text_file(path, "component file"))
+    except tomllib.TOMLDecodeError as exc:
+        raise _err(src, f"not valid TOML: {exc}") from None
+    extra = sorted(set(data) - TOP_KEYS)
+    if extra:
+        raise _err(src, f"unknown top-level key(s) {', '.join(extra)}; a component file has "
+                        f"{', '.join(f'[{k}]' for k in sorted(TOP_KEYS))}")
+    comp = data.get("component")
+    if not isinstance(comp, dict):
+        raise _err(src, "missing [component] table (name, description, equations)")
+    bad = sorted(set(comp) - COMPONENT_KEYS)
+    if bad:
+        raise _err(src, f"[component] has unknown key(s) {', '.join(bad)}; known: {', '.join(sorted(COMPONENT_KEYS))}")
+    name = check_identifier(comp.get("name", path.stem), f"{src}: [component] name")
+    desc, prov = comp.get("description", ""), comp.get("provenance", "")
+    if not isinstance(desc, str) or not isinstance(prov, str):
+        raise _err(src, "[component] description and provenance must be strings")
+
+    declared: dict = {}
+    specs = (("parameters", "parameter", PARAMETER_KEYS), ("inputs", "input", INPUT_KEYS),
+             ("states", "state", STATE_KEYS), ("intermediates", "intermediate", INTERMEDIATE_KEYS),
+             ("outputs", "output", OUTPUT_KEYS))
+    for table, kind, keys in specs:
+        tab = data.get(table, {})
+        if not isinstance(tab, dict):
+            raise _err(src, f"[{table}] must be a table of {{ unit = ..., ... }} entries")
+        if len(tab) > MAX_DECLARATIONS:
+            raise _err(src, f"[{table}] declares {len(tab)} names; at most {MAX_DECLARATIONS}")
+        for vname, entry in tab.items():
+            where = f"[{table}] {vname}"
+            problem = _name_problem(vname)
+            if problem:
+                raise _err(src, f"{where}: the name {problem}")
+            if vname in declared:
+                raise _err(src, f"{where}: {vname!r} is declared twice (also in the {declared[vname].kind}s)")
+            if not isinstance(entry, dict):
+                raise _err(src, f"{where} must be a table like {{ unit = \"N.m\", ... }}")
+            bad = sorted(set(entry) - keys)
+            if bad:
+                raise _err(src, f"{where} has unknown key(s) {', '.join(bad)}; known: {', '.join(sorted(keys))}")
+            unit = entry.get("unit", "1")
+            if not isinstance(unit, str):
+                raise _err(src, f"{where} unit must be a string")
+            try:
+                dimension_of_unit(unit)
+            except ValueError as exc:
+                raise _err(src, f"{where}: {exc}") from None
+            d = entry.get("description", "")
+            if not isinstance(d, str):
+                raise _err(src, f"{where} description must be a string")
+            vals = {k: _number(entry[k], f"{where} {k}", src) for k in ("value", "start", "nominal", "min", "max")
+                    if k in entry}
+            if kind == "parameter" and "value" not in vals:
+                raise _err(src, f"{where}: a parameter needs a value")
+            if "nominal" in vals and vals["nominal"] <= 0:
+                raise _err(src, f"{where} nominal must be positive")
+            lo, hi = vals.get("min"), vals.get("max")
+            if lo is not None and hi is not None and lo > hi:
+                raise _err(src, f"{where}: min ({lo}) is above max ({hi})")
+            value = vals.get("value", vals.get("start", 0.0 if kind == "state" else None))
+            if value is not None and ((lo is not None and value < lo) or (hi is not None and value > hi)):
+                raise _err(src, f"{where}: {'value' if kind == 'parameter' else 'start'} {value} is outside "
+                                f"[{lo}, {hi}]")
+            out = entry.get("output", True)
+            if not isinstance(out, bool):
+                raise _err(src, f"{where} output must be true or false")
+            declared[vname] = Declared(vname, kind, unit, d, value, vals.get("nominal"), lo, hi, out)
+    if not any(d.kind in ("state", "output") for d in declared.values()):
+        raise _err(src, "declares no [states] and no [outputs]: nothing to compute")
+
+    equations = _equations(comp.get("equations"), declared, src)
+    order = _order_intermediates(equations, declared, src)
+    sets = _sets(data.get("sets", {}), declared, src)
+    connectors = data.get("connectors", {})
+    if not isinstance(connectors, dict):
+        raise _err(src, "[connectors] must hold tables [connectors.<name>]")
+    from ..connectors import check_file_connectors
+
+    connectors = check_file_connectors(connectors, declared, src)
+    cf = ComponentFile(path, name, desc, prov, declared, equations, order, sets, connectors)
+    _build_all(cf)  # the language's refusals first (they say what is wrong with the text) ...
+    _check_dimensions(cf)  # ... then the dimensions of what it says
+    return cf
+
+
+def split_equation(text: str) -> tuple:
+    """``"lhs = rhs"`` split at the one '=' that is not part of ==, <=, >= or !=."""
+    for i, c in enumerate(text):
+        if c == "=" and (i == 0 or text[i - 1] not in "<>=!") and (i + 1 == len(text) or text[i + 1] != "="):
+            return text[:i].strip(), text[i + 1:].strip()
+    raise ValueError("is not 'lhs = rhs'")
+
+
+def _equations(raw, declared, src) -> dict:
+    if not isinstance(raw, list) or not all(isinstance(e, str) for e in raw):
+        raise _err(src, "[component] equations must be a list of strings \"der(x) = ...\" / \"y = ...\"")
+    if len(raw) > MAX_EQUATIONS:
+        raise _err(src, f"[component] equations: {len(raw)} equations; at most {MAX_EQUATIONS}")
+    out = {}
+    for k, text in enumerate(raw):
+        where = f"equation {k + 1} {language._short(text)}"
+        try:
+            lhs, rhs = split_equation(text)
+        except ValueError as exc:
+            raise _err(src, f"{where} {exc}") from None
+        if lhs.startswith("der(") and lhs.endswith(")"):
+            target, want = lhs[4:-1].strip(), ("state",)
+        else:
+            target, want = lhs, ("output", "intermediate")
+        d = declared.get(target)
+        if d is None or d.kind not in want:
+            what = "der() of a declared state" if want == ("state",) else "a declared output or intermediate"
+            kind = f" ({target!r} is {'an' if d and d.kind[0] in 'aeiou' else 'a'} {d.kind})" if d else ""
+            raise _err(src, f"{where}: the left side must be {what}{kind}; write der(x) = ... for a state x, "
+                            f"y = ... for an output or intermediate y")
+        if target in out:
+            raise _err(src, f"{where}: a second equation for {lhs} (the first: {out[target][0]} = {out[target][1]})")
+        try:
+            tree, python = language.parse_tree(rhs)
+        except ExpressionError as exc:
+            raise _err(src, f"{where}: {exc}") from None
+        unknown = sorted(language.names_in(tree) - set(declared) - {"pi", "time"} - language.FUNCTION_NAMES)
+        if unknown:
+            raise _err(src, f"{where}: unknown name(s) {', '.join(unknown)}; declared: {', '.join(declared)}, "
+                            f"time, pi")
+        out[target] = (lhs, rhs, tree, python)
+    missing = [("der(" + d.name + ")" if d.kind == "state" else d.name) for d in declared.values()
+               if d.kind in ("state", "output", "intermediate") and d.name not in out]
+    if missing:
+        raise _err(src, f"no equation for {', '.join(missing)}: every state needs der(x) = ..., every output "
+                        f"and intermediate y = ...")
+    return out
+
+
+def _order_intermediates(equations, declared, src) -> list:
+    # outputs may be read by other equations too: both are ordered by their dependencies
+    inter = [d.name for d in declared.values() if d.kind in ("intermediate", "output")]
+    deps = {n: sorted(language.names_in(equations[n][2]) & set(inter)) for n in inter}
+    state, order, path = {}, [], []
+
+    def visit(n):
+        if state.get(n) == 2:
+            return
+        if state.get(n) == 1:
+            cycle = path[path.index(n):] + [n]
+            raise _err(src, f"the intermediates/outputs {' -> '.join(cycle)} depend on each other in a cycle "
+                            f"(an algebraic loop): make one of them a state or solve the loop by hand")
+        state[n] = 1
+        path.append(n)
+        for m in deps[n]:
+            visit(m)
+        path.pop()
+        state[n] = 2
+        order.append(n)
+
+    for n in inter:
+        visit(n)
+    return order
+
+
+def _sets(raw, declared, src) -> dict:
+    if not isinstance(raw, dict):
+        raise _err(src, "[sets] must hold tables [sets.<name>] of parameter values")
+    out = {}
+    params = {d.name: d for d in declared.values() if d.kind == "parameter"}
+    for sname, tab in raw.items():
+        if not isinstance(tab, dict):
+            raise _err(src, f"[sets.{sname}] must be a table of parameter values")
+        out[sname] = _check_values(tab, params, f"{src}: [sets.{sname}]")
+    return out
+
+
+def _check_values(values: Mapping, params: dict, where: str) -> dict:
+    out = {}
+    for k, v in values.items():
+        d = params.get(k)
+        if d is None:
+            raise InputFileError(f"{where}: {k!r} is not a parameter; parameters: {', '.join(params) or '-'}")
+        try:
+            x = language.finite(v, f"{where}: {k}")
+        except ExpressionError as exc:
+            raise InputFileError(str(exc)) from None
+        if (d.min is not None and x < d.min) or (d.max is not None and x > d.max):
+            raise InputFileError(f"{where}: {k} = {x} is outside its range [{d.min}, {d.max}]")
+        out[k] = x
+    return out
+
+
+def _constant_value(python: str):
+    """The exact value of a constant sub-tree (for exponents), or None."""
+    def value(node):
+        try:
+            e = language.EquationBuilder(python, {}, set()).build(node)
+        except ExpressionError:
+            return None
+        return Fraction(int(e.p), int(e.q)) if e.is_Rational else None
+    return value
+
+
+def _check_dimensions(cf: ComponentFile) -> None:
+    dims = {n: dimension_of_unit(d.unit) for n, d in cf.declared.items()}
+    for target, (lhs, rhs, tree, python) in cf.equations.items():
+        lhs_dim = sub(dims[target], SECOND) if cf.declared[target].kind == "state" else dims[target]
+        try:
+            check_equation(python, tree, lhs, lhs_dim, dims, _constant_value(python))
+        except DimensionError as exc:
+            units = ", ".join(f"{n} [{cf.declared[n].unit}]" for n in sorted(language.names_in(tree) & set(dims)))
+            raise _err(cf.path, f"equation '{lhs} = {rhs}' is dimensionally inconsistent: {exc}; units: "
+                                f"{lhs.removeprefix('der(').removesuffix(')')} [{cf.declared[target].unit}]"
+                                f"{', ' + units if units else ''}") from None
+
+
+def component_model(cf: ComponentFile, name: Optional[str] = None, parameter_set=None,
+                    overrides: Optional[Mapping[str, float]] = None, strict_set: bool = True) -> SymbolicModel:
+    """The SymbolicModel of a checked file with chosen parameter values.
+
+    ``parameter_set``: a name of the file's ``[sets.<name>]``, or a ``.toml``
+    path holding a ``[<component name>]`` table of values; ``strict_set=False``
+    (a scene's default set) ignores a set name the file does not define.
+    ``overrides``: parameter values, checked against the declared ranges.
+    """
+    src = str(cf.path)
+    params = {d.name: d for d in cf.of_kind("parameter")}
+    values = {n: d.value for n, d in params.items()}
+    if parameter_set is not None:
+        ps = str(parameter_set)
+        if ps.endswith(".toml"):
+            try:
+                tab = tomllib.loads(read_text_file(Path(ps), "parameter set")).get(cf.name)
+            except tomllib.TOMLDecodeError as exc:
+                raise InputFileError(f"{ps}: not valid TOML: {exc}") from None
+            if not isinstance(tab, dict):
+                raise InputFileError(f"{ps}: no [{cf.name}] table of parameter values for component file {src}")
+            values.update(_check_values(tab, params, f"{ps}: [{cf.name}]"))
+        elif ps in cf.sets:
+            values.update(cf.sets[ps])
+        elif strict_set:
+            raise InputFileError(f"{src}: no parameter set {ps!r}; the file defines "
+                                 f"{', '.join(cf.sets) or 'none'} ([sets.<name>])")
+    values.update(_check_values(dict(overrides or {}), params, f"{src}: parameter override"))
+
+    ders, outs = _build_all(cf)
+
+    def v(d, start):
+        return var(d.name, d.unit, d.description, start=start, nominal=d.nominal, min=d.min, max=d.max,
+                   output=d.kind == "state" and d.output)
+
+    try:
+        return explicit_model(
+            name or cf.name,
+            [v(d, d.value) for d in cf.of_kind("state")],
+            [v(d, d.value) for d in cf.of_kind("input")],
+            [v(d, values[d.name]) for d in params.values()],
+            ders, [v(d, None) for d in cf.of_kind("output")], outs,
+            description=cf.description or f"component file {cf.path.name}",
+            provenance=cf.provenance or f"component file {cf.path.name}")
+    except ValueError as exc:
+        raise _err(src, str(exc)) from None
+
+
+def _build_all(cf: ComponentFile) -> tuple:
+    """(derivative expressions, output expressions); intermediates substituted, parameters symbolic."""
+    symbols = {n: sp.Symbol(n, real=True) for n in cf.declared
+               if cf.declared[n].kind in ("parameter", "input", "state")}
+    constant = {symbols[d.name] for d in cf.of_kind("parameter")}
+    names = dict(symbols)
+    for n in cf.order:  # intermediates and outputs, each after what it reads
+        names[n] = _build(cf, n, names, constant)
+    ders = [_build(cf, d.name, names, constant) for d in cf.of_kind("state")]
+    return ders, [names[d.name] for d in cf.of_kind("output")]
+
+
+def _build(cf, target, names, constant):
+    lhs, rhs, tree, python = cf.equations[target]
+    try:
+        expr = language.EquationBuilder(python, names, constant).build(tree)
+        language.check_finite_constants(expr, rhs)
+    except ExpressionError as exc:
+        raise _err(cf.path, f"equation '{lhs} = {rhs}': {str(exc).replace(repr(python), repr(rhs))}") from None
+    return expr
+
+
+class _RealAbs(sp.Function):
+    """|x| of a real x, differentiated as sign(x) dx.
+
+    sympy's own Abs falls back to re/im parts and a division by |x| when it
+    cannot prove a nested argument real (the smooth forms nest Abs), which is
+    0/0 in C exactly at a kink; this one is swapped in for the derivation only.
+    """
+
+    is_real = True
+
+    def fdiff(self, argindex=1):
+        return sp.sign(self.args[0])
+
+
+def explicit_model(name, states, inputs, parameters, derivatives, outputs, output_exprs, description,
+                   provenance) -> SymbolicModel:
+    """:meth:`SymbolicModel.from_equations` with |x| differentiated as sign(x) dx (see :class:`_RealAbs`)."""
+    from ...codegen.model import _finite_signs
+    from ...codegen.program import Program
+
+    def real_abs(e):
+        return sp.sympify(e).replace(sp.Abs, _RealAbs)
+
+    def plain(e):
+        return _finite_signs(e.replace(_RealAbs, sp.Abs))
+
+    f = [real_abs(e) for e in derivatives]
+    g = [real_abs(e) for e in output_exprs]
+    xs, us = [v.symbol for v in states], [v.symbol for v in inputs]
+    prog, jac = Program("_w"), Program("_j")
+    fd = tuple(prog.let(plain(e), "f") for e in f)
+    gd = tuple(prog.let(plain(e), "g") for e in g)
+
+    def jm(exprs, wrt):
+        if not wrt or not exprs:
+            return sp.zeros(len(exprs), len(wrt))
+        return sp.Matrix(len(exprs), len(wrt), lambda i, j: jac.let(plain(sp.diff(exprs[i], wrt[j]))))
+
+    return SymbolicModel(name=name, description=description, states=tuple(states), inputs=tuple(inputs),
+                         parameters=tuple(parameters), outputs=tuple(outputs), program=prog, derivatives=fd,
+                         output_exprs=gd, jacobian=jac, dfdx=jm(f, xs), dfdu=jm(f, us), dgdx=jm(g, xs),
+                         dgdu=jm(g, us), provenance=provenance)

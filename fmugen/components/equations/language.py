@@ -1,0 +1,342 @@
+"""The expression language of component files: the robot files' safe parser, extended.
+
+An equation's right-hand side is text.  It is tokenised, the Modelica
+conditional ``if C then A else B`` (``elseif`` chains too) is rewritten into
+Python's conditional expression, and the result is parsed by :mod:`ast`
+(``mode="eval"``) and walked against a whitelist that builds sympy objects
+directly -- the same walk, limits and refusals as
+:mod:`fmugen.robot.expressions` (:data:`~fmugen.robot.expressions.MAX_DEPTH`,
+:data:`~fmugen.robot.expressions.MAX_NODES`, at most
+:data:`~fmugen.robot.expressions.MAX_TEXT_LENGTH` characters, no attribute,
+subscript, lambda, string or call of anything outside the table below).
+Nothing is ever passed to ``eval``, ``exec`` or ``sympify``.
+
+Functions
+---------
+Smooth everywhere: ``sqrt sin cos tan exp log tanh atan`` (one argument),
+``atan2(y, x)`` (a jump of 2 pi across y = 0, x < 0: keep the argument away
+from that cut).
+
+Kinked (a corner or a jump): ``abs(x)``, ``sign(x)``, ``min(a, b)``,
+``max(a, b)``, ``sat(x, lo, hi)`` (saturation), ``deadzone(x, lo, hi)``,
+``step(d)`` (0 below 0, 1 above).  Each takes an optional last argument
+``eps > 0``, the width of its smooth band:
+
+* with ``eps`` the C^1 branch-free form of :mod:`fmugen.components.smooth`
+  is used -- exact outside ``|kink| >= eps`` (``abs`` is the Huber function,
+  ``min``/``max``/``sat``/``deadzone`` are built from the C^1 ramp,
+  ``step`` is the cubic smoothstep of ``clip(d/eps, -1, 1)``), except
+  ``sign(x, eps) = x/sqrt(x^2 + eps^2)``, the C-infinity Coulomb form;
+* without ``eps`` the exact function is used, and this is **refused when
+  its arguments depend on a state, an input or time**: a corner in f makes
+  the exact Jacobian jump and a jump makes f itself jump, so RODAS3's
+  Newton iteration (which reuses one Jacobian across the step), the master's
+  Newton coupling and the equilibrium solver lose their convergence at the
+  switch, and the runtime has no event handling to stop there.  On
+  parameters and constants (fixed during a run) the exact form is kept.
+
+Conditionals
+------------
+``if C then A else B`` where ``C`` is one comparison ``l > r`` (``<``,
+``>=``, ``<=``; ``==``/``!=`` and ``and``/``or`` are refused: nest the ifs).
+An ``if`` starts an expression: the whole right-hand side, a parenthesised
+group or a function argument (``1 + (if x > 0 then a else b)``).
+
+* On parameters and constants: exact (a ternary in C; constant during a run).
+* On a state, input or time the switch must be smooth: write
+  ``if smooth(l > r, eps) then A else B``, which is
+  ``B + (A - B) step(l - r, eps)``: exactly A for l - r >= eps, exactly B for
+  l - r <= -eps, a C^1 blend in between.  A plain comparison there is refused
+  (why: as above).
+
+Names: ``time`` is the model time [s]; ``pi``; every declared parameter,
+input, state and intermediate.  Other names are refused with the list of
+declared ones.
+"""
+from __future__ import annotations
+
+import ast
+import io
+import math
+import tokenize
+
+import sympy as sp
+
+from ...robot.expressions import (MAX_DEPTH, MAX_TEXT_LENGTH, ExpressionError, _Builder, _check_size,
+                                  _short, check_double)
+from ..base import TIME
+from ..smooth import huber, smooth_relu, smooth_sign
+
+#: one-argument functions that are smooth everywhere
+SMOOTH_FUNCTIONS = {"sqrt": sp.sqrt, "sin": sp.sin, "cos": sp.cos, "tan": sp.tan, "exp": sp.exp, "log": sp.log,
+                    "tanh": sp.tanh, "atan": sp.atan}
+#: kinked functions: name -> number of arguments without the optional eps
+KINKED_FUNCTIONS = {"abs": 1, "sign": 1, "min": 2, "max": 2, "sat": 3, "deadzone": 3, "step": 1}
+#: every callable name of the language (``smooth`` only as an if-condition)
+FUNCTION_NAMES = frozenset(SMOOTH_FUNCTIONS) | frozenset(KINKED_FUNCTIONS) | {"atan2", "smooth", "der"}
+RESERVED = FUNCTION_NAMES | {"pi", "time", "t", "if", "then", "else", "elseif", "and", "or", "not"}
+
+_COMPARE = {ast.Gt: sp.Gt, ast.GtE: sp.Ge, ast.Lt: sp.Lt, ast.LtE: sp.Le}
+
+
+# --------------------------------------------------------------------------
+# text -> Python expression tree
+# --------------------------------------------------------------------------
+def parse_tree(text: str) -> tuple:
+    """(checked :mod:`ast` tree, the Python text it was parsed from) of a right-hand side (``if`` rewritten)."""
+    if not isinstance(text, str):
+        raise ExpressionError(f"expected an expression string, got {type(text).__name__}")
+    if len(text) > MAX_TEXT_LENGTH:
+        raise ExpressionError(f"expression longer than {MAX_TEXT_LENGTH} characters")
+    if not text.strip():
+        raise ExpressionError("empty expression")
+    if any(ord(c) < 32 or ord(c) == 127 for c in text):
+        raise ExpressionError(f"control character (newline, tab, ...) in {_short(text)}; write one line")
+    python = _rewrite_conditionals(text)
+    try:
+        tree = ast.parse(python, mode="eval")
+    except SyntaxError as exc:
+        raise ExpressionError(f"syntax error in {_short(text)}: {exc.msg}") from None
+    except (RecursionError, MemoryError):
+        raise ExpressionError(f"expression nested too deeply in {_short(text)}") from None
+    _check_size(tree.body, text)
+    return tree.body, python
+
+
+def _tokens(text: str) -> list:
+    out = []
+    try:
+        for tok in tokenize.generate_tokens(io.StringIO(text).readline):
+            if tok.type in (tokenize.NEWLINE, tokenize.NL, tokenize.INDENT, tokenize.DEDENT, tokenize.ENDMARKER):
+                continue
+            if tok.type == tokenize.COMMENT:
+                raise ExpressionError(f"'#' is not allowed in {_short(text)}")
+            if tok.type == tokenize.ERRORTOKEN and not tok.string.isspace():
+                raise ExpressionError(f"cannot read {tok.string!r} in {_short(text)}")
+            out.append(tok.string)
+    except (tokenize.TokenError, IndentationError, SyntaxError) as exc:
+        raise ExpressionError(f"syntax error in {_short(text)}: {exc.args[0] if exc.args else exc}") from None
+    return out + [""]  # "" is the end
+
+
+def _rewrite_conditionals(text: str) -> str:
+    """``if C then A elseif D then B else E`` -> ``((A) if (C) else ((B) if (D) else (E)))``."""
+    toks = _tokens(text)
+
+    def fail(msg):
+        raise ExpressionError(f"{msg} in {_short(text)}")
+
+    def expr(i, stops, depth):
+        if depth > MAX_DEPTH:
+            fail(f"expression nested too deeply (more than {MAX_DEPTH} levels)")
+        if toks[i] == "if":
+            cond, i = expr(i + 1, {"then"}, depth + 1)
+            if toks[i] != "then":
+                fail("'if' without 'then'")
+            a, i = expr(i + 1, {"else", "elseif"}, depth + 1)
+            if toks[i] == "elseif":
+                toks[i] = "if"
+                b, i = expr(i, stops, depth + 1)
+            elif toks[i] == "else":
+                b, i = expr(i + 1, stops, depth + 1)
+            else:
+                fail("'if ... then' without 'else'")
+            return f"(({a}) if ({cond}) else ({b}))", i
+        out = []
+        while True:
+            t = toks[i]
+            if t == "" or t in stops or t in (")", ",", "]") or t in ("then", "else", "elseif"):
+                break
+            if t == "if":
+                fail("'if' must start an expression: write (if C then A else B)")
+            if t in ("(", "["):
+                close = ")" if t == "(" else "]"
+                out.append(t)
+                i += 1
+                while toks[i] != close:
+                    item, i = expr(i, set(), depth + 1)
+                    out.append(item)
+                    if toks[i] == ",":
+                        out.append(",")
+                        i += 1
+                    elif toks[i] != close:
+                        fail("unbalanced parentheses" if toks[i] == "" else f"unexpected {toks[i]!r}")
+                out.append(close)
+                i += 1
+                continue
+            out.append(t)
+            i += 1
+        if not out:
+            fail(f"missing expression before {toks[i]!r}" if toks[i] else "missing expression at the end")
+        return " ".join(out), i
+
+    result, i = expr(0, set(), 1)
+    if toks[i] != "":
+        fail(f"unexpected {toks[i]!r}" + (" (an 'if' needs 'then' and 'else')" if toks[i] in ("then", "else") else ""))
+    return result
+
+
+# --------------------------------------------------------------------------
+# tree -> sympy
+# --------------------------------------------------------------------------
+class EquationBuilder(_Builder):
+    """Builds sympy from a checked tree; names resolve through ``names``.
+
+    ``names``: name -> sympy expression (parameters and variables their
+    symbols, intermediates their already-built expressions).  ``constant``:
+    symbols fixed during a run (the parameters): a kinked function or an
+    ``if`` on them is kept exact, anything else must be smooth.
+    """
+
+    def __init__(self, text: str, names: dict, constant: set):
+        super().__init__(text)
+        self.names = names
+        self.constant = constant
+
+    def _is_constant(self, expr) -> bool:
+        return expr.free_symbols <= self.constant
+
+    def _Name(self, node):
+        name = node.id
+        if name == "pi":
+            return sp.pi
+        if name == "time":
+            return TIME
+        if name in FUNCTION_NAMES:
+            raise ExpressionError(f"function {name!r} used without a call in {self.text!r}")
+        if name not in self.names:
+            known = ", ".join(sorted(self.names)) or "-"
+            raise ExpressionError(f"unknown name {name!r} in {self.text!r}; declared: {known}, time, pi")
+        return self.names[name]
+
+    def _Call(self, node):
+        if not isinstance(node.func, ast.Name) or node.func.id not in FUNCTION_NAMES - {"smooth", "der"}:
+            callee = node.func.id if isinstance(node.func, ast.Name) else type(node.func).__name__
+            hint = (" (smooth(...) is only an if-condition: if smooth(x > c, eps) then ...)" if callee == "smooth"
+                    else " (der(x) is only a left-hand side)" if callee == "der" else "")
+            raise ExpressionError(f"call of {callee!r} is not allowed in {self.text!r}{hint}; functions: "
+                                  f"{', '.join(sorted(FUNCTION_NAMES - {'smooth', 'der'}))}")
+        name = node.func.id
+        if node.keywords or any(isinstance(a, ast.Starred) for a in node.args):
+            raise ExpressionError(f"{name}() takes plain positional arguments in {self.text!r}")
+        args = [self.build(a) for a in node.args]
+        if name in SMOOTH_FUNCTIONS:
+            self._arity(name, args, 1)
+            return SMOOTH_FUNCTIONS[name](args[0])
+        if name == "atan2":
+            self._arity(name, args, 2)
+            return sp.atan2(args[0], args[1])
+        n = KINKED_FUNCTIONS[name]
+        if len(args) not in (n, n + 1):
+            raise ExpressionError(f"{name}() takes {n} argument{'s' if n > 1 else ''} and an optional "
+                                  f"smoothing width eps, got {len(args)} in {self.text!r}")
+        if len(args) == n + 1:
+            return _smooth_form(name, args[:n], args[n])
+        if not all(self._is_constant(a) for a in args):
+            raise ExpressionError(
+                f"{name}({', '.join(map(str, args))}) in {self.text!r} has a "
+                f"{'jump' if name in ('sign', 'step') else 'corner'} on a state, input or time: give the width "
+                f"of its smooth band as a last argument, {name}(..., eps) (an exact kink breaks the exact "
+                f"Jacobian and the Newton iterations of the implicit solvers)")
+        return _exact_form(name, args)
+
+    @staticmethod
+    def _arity(name, args, n):
+        if len(args) != n:
+            raise ExpressionError(f"{name}() takes exactly {n} argument{'s' if n > 1 else ''}, got {len(args)}")
+
+    def _IfExp(self, node):
+        test, eps = node.test, None
+        if isinstance(test, ast.Call) and isinstance(test.func, ast.Name) and test.func.id == "smooth":
+            if len(test.args) != 2 or test.keywords:
+                raise ExpressionError(f"smooth(condition, eps) takes a comparison and a width in {self.text!r}")
+            test, eps = test.args[0], self.build(test.args[1])
+        if not isinstance(test, ast.Compare) or len(test.ops) != 1 or type(test.ops[0]) not in _COMPARE:
+            raise ExpressionError(f"an if-condition is one comparison l > r, l < r, l >= r or l <= r "
+                                  f"(optionally smooth(l > r, eps)) in {self.text!r}")
+        lhs, rhs = self.build(test.left), self.build(test.comparators[0])
+        a, b = self.build(node.body), self.build(node.orelse)
+        greater = isinstance(test.ops[0], (ast.Gt, ast.GtE))
+        if eps is not None:
+            d = lhs - rhs if greater else rhs - lhs
+            return b + (a - b) * _smooth_form("step", [d], eps)
+        if not (self._is_constant(lhs) and self._is_constant(rhs)):
+            raise ExpressionError(
+                f"if-condition on a state, input or time in {self.text!r}: a switch there makes f or its Jacobian "
+                f"jump, which the implicit solvers' Newton iterations and the runtime (no event handling) cannot "
+                f"follow; write if smooth(l > r, eps) then A else B (a C^1 blend over |l - r| < eps)")
+        return sp.Piecewise((a, _COMPARE[type(test.ops[0])](lhs, rhs)), (b, True))
+
+    def _Compare(self, node):
+        raise ExpressionError(f"a comparison is only an if-condition in {self.text!r}")
+
+
+def _exact_form(name, a):
+    if name == "abs":
+        return sp.Abs(a[0])
+    if name == "sign":
+        return sp.sign(a[0])
+    if name == "min":
+        return sp.Min(a[0], a[1])
+    if name == "max":
+        return sp.Max(a[0], a[1])
+    if name == "sat":
+        return sp.Min(sp.Max(a[0], a[1]), a[2])
+    if name == "deadzone":
+        return a[0] - sp.Min(sp.Max(a[0], a[1]), a[2])
+    if name == "step":
+        return sp.Piecewise((1, sp.Gt(a[0], 0)), (0, True))
+    raise AssertionError(name)
+
+
+def _smooth_form(name, a, eps):
+    """The C^1 (sign: C-infinity) branch-free forms of fmugen.components.smooth, exact for |kink| >= eps."""
+    if name == "abs":
+        return huber(a[0], eps)
+    if name == "sign":
+        return smooth_sign(a[0], eps)
+    if name == "min":
+        return a[0] - smooth_relu(a[0] - a[1], eps)
+    if name == "max":
+        return a[0] + smooth_relu(a[1] - a[0], eps)
+    if name == "sat":
+        return a[1] + smooth_relu(a[0] - a[1], eps) - smooth_relu(a[0] - a[2], eps)
+    if name == "deadzone":
+        return a[0] - _smooth_form("sat", a, eps)
+    if name == "step":
+        c = (sp.Abs(a[0] / eps + 1) - sp.Abs(a[0] / eps - 1)) / 2  # clip(d/eps, -1, 1), exact
+        return sp.Rational(1, 2) + sp.Rational(3, 4) * c - c**3 / 4  # smoothstep: slope 0 at c = +-1
+    raise AssertionError(name)
+
+
+def build(text: str, names: dict, constant: set) -> sp.Expr:
+    """Parse ``text`` and build its sympy expression (see :class:`EquationBuilder`); non-finite refused."""
+    tree, python = parse_tree(text)
+    expr = EquationBuilder(python, names, constant).build(tree)
+    check_finite_constants(expr, text)
+    return expr
+
+
+def check_finite_constants(expr, text: str) -> None:
+    """Every constant sub-expression must be a finite double (``1/0``, ``log(0)``, ``exp(1000)`` refused)."""
+    if expr.has(sp.zoo, sp.oo, -sp.oo, sp.nan):
+        raise ExpressionError(f"non-finite value in {_short(text)}")
+    stack = [expr]
+    while stack:
+        e = stack.pop()
+        if isinstance(e, sp.Basic) and not e.free_symbols and not isinstance(e, sp.logic.boolalg.BooleanAtom) \
+                and not e.is_Relational and isinstance(e, sp.Expr):
+            check_double(e, f"{e} in {_short(text)}")
+            continue
+        stack.extend(a for a in getattr(e, "args", ()) if isinstance(a, sp.Basic))
+
+
+def names_in(tree) -> set:
+    """Every name the tree reads (to order intermediates by their dependencies)."""
+    return {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)}
+
+
+def finite(value, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ExpressionError(f"{where} must be a finite number, got {value!r}")
+    return float(value)
