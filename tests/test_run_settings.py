@@ -114,10 +114,11 @@ def test_scene_file_with_an_unknown_cosim_key_names_file_and_valid_keys(tmp_path
 
 @pytest.fixture(scope="module")
 def iterated_scene(tmp_path_factory):
-    """The split rig whose [cosim] asks for an iteration it cannot finish: 2 iterations to 1e-13."""
+    """The split rig whose [cosim] asks for an iteration it cannot finish: 2 iterations to 1e-13 (its FMUs are
+    the split rig's: [cosim] does not change them)."""
     d = tmp_path_factory.mktemp("iterated")
     scene = d / "split_iterated.toml"
-    scene.write_text(SPLIT.read_text().replace('stop = 1.0', 'stop = 0.3') + """
+    scene.write_text(SPLIT.read_text() + """
 [cosim]
 scheme = "iterative"
 extrapolation = "linear"
@@ -138,21 +139,21 @@ def test_every_cosim_key_is_honoured_by_command_api_sweep_and_report(iterated_sc
 
     # the command: the file's settings, then --set, then the flags
     out = tmp_path / "cli"
-    assert main(["cosim", str(iterated_scene), "--out", str(out)]) == 1
+    assert main(["cosim", str(iterated_scene), "--out", str(out), "--stop", "0.15"]) == 1
     text = _summary(out)
     assert "iterative/linear: failed" in text and "did not converge in 2 iterations" in text
     assert "(H 0.002..0.002 s)" in text
-    assert main(["cosim", str(iterated_scene), "--out", str(out), "--set", "cosim.step=0.004",
+    assert main(["cosim", str(iterated_scene), "--out", str(out), "--stop", "0.15", "--set", "cosim.step=0.004",
                  "--iterations", "40", "--coupling-tol", "1e-6"]) == 0
-    assert "iterative/linear: ok" in _summary(out) and "(H 0.004..0.004 s)" in _summary(out)
+    assert "iterative/linear: ok" in _summary(out) and "..0.004 s)" in _summary(out)  # the last step ends at 0.15
     cli = np.loadtxt(out / "results.csv", delimiter=",", skiprows=1)
 
     # the API, with the built scene: the same settings, the same numbers
     built = ac.build_scene_cached(iterated_scene, tmp_path / "api")
-    r = run(built, stop=0.3)
+    r = run(built, stop=0.15)
     assert not r.ok and "did not converge in 2 iterations" in str(r.summary.failure)
     r = run(load_scene(iterated_scene, set=["cosim.step=0.004"]).build(tmp_path / "api2"), max_iterations=40,
-            coupling_tol=1e-6)
+            coupling_tol=1e-6, stop=0.15)
     assert r.ok and np.array_equal(np.column_stack([r.time, r.values]), cli)
 
     # the sweep's keywords and the report's runs: the same resolution
@@ -160,7 +161,36 @@ def test_every_cosim_key_is_honoured_by_command_api_sweep_and_report(iterated_sc
     assert run_options(built.system.settings) == settings.keywords()
     assert run_options(built.system.settings)["max_iterations"] == 2
     rep = make_report(built.system, built.scene.reference_problem(), [2e-3], [("iterative", "linear")], repeats=1,
-                      stop=0.1, settings=settings)
+                      stop=0.15, settings=settings)  # the reference of the dense-output test below: cached
     (row,) = rep.rows
     assert row.status == "failed" and "did not converge in 2 iterations" in row.failure
     assert "did not converge in 2 iterations" in rep.table()  # the reason in the text table too
+
+
+# ---------------------------------------------------------------------------------------------- dense output
+def test_dense_output_from_the_fmus_slopes(tmp_path):
+    """Hermite between communication points from fmi2GetRealOutputDerivatives: the slope of the joint angle
+    is the recorded joint speed, and between the points the interpolant's error is the coupling's (as at
+    the points), where the straight line's is the interpolation's."""
+    from fmugen.cosim.dense import hermite
+    from fmugen.cosim.reference import solve_reference
+
+    built = ac.build_scene_cached(SPLIT, tmp_path / "fmus")
+    H, stop = 15e-3, 0.15  # Newton/cubic: a coupling error far below what a straight line between points makes
+    r = run(built, "newton", "cubic", step=H, stop=stop, dense=True)
+    assert r.ok and r.slopes.shape == r.values.shape
+    th, w = r.columns.index("joint.theta"), r.columns.index("joint.w")
+    np.testing.assert_allclose(r.slopes[:, th], r.values[:, w], rtol=1e-12, atol=1e-15)  # der(theta) = w
+    assert np.all(np.isfinite(r.slopes))
+    mid = 0.5 * (r.time[1:] + r.time[:-1])
+    p = built.scene.reference_problem()
+    from fmugen.cosim.system import ReferenceProblem
+
+    p = ReferenceProblem(p.model, p.x0, p.u, p.columns, p.start_time, stop, p.nominals)
+    ref = solve_reference(p, times=np.concatenate([r.time, mid]))
+    n = len(r.time)
+    e_cp = np.max(np.abs(r.values[:, th] - ref["joint.theta"][:n]))
+    e_line = np.max(np.abs(hermite(r.time, r.values, None, mid)[:, th] - ref["joint.theta"][n:]))
+    e_herm = np.max(np.abs(hermite(r.time, r.values, r.slopes, mid)[:, th] - ref["joint.theta"][n:]))
+    # measured: e_cp 3.1e-6, the line 2.0e-4 (it would be reported as the run's error), Hermite 3.9e-6
+    assert e_line > 10 * e_cp and e_herm < 2 * e_cp, (e_cp, e_line, e_herm)

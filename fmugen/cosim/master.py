@@ -181,6 +181,7 @@ class CosimResult:
     values: np.ndarray  # (n, len(columns))
     columns: tuple
     summary: Summary
+    slopes: Optional[np.ndarray] = None  # (n, len(columns)) d/dt at each point (run(dense=True)), NaN: none
 
     @property
     def ok(self) -> bool:
@@ -467,7 +468,8 @@ class Master:
     # -- the run ----------------------------------------------------------------
     def run(self, step: Optional[float] = None, stop: Optional[float] = None, adaptive: bool = False,
             tol: float = 1e-4, min_step: Optional[float] = None, max_step: Optional[float] = None,
-            coupling_tol: float = 1e-8, max_iterations: int = 30, detect_divergence: bool = True) -> CosimResult:
+            coupling_tol: float = 1e-8, max_iterations: int = 30, detect_divergence: bool = True,
+            dense: bool = False) -> CosimResult:
         sysm = self.system
         t0 = float(sysm.start_time)
         stop = float(sysm.stop_time if stop is None else stop)
@@ -516,6 +518,11 @@ class Master:
         if hermite:
             self._send_ddu = True
         rec_idx = self.rec_idx
+        slopes = None
+        if dense:
+            from .dense import SlopeRecorder
+
+            slopes = SlopeRecorder(units, sysm.recorded)
         cap = int(min(max((stop - t0) / Hmin, 16), 1_000_000)) + 2 if not adaptive else 1024
         T = np.empty(cap)
         V = np.empty((cap, len(rec_idx)))
@@ -558,6 +565,8 @@ class Master:
             T[0] = t
             V[0] = Y[rec_idx]
             n_rows = 1
+            if slopes is not None:  # dense output (fmugen.cosim.dense): the recorded columns' slopes
+                slopes.append()
             if need_states:
                 states = [u.new_state() for u in units]
                 calls += len(units)
@@ -740,6 +749,8 @@ class Master:
                 T[n_rows] = t
                 np.take(Y, rec_idx, out=V[n_rows])
                 n_rows += 1
+                if slopes is not None:
+                    slopes.append()
                 if detect_divergence and nu and not adaptive:  # adaptive: the step control bounds the defect
                     Dblk[win_count] = d_v
                     Ublk[win_count] = Unew_v
@@ -807,7 +818,8 @@ class Master:
             summ.failure = failure
         if summ.macro_steps == 0:
             summ.step_min = summ.step_max = 0.0
-        return CosimResult(T[:n_rows].copy(), V[:n_rows].copy(), self.columns, summ)
+        return CosimResult(T[:n_rows].copy(), V[:n_rows].copy(), self.columns, summ,
+                           slopes.slopes() if slopes is not None else None)
 
     def _monitor(self, t, H, D, U, scale0, peak, windows, recent):
         """Divergence check on a block of accepted macro steps (defects D, values U: (win_len, nu))."""

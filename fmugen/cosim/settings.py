@@ -62,6 +62,7 @@ class RunSettings:
     coupling_tol: Optional[float] = None
     workers: int = 1
     detect_divergence: Optional[bool] = None
+    dense: Optional[bool] = None  # API only: record the outputs' slopes for dense output (fmugen.cosim.dense)
 
     def master_keywords(self) -> dict:
         """Keywords of :class:`fmugen.cosim.master.Master` (besides the system)."""
@@ -71,7 +72,7 @@ class RunSettings:
     def run_keywords(self) -> dict:
         """Keywords of ``Master.run``: only those set (the master keeps its defaults for the others)."""
         out = {"step": self.step, "stop": self.stop, "adaptive": self.adaptive}
-        for k in ("tol", "min_step", "max_step", "max_iterations", "coupling_tol", "detect_divergence"):
+        for k in ("tol", "min_step", "max_step", "max_iterations", "coupling_tol", "detect_divergence", "dense"):
             v = getattr(self, k)
             if v is not None:
                 out[k] = v
@@ -140,7 +141,7 @@ def _check(field: str, value, where: str):
         return _positive(where, value)
     if field in ("max_iterations", "workers"):
         return _whole(where, value)
-    if field in ("adaptive", "detect_divergence"):
+    if field in ("adaptive", "detect_divergence", "dense"):
         return _flag(where, value)
     if field == "order":
         if isinstance(value, str):
