@@ -4,6 +4,7 @@
     fmugen build FILE.toml --fmi-type me|cs|both -o OUT.fmu [--outputs p_ee,qdd] [--fold all]
                            [--model inverse_dynamics]
     fmugen info FILE.toml
+    fmugen export-urdf ROBOT.toml -o ROBOT.urdf [--set NAME=VALUE ...]   (any robot as URDF, fmugen/robot)
     fmugen build SCENE.toml -o DIR [--set NAME=VALUE ...] [--no-prune] [--no-cache]
     fmugen suite [FILE.toml] [--cases NAME ...] [--quick] --out DIR   (stiff and extreme cases, fmugen/suite)
     fmugen linearize FILE.toml [--at NAME=VALUES ...] [--trim NAMES] [--inputs ...] [--outputs ...]
@@ -14,9 +15,12 @@
                  [--step H] [--adaptive --tol E] [--stop T] [--set ...] --out DIR   (co-simulation, fmugen/cosim)
     fmugen reference SCENE.toml [--points N] [--set ...] --out DIR   (the scene as one model, Radau at 1e-12)
     fmugen report SCENE.toml [--steps H1,H2,...] [--schemes S/E,...] [--repeats 5] --out DIR   (error vs wall time)
+    fmugen ssp SCENE.toml -o OUT.ssp [--set ...]   (the scene as an SSP 1.0 archive, fmugen/ssp)
+    fmugen cosim | report SYSTEM.ssp ...           (any SSP of FMI 2.0 FMUs run by fmugen's master)
 
 FILE is a robot file (a ``[robot]`` table), an assembly of actuator-chain
-components (an ``[assembly]`` table) or a scene (a ``[scene]`` table: one FMU
+components (an ``[assembly]`` table), a component file (a ``[component]``
+table, fmugen/components/README.md) or a scene (a ``[scene]`` table: one FMU
 per group into DIR).  ``--set NAME=VALUE`` (repeatable) gives any parameter or
 start value (``--set m=1`` for a robot with a symbolic m, ``--set joint.J=5``
 in a scene).
@@ -32,20 +36,25 @@ from pathlib import Path
 
 def _kind(path: Path) -> str:
     # user errors are InputFileError (a ValueError): main() prints one line and exits 2
-    from .errors import InputFileError, read_text_file
+    from .errors import InputFileError, read_text_file, toml_problem
+    from .robot.loader import is_urdf
 
+    if is_urdf(path):
+        return "robot"
     try:
         data = tomllib.loads(read_text_file(path, "TOML file"))
-    except tomllib.TOMLDecodeError as exc:
-        raise InputFileError(f"{path}: not valid TOML: {exc}") from None
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        raise InputFileError(f"{path}: {toml_problem(exc)}") from None
     if "robot" in data:
         return "robot"
     if "assembly" in data:
         return "assembly"
     if "scene" in data:
         return "scene"
-    raise InputFileError(f"{path}: neither a robot file ([robot] table), an assembly ([assembly] table) "
-                         f"nor a scene ([scene] table)")
+    if "component" in data:
+        return "component"
+    raise InputFileError(f"{path}: neither a robot file ([robot] table), an assembly ([assembly] table), "
+                         f"a scene ([scene] table) nor a component file ([component] table)")
 
 
 def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler", model="forward_dynamics",
@@ -68,6 +77,11 @@ def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler", mo
         arm = fmugen.load_robot(path, formulation)
         m = (arm.inverse_dynamics_model() if model == "inverse_dynamics"
              else arm.state_space_model(outputs=outputs, strategy=strategy))
+    elif kind == "component":  # a component file: parameters through its checks (ranges, exact ifs)
+        from .components.equations import load_component, read_component_file
+
+        params = {d.name for d in read_component_file(path).of_kind("parameter")}
+        m = load_component(path, overrides={k: v for k, v in sets.items() if k in params})
     else:
         from .components.assembly import load_assembly
 
@@ -82,6 +96,15 @@ def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler", mo
                                  f"{did_you_mean(k, names)}; parameters: {', '.join(p.name for p in m.parameters)}")
             if isinstance(v, bool) or not isinstance(v, (int, float)):
                 raise SceneError(f"{path}: --set {k}={v!r}: a number is needed")
+        from .values import as_number, check_model_values, robot_value_problem
+
+        sets = {k: as_number(v, f"{path}: --set {k}") for k, v in sets.items()}
+        check_model_values(m, sets, lambda k: f"{path}: --set {k}")  # the checks file values get
+        if kind == "robot":
+            params = {p.name for p in m.parameters}
+            problem = robot_value_problem(arm.robot, {k: v for k, v in sets.items() if k in params})
+            if problem:
+                raise SceneError(f"{path}: --set: {problem}")
         m = m.with_starts(sets)
     return m
 
@@ -95,14 +118,36 @@ def _cmd_equations(args) -> int:
     return 0
 
 
+def _cmd_export_urdf(args) -> int:
+    from .robot.loader import load_robot_description
+    from .robot.urdf_export import robot_to_urdf
+    from .scene import parse_sets
+
+    robot = load_robot_description(args.robot)
+    text = robot_to_urdf(robot, parse_sets(args.set) or None)
+    Path(args.output).write_text(text)
+    print(f"wrote {args.output}: {robot.n} joints, {len(robot.frames)} frames")
+    return 0
+
+
 def _cmd_build_scene(args) -> int:
     from .scene import load_scene
 
+    if args.fmi_type is not None:  # one flag for all groups would hide what the file says per FMU
+        raise ValueError(f"{args.file}: --fmi-type does not apply to a scene: each FMU's type is its group's "
+                         f"fmi_type (\"cs\" or \"me\"; \"me\" FMUs carry both interfaces), e.g. "
+                         f"--set fmus.<group>.fmi_type=me")
+
+    from .arguments import output_folder
+
+    if args.output:
+        output_folder(args.output, "-o", inputs=[args.file])
     scene = load_scene(args.file, set=args.set, allow_factories=args.allow_factories)
     out = Path(args.output) if args.output else Path(scene.name)
     if out.suffix == ".fmu":
         raise ValueError(f"{args.file}: a scene builds one FMU per group: -o names a folder, not {out}")
-    built = scene.build(out, prune=not args.no_prune, use_cache=not args.no_cache)
+    output_folder(out, "-o", inputs=[args.file])
+    built = scene.build(out, prune=False if args.no_prune else None, use_cache=not args.no_cache)
     print(built.summary())
     print(f"wrote {len(built.fmus)} FMU(s) into {out}")
     return 0
@@ -113,9 +158,12 @@ def _bytes(text: str) -> float:
     units = {"K": 2**10, "M": 2**20, "G": 2**30}
     t = text.strip().upper().rstrip("B").rstrip("I")
     try:
-        return float(t[:-1]) * units[t[-1]] if t and t[-1] in units else float(t)
-    except ValueError:
+        v = float(t[:-1]) * units[t[-1]] if t and t[-1] in units else float(t)
+    except (ValueError, OverflowError):
         raise ValueError(f"--budget-memory {text!r}: a size such as 800M, 1.5G or a number of bytes") from None
+    if not (v > 0 and v < float("inf")):
+        raise ValueError(f"--budget-memory {text!r}: a positive size such as 800M, 1.5G")
+    return v
 
 
 def _cmd_build(args) -> int:
@@ -124,7 +172,14 @@ def _cmd_build(args) -> int:
     path = Path(args.file)
     if _kind(path) == "scene":
         return _cmd_build_scene(args)
+    from .arguments import output_file
+
     t0 = time.perf_counter()
+    if args.output:  # checked before anything is derived: never the input, never a folder
+        output_file(args.output, "-o", inputs=[path])
+    memory = _bytes(args.budget_memory) if args.budget_memory else None
+    if args.budget_seconds is not None and not (args.budget_seconds > 0 and args.budget_seconds < float("inf")):
+        raise ValueError(f"--budget-seconds {args.budget_seconds!r}: must be a positive number of seconds")
     outputs = tuple(o for o in args.outputs.split(",") if o)
     if sys.stderr.isatty():  # progress of the first stage; build_fmu reports the others
         print(f"fmugen build {path.name}: derive ...", end="", file=sys.stderr, flush=True)
@@ -133,10 +188,9 @@ def _cmd_build(args) -> int:
     if sys.stderr.isatty():
         print(f" {t1 - t0:.1f} s", file=sys.stderr, flush=True)
     fold = None if args.fold == "none" else ("all" if args.fold == "all" else args.fold.split(","))
-    out = Path(args.output) if args.output else Path(f"{model.name}.fmu")
-    result = build_fmu(model, out, fmi_type=args.fmi_type, fold_parameters=fold, budget_start=t0,
-                       budget_seconds=args.budget_seconds,
-                       budget_memory=_bytes(args.budget_memory) if args.budget_memory else None)
+    out = output_file(args.output or f"{model.name}.fmu", "-o", inputs=[path])
+    result = build_fmu(model, out, fmi_type=args.fmi_type or "both", fold_parameters=fold, budget_start=t0,
+                       budget_seconds=args.budget_seconds, budget_memory=memory)
     t2 = time.perf_counter()
     print(f"wrote {result.path}  (derive {t1 - t0:.2f} s, generate+compile+zip {t2 - t1:.2f} s)")
     if args.ops:
@@ -153,12 +207,14 @@ def _cmd_info(args) -> int:
         scene = load_scene(path, set=args.set, allow_factories=args.allow_factories)
         print(f"scene {scene.name}: {scene.spec.description}")
         for g in scene.groups:
-            m, removed = scene.group_model(g)
+            m, removed = scene.group_model(g, prune=scene.spec.prune)
             print(f"FMU {g} ({', '.join(scene.groups[g].members)}): {m.nx} states; inputs "
                   f"{', '.join(v.name for v in m.inputs) or '-'}; outputs "
                   f"{', '.join([v.name for v in m.states if v.output] + [v.name for v in m.outputs]) or '-'}")
             for r in removed:
                 print(f"    pruned: {r}")
+        for b in scene.spec.bonds:  # the physical bonds of connect, and the signals that make each
+            print(f"bond {b}: " + ", ".join(f"{v}: {src} -> {dst}" for v, src, dst in b.signals))
         return 0
     model = symbolic_model(path, sets=args.set)
     print(f"{model.name}: {model.description}")
@@ -178,16 +234,22 @@ COMMANDS = {
     "equations": ("print the final equations of motion of a robot", "fmugen.cli:_add_own_commands"),
     "build": ("derive, generate, compile and zip an FMI 2.0 FMU", "fmugen.cli:_add_own_commands"),
     "info": ("list the variables a file's model will have", "fmugen.cli:_add_own_commands"),
+    "export-urdf": ("write a robot (TOML or URDF) as a URDF file, parameters at their values",
+                    "fmugen.cli:_add_own_commands"),
     "suite": ("stiff and extreme cases through every CS solver: accurate / detected / silent failure, "
               "table + CSV + plots", "fmugen.suite.cli:add_parser"),
     "linearize": ("trim and linearise a robot, assembly or scene (A, B, C, D into .npz)",
                   "fmugen.control.cli:add_parser"),
     "sweep": ("run a scene over a parameter grid or Monte-Carlo sample (Dask)", "fmugen.sweep.cli:add_parser"),
+    "ssp": ("write a scene as an SSP 1.0 archive (FMUs, connections, parameters, units, default experiment) that "
+            "other FMI masters run", "fmugen.ssp.cli:add_parser"),
     "cosim": ("co-simulate a scene's FMUs (results.csv, .npz, plot, summary)",
               "fmugen.cosim.commands:add_cosim_commands"),
     "reference": ("solve a scene as one model with Radau at 1e-12 (reference.csv, plot)",
                   "fmugen.cosim.commands:add_cosim_commands"),
     "report": ("error against wall time over schemes and macro steps", "fmugen.cosim.commands:add_cosim_commands"),
+    "size": ("propose an actuator parameter set per joint of an arm (hydraulic or electric)",
+             "fmugen.components.arm_sizing:add_parser"),
 }
 
 
@@ -202,8 +264,9 @@ def _add_own_commands(sub) -> None:
     p.set_defaults(func=_cmd_equations)
 
     p = sub.add_parser("build", help="derive, generate, compile and zip an FMI 2.0 FMU")
-    p.add_argument("file", help="robot or assembly TOML file")
-    p.add_argument("--fmi-type", default="both", choices=["me", "cs", "both"])
+    p.add_argument("file", help="robot, assembly, component or scene TOML file")
+    p.add_argument("--fmi-type", default=None, choices=["me", "cs", "both"],
+                   help="robot, assembly and component files (default both); a scene's FMUs take their group's fmi_type")
     p.add_argument("-o", "--output", help="path of the .fmu (default: <model name>.fmu); a folder for a scene")
     p.add_argument("--outputs", default="p_ee", help="robot outputs besides q, qd: p_ee, qdd (comma separated)")
     p.add_argument("--formulation", default="newton_euler", choices=["newton_euler", "lagrange"])
@@ -225,6 +288,12 @@ def _add_own_commands(sub) -> None:
     p.add_argument("--allow-factories", action="store_true",
                    help="scenes: allow instances made by a Python factory (runs code named in the file)")
     p.set_defaults(func=_cmd_build)
+
+    p = sub.add_parser("export-urdf", help="write a robot (TOML or URDF) as a URDF file, parameters at their values")
+    p.add_argument("robot")
+    p.add_argument("-o", "--output", required=True, help="the .urdf file to write")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="parameter values")
+    p.set_defaults(func=_cmd_export_urdf)
 
     p = sub.add_parser("info", help="list the variables a file's model will have")
     p.add_argument("file")
@@ -260,6 +329,16 @@ def main(argv=None) -> int:
     except (ValueError, KeyError, OSError) as exc:  # clear message, no traceback, for user errors
         text = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
         print("fmugen: " + str(text).replace("\n", " "), file=sys.stderr)  # one line
+        return 2
+    except RuntimeError as exc:  # a C compiler that failed: one line (the command and its first error)
+        if not any(c.__name__ == "BuildError" for c in type(exc).__mro__):
+            raise
+        lines = str(exc).splitlines() or [type(exc).__name__]
+        first = next((ln.strip() for ln in lines[1:] if "error" in ln.lower()), "")
+        print(f"fmugen: {lines[0].rstrip(':')}{': ' + first if first else ''}"[:1500], file=sys.stderr)
+        return 1
+    except RecursionError:  # an input nested deeper than any reader handles (a last resort: readers name it)
+        print(f"fmugen: {args.command}: an input is nested too deeply to be read", file=sys.stderr)
         return 2
 
 

@@ -16,7 +16,7 @@ import math
 import re
 from pathlib import Path
 
-__all__ = ["FmugenError", "InputFileError", "read_text_file", "check_finite", "check_identifier",
+__all__ = ["FmugenError", "InputFileError", "read_text_file", "toml_problem", "check_finite", "check_identifier",
            "MAX_IDENTIFIER_LENGTH", "IDENTIFIER_PATTERN"]
 
 #: names that become C identifiers, FMU model identifiers and file names: ASCII
@@ -57,11 +57,21 @@ def read_text_file(path, what: str = "file") -> str:
     return text
 
 
+def toml_problem(exc: BaseException) -> str:
+    """The phrase for a file tomllib could not read: its syntax error, or nesting deeper than
+    Python's recursion allows (``a = [[[[...]]]]`` thousands deep) -- never a bare RecursionError."""
+    if isinstance(exc, RecursionError):
+        return "not usable TOML: values nested too deeply (arrays or tables inside each other hundreds of levels deep)"
+    return f"not valid TOML: {exc}"
+
+
 def check_finite(value: float, where: str) -> float:
     """``value`` as a float, or an :class:`InputFileError` at ``where`` if NaN or infinite."""
     try:
         v = float(value)
-    except (TypeError, ValueError, OverflowError):
+    except OverflowError:
+        raise InputFileError(f"{where}: an integer beyond the double-precision range") from None
+    except (TypeError, ValueError):
         raise InputFileError(f"{where}: {value!r} is not a number") from None
     if not math.isfinite(v):
         raise InputFileError(f"{where}: non-finite value {v!r}")

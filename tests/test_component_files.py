@@ -466,3 +466,68 @@ def test_state_feedback_file_splits_long_rows(tmp_path, monkeypatch):
     u = [0.7, -0.4]
     assert a.g(0, [], u)[0] == pytest.approx(1.0 - 3.0 * 0.6 - 0.5 * (-0.6), rel=1e-14)
     assert b.g(0, [], u)[0] == a.g(0, [], u)[0]
+
+
+def test_linearising_at_rest_inside_a_smoothed_coulomb_term_is_flagged(tmp_path):
+    """At rest the smoothed sign acts as a viscous damper T_s/w_eps: the linearisation shows it
+    (closed form), fmugen says so, and the friction-free choice it offers removes it."""
+    from fmugen.control.kinks import kink_warnings
+
+    (tmp_path / "s.toml").write_text('[scene]\nname = "s"\n[instances]\nload = { type = "lib:stribeck" }\n')
+    sc = fmugen.load_scene(tmp_path / "s.toml")
+    m = fmugen.control.scene_model(sc)
+    op = fmugen.trim(m, at={"load.phi": 0.0, "load.w": 0.0}, free=["load.tau"])
+    A = np.asarray(fmugen.linearize(m, op).A)
+    assert A[1, 1] == pytest.approx(-(3.0 / 1e-3 + 0.02) / 0.05, rel=1e-12)
+    (line,) = kink_warnings(sc, m, op)
+    assert "load: sign(w, w_eps)" in line and "--set load.w_eps=1e12" in line
+    sc0 = fmugen.load_scene(tmp_path / "s.toml", set={"load.w_eps": 1e12})
+    m0 = fmugen.control.scene_model(sc0)
+    op0 = fmugen.trim(m0, at={"load.phi": 0.0, "load.w": 0.0}, free=["load.tau"])
+    assert kink_warnings(sc0, m0, op0) == []
+    assert np.asarray(fmugen.linearize(m0, op0).A)[1, 1] == pytest.approx(-0.02 / 0.05, rel=1e-6)
+    # outside the band (slipping at 1 rad/s): nothing to say
+    from types import SimpleNamespace
+
+    x1 = np.array([{"load.phi": 0.0, "load.w": 1.0}[v.name] for v in m.states])
+    assert kink_warnings(sc, m, SimpleNamespace(x=x1, u=np.array([2.0]), t=0.0)) == []
+
+
+def test_hostile_text_of_a_component_file_stays_inside_comments_and_xml(tmp_path):
+    """Descriptions and provenance are data: escaped in model.c and modelDescription.xml."""
+    import xml.dom.minidom
+
+    from fmugen.codegen.c_code import generate_c
+    from fmugen.fmi.model_description import model_description_xml
+
+    evil = '*/ int pwned = 1; /* ??/ <!-- ]]> &amp; "q" </fmiModelDescription>'
+    p = write(tmp_path, ["der(phi) = w", "der(w) = tau/J"])
+    text = p.read_text().replace('name = "c"', f'name = "c"\ndescription = {_toml_string(evil)}\n'
+                                                f'provenance = {_toml_string(evil)}')
+    text = text.replace('[inputs]\ntau = { unit = "N.m", start = 0.0 }',
+                        f'[inputs]\ntau = {{ unit = "N.m", start = 0.0, description = {_toml_string(evil)} }}')
+    p.write_text(text)
+    m = load_component(p)
+    assert "pwned" in m.description and "pwned" in m.provenance
+    c = generate_c(m).source
+    for line in c.splitlines():
+        if "pwned" in line:
+            assert "*/ int" not in line and "??/" not in line
+    doc = xml.dom.minidom.parseString(model_description_xml(m, "{00000000-0000-0000-0000-000000000000}", "c"))
+    assert "pwned" in doc.documentElement.getAttribute("description")
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ("w = { unit = \"rad/s\" }", "\"w;x\" = { unit = \"rad/s\" }", "must be an identifier"),
+    ("w = { unit = \"rad/s\" }", "w__x = { unit = \"rad/s\" }", "must be an identifier"),
+    ("w = { unit = \"rad/s\" }", "w = { unit = \"rad/s</x>\" }", "unit"),
+    ("w = { unit = \"rad/s\" }", "w = { unit = \"rad/s\", start = inf }", "finite"),
+    ("w = { unit = \"rad/s\" }", "w = { unit = \"rad/s\", nominal = -1.0 }", "nominal must be positive"),
+    ("w = { unit = \"rad/s\" }", "w = { unit = \"rad/s\", min = 2.0, max = 1.0 }", "min .* is above max"),
+    ("w = { unit = \"rad/s\" }", "w = { unit = \"rad/s\", evil = 1 }", "unknown key"),
+])
+def test_declarations_are_checked(tmp_path, old, new, message):
+    p = write(tmp_path, ["der(phi) = w", "der(w) = tau/J"])
+    p.write_text(p.read_text().replace(old, new).replace("der(w)", "der(w)"))
+    with pytest.raises(InputFileError, match=message):
+        read_component_file(p)

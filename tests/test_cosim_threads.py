@@ -7,14 +7,14 @@ is costly enough by itself.
 import numpy as np
 import pytest
 
-import fmugen.cosim.master as master
+import fmugen.cosim.executor as executor
 from cosim_rigs import split_system
 from fmugen.cosim import CosimError, run
 
 
 @pytest.fixture
 def threads_always(monkeypatch):
-    monkeypatch.setattr(master, "PARALLEL_MIN_COST", 0.0)
+    monkeypatch.setattr(executor, "PARALLEL_MIN_COST", 0.0)
 
 
 def test_cheap_sweeps_stay_on_one_thread():
@@ -40,7 +40,7 @@ def test_threads_give_the_one_thread_result_bit_for_bit(threads_always, scheme, 
 def test_an_fmu_that_discards_on_a_thread_is_reported_as_on_one(threads_always, monkeypatch):
     # Jacobi/held far above its limit on the stiff rig, without the divergence check: the chain's solver
     # discards at t = 0.52 s, on a thread from the second sweep on
-    monkeypatch.setattr(master, "TIMED_SWEEPS", 1)
+    monkeypatch.setattr(executor, "TIMED_SWEEPS", 1)
     runs = [run(split_system("stiff", "step", stop=1.0), "jacobi", "hold", step=0.02, workers=w,
                 detect_divergence=False) for w in (1, 2)]
     assert runs[1].summary.threads == 2

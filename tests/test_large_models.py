@@ -323,7 +323,8 @@ def test_a_killed_build_removes_its_files_and_its_compilers(tmp_path, sig):
         raise
     assert proc.returncode != 0
     assert "BuildInterrupted" in err or "KeyboardInterrupt" in err
-    assert list(work.iterdir()) == [] and not out.exists() and not out.with_name("m.fmu.part").exists()
+    assert list(work.iterdir()) == [] and not out.exists() and not out.with_name("m.fmu.part").exists() \
+        and not list(out.parent.glob(".m.fmu.*.part"))
     for pid in map(int, pids.read_text().split()):
         with pytest.raises(ProcessLookupError):  # the compilers it started are gone
             os.kill(pid, 0)

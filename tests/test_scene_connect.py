@@ -17,18 +17,27 @@ NEW = ROOT / "examples/scenes/puma_hydraulic.toml"
 OLD = ROOT / "tests/data/puma_hydraulic_signals.toml"
 
 
+@pytest.mark.parametrize("name", ["puma_hydraulic", "puma_electric", "puma_wrist_locked"])
+def test_shipped_scenes_with_connect_are_the_scenes_written_out(name):
+    new_path, old_path = ROOT / f"examples/scenes/{name}.toml", ROOT / f"tests/data/{name}_signals.toml"
+    old, new = fmugen.load_scene(old_path), fmugen.load_scene(new_path)
+    assert len(new_path.read_text().splitlines()) < 0.6 * len(old_path.read_text().splitlines())
+    assert new.connections == old.connections  # the same signals, in the same order
+    assert new.spec.instances == old.spec.instances and new.spec.groups == old.spec.groups
+    assert new.spec.record == old.spec.record and new.spec.cosim == old.spec.cosim
+    assert new.spec.monolithic == old.spec.monolithic and new.groups == old.groups
+    # the build cache key hashes everything that shapes an FMU: equal keys, identical FMUs
+    x0 = {"arm.q[2]": -0.4}
+    for g in old.groups:
+        assert _group_key(new, g, True, x0, {}) == _group_key(old, g, True, x0, {})
+
+
 def test_puma_hydraulic_with_connect_is_the_scene_written_out():
     old, new = fmugen.load_scene(OLD), fmugen.load_scene(NEW)
     assert len(NEW.read_text().splitlines()) < len(OLD.read_text().splitlines()) / 2
-    assert new.connections == old.connections  # same 48 signals, same order
-    assert new.spec.instances == old.spec.instances and new.spec.groups == old.spec.groups
-    assert new.spec.record == old.spec.record and new.spec.cosim == old.spec.cosim
-    # the build cache key hashes everything that shapes an FMU: equal keys, identical FMUs
-    x0 = {"arm.q[2]": -0.4, "act2.P_L": 1e6}
-    for g in old.groups:
-        assert _group_key(new, g, True, x0) == _group_key(old, g, True, x0)
     a, b = old.group_model("joint2")[0], new.group_model("joint2")[0]
     assert a.derivatives == b.derivatives and a.states == b.states and a.inputs == b.inputs
+    new = fmugen.load_scene(NEW)
     # twelve bonds: six hydraulic (P_L | Q_L), six rotational (w | tau), with their power variables
     bonds = {str(b_): b_ for b_ in new.spec.bonds}
     assert len(bonds) == 12
@@ -110,3 +119,52 @@ def test_repeat_errors(tmp_path):
     # --set reaches an expanded instance
     sc = fmugen.load_scene(NEW, set={"path2.q_end": 0.3})
     assert {v.name: v.start for v in sc.base_models["path2"].parameters}["q_end"] == 0.3
+
+
+def test_record_bonds_and_energy_per_bond(tmp_path):
+    from fmugen.scene.bonds import bond_power
+
+    sc = rig(tmp_path, '["act.port", "valve.port"], ["act.flange", "inert.flange"]')
+    assert sc.spec.record == ()
+    p = tmp_path / "rig.toml"
+    p.write_text(p.read_text().replace("stop = 0.5", "stop = 0.5\nrecord_bonds = true"))
+    sc = fmugen.load_scene(p)
+    assert sc.spec.record == ("act.P_L", "valve.Q_L", "act.tau", "inert.w")
+    t = np.linspace(0, 2, 201)
+    cols = {"act.P_L": np.full_like(t, 3e6), "valve.Q_L": 1e-5 * t, "act.tau": np.full_like(t, 4.0),
+            "inert.w": np.cos(t)}
+    (b1, p1, e1), (b2, p2, e2) = bond_power(sc.spec.bonds, t, cols.__getitem__)
+    assert str(b1) == "act.port <-> valve.port (hydraulic)" and p1[-1] == pytest.approx(60.0)
+    assert e1[-1] == pytest.approx(3e6 * 1e-5 * 2.0**2 / 2, rel=1e-12)  # integral of a ramp: trapezoid exact
+    assert e2[-1] == pytest.approx(4.0 * np.sin(2.0), rel=1e-4)
+
+
+URDF = """<robot name="two">
+  <link name="base"/>
+  <link name="upper"><inertial><origin xyz="0 0 0.2"/><mass value="2.0"/>
+    <inertia ixx="0.02" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.01"/></inertial></link>
+  <link name="lower"><inertial><origin xyz="0 0 0.15"/><mass value="1.0"/>
+    <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.005"/></inertial></link>
+  <joint name="shoulder" type="revolute"><parent link="base"/><child link="upper"/>
+    <axis xyz="0 1 0"/><limit lower="-2" upper="2" effort="100" velocity="2"/></joint>
+  <joint name="elbow" type="revolute"><parent link="upper"/><child link="lower"/>
+    <origin xyz="0 0 0.4"/><axis xyz="0 1 0"/><limit lower="-2" upper="2" effort="50" velocity="2"/></joint>
+</robot>
+"""
+
+
+def test_connect_to_a_urdf_joint_by_name(tmp_path):
+    (tmp_path / "two.urdf").write_text(URDF)
+    (tmp_path / "s.toml").write_text("""
+[scene]
+name = "s"
+connect = [["act.flange", "arm.elbow"], ["valve.port", "act.port"]]
+[instances]
+arm = { robot = "two.urdf" }
+act = { type = "hydraulic_actuator" }
+valve = { type = "servo_valve" }
+""")
+    sc = fmugen.load_scene(tmp_path / "s.toml")
+    assert ("arm", "qd[2]", "act", "w", None) in sc.connections
+    assert ("act", "tau", "arm", "tau[2]", None) in sc.connections
+    assert str(sc.spec.bonds[0]) == "act.flange <-> arm.elbow (rotational)"

@@ -18,19 +18,19 @@ operation counts as the FMU's, ``SymbolicModel.with_parameters_folded`` folds
 their parameters, and :class:`~fmugen.codegen.c_harness.CompiledModel` times
 them in a C loop.
 
-:func:`pinocchio_model` builds the same arm as a Pinocchio ``Model`` (the
+:func:`pinocchio_model` builds the same robot as a Pinocchio ``Model`` (the
 independent numeric oracle of the benchmark and of
-``tests/test_pinocchio_crosscheck.py``).  Pinocchio's joint frames are
-fmugen's joint frames F_i (:mod:`fmugen.dynamics.joint_frames`):
-
-    F_i = F_{i-1} Tx(a'_i) Rx(alpha'_i) Rz(theta0_i) Tz(d0_i) J_i(q_i)
-
-with (a'_i, alpha'_i) of the previous link (standard DH) or of link i
-(modified DH), J_i = Rz(q_i) (revolute, Pinocchio ``JointModelRZ``) or
-Tz(q_i) (prismatic, ``JointModelPZ``); the constant part is the joint
-placement.  Link i's mass, centre of mass and inertia about it, moved into
-F_i, give ``pin.Inertia(m, c, I_c)``; the rotor inertia is Pinocchio's
-``armature``; gravity is ``Model.gravity``.
+``tests/test_pinocchio_crosscheck.py``) from its bodies
+(:mod:`fmugen.robot.description`): joint i is Pinocchio joint i + 1 with
+parent lambda(i) + 1 (0 is the universe), placement ``SE3(R, p)`` with the
+constant offset of q folded in, motion ``JointModelR{X,Y,Z}`` /
+``P{X,Y,Z}`` for an aligned axis and the ``RevoluteUnaligned`` /
+``PrismaticUnaligned`` joint otherwise; the body's mass, centre of mass and
+inertia about it give ``pin.Inertia(m, c, I_c)``; the rotor inertia is
+Pinocchio's ``armature``; gravity is ``Model.gravity``.  For a DH robot the
+placements come from :func:`~fmugen.robot.description.dh_to_joints`, so
+agreement with the recursive Lagrange formulation (which reads the DH
+parameters directly) also checks that conversion.
 """
 from __future__ import annotations
 
@@ -40,7 +40,6 @@ from typing import Optional
 import numpy as np
 import sympy as sp
 
-from ..dynamics.joint_frames import joint_frame_chain
 from ..robot.description import PRISMATIC, REVOLUTE
 from .model import SymbolicModel, Variable
 
@@ -122,38 +121,84 @@ def pinocchio_model(robot, values: Optional[dict] = None):
            for p in robot.parameters}
     env = {s: sp.sympify(v) for s, v in env.items() if v is not None}
 
+    # Pinocchio's algorithms take every subtree as a contiguous range of joints (depth-first numbering)
+    for i in range(robot.n):
+        below = [k for k in range(robot.n) if i in robot.ancestors(k)]
+        if below != list(range(i, i + len(below))):
+            raise ValueError(f"{robot.name}: bodies are not numbered depth-first (the subtree of body {i} is "
+                             f"{below}); Pinocchio needs each subtree contiguous")
     model = pin.Model()
     model.name = robot.name
-    parent = 0
     armature = []
-    for i, L in enumerate(joint_frame_chain(robot)):
+    for i, L in enumerate(robot.bodies):
         where = f"{robot.name}, link {i + 1}"
         if _number(L.damping, env, f"{where} damping") != 0.0:
             raise ValueError(f"{where}: joint damping is not modelled by Pinocchio's rnea/crba/aba")
-        a = _number(L.a, env, f"{where} a")
-        alpha = _number(L.alpha, env, f"{where} alpha")
-        theta0 = _number(L.theta0, env, f"{where} theta")
-        d0 = _number(L.d0, env, f"{where} d")
-        # Tx(a) Rx(alpha) Rz(theta0) Tz(d0): rotation Rx Rz, translation a x + d (Rx z)
-        ca, sa, ct, st = np.cos(alpha), np.sin(alpha), np.cos(theta0), np.sin(theta0)
-        Rx = np.array([[1.0, 0.0, 0.0], [0.0, ca, -sa], [0.0, sa, ca]])
-        Rz = np.array([[ct, -st, 0.0], [st, ct, 0.0], [0.0, 0.0, 1.0]])
-        placement = pin.SE3(Rx @ Rz, np.array([a, 0.0, 0.0]) + d0 * Rx[:, 2])
+        if _number(L.friction, env, f"{where} friction") != 0.0:
+            raise ValueError(f"{where}: joint friction is not modelled by Pinocchio's rnea/crba/aba")
+        R = np.array([[_number(x, env, f"{where} rotation") for x in row] for row in L.rotation])
+        p = np.array([_number(x, env, f"{where} translation") for x in L.translation])
+        k = np.array([_number(x, env, f"{where} axis") for x in L.axis])
+        offset = _number(L.offset, env, f"{where} offset")
+        # the constant offset of q folds into the placement (a motion about/along k commutes with itself)
         if L.joint == REVOLUTE:
-            joint = pin.JointModelRZ()
+            R = R @ pin.AngleAxis(offset, k).matrix() if offset else R
+        else:
+            p = p + offset * (R @ k)
+        aligned = [np.array_equal(k, e) for e in np.eye(3)]
+        if L.joint == REVOLUTE:
+            joint = [pin.JointModelRX, pin.JointModelRY, pin.JointModelRZ][aligned.index(True)]() if any(aligned) \
+                else pin.JointModelRevoluteUnaligned(k)
         elif L.joint == PRISMATIC:
-            joint = pin.JointModelPZ()
+            joint = [pin.JointModelPX, pin.JointModelPY, pin.JointModelPZ][aligned.index(True)]() if any(aligned) \
+                else pin.JointModelPrismaticUnaligned(k)
         else:
             raise ValueError(f"{where}: unknown joint type {L.joint!r}")
-        jid = model.addJoint(parent, joint, placement, f"joint{i + 1}")
+        jid = model.addJoint(L.parent + 1, joint, pin.SE3(R, p), L.joint_name or f"joint{i + 1}")
         mass = _number(L.mass, env, f"{where} mass")
         com = np.array([_number(c, env, f"{where} com") for c in L.com])
-        inertia = np.array([[_number(L.inertia_com[r, c], env, f"{where} inertia") for c in range(3)]
+        inertia = np.array([[_number(L.inertia_com[r][c], env, f"{where} inertia") for c in range(3)]
                             for r in range(3)])
         model.appendBodyToJoint(jid, pin.Inertia(mass, com, inertia), pin.SE3.Identity())
         armature.append(_number(L.rotor_inertia, env, f"{where} rotor_inertia"))
-        parent = jid
     model.armature = np.array(armature)
     model.gravity = pin.Motion(np.array([_number(g, env, f"{robot.name} gravity") for g in robot.gravity]),
                                np.zeros(3))
     return model
+
+
+def pinocchio_urdf_map(model, robot) -> list:
+    """``(idx_q, idx_v, nq)`` in a Pinocchio model read from the same URDF, per fmugen joint (by joint name).
+
+    Pinocchio orders joints its own way and writes a continuous joint as
+    (cos q, sin q) (nq = 2); :func:`to_pinocchio` converts vectors.
+    """
+    out = []
+    for b in robot.bodies:
+        name = b.joint_name or b.name
+        if not model.existJointName(name):
+            raise KeyError(f"{robot.name}: joint {name!r} not in the Pinocchio model")
+        j = model.joints[model.getJointId(name)]
+        out.append((j.idx_q, j.idx_v, j.nq))
+    return out
+
+
+def to_pinocchio(model, mapping, q=None, v=None):
+    """(q, v) of fmugen's joint order as Pinocchio vectors (``mapping`` from :func:`pinocchio_urdf_map`)."""
+    import pinocchio as pin
+
+    out = []
+    if q is not None:
+        qp = pin.neutral(model)
+        for (iq, _, nq), x in zip(mapping, q):
+            if nq == 2:
+                qp[iq], qp[iq + 1] = np.cos(x), np.sin(x)
+            else:
+                qp[iq] = x
+        out.append(qp)
+    if v is not None:
+        vp = np.zeros(model.nv)
+        for (_, iv, _), x in zip(mapping, v):
+            vp[iv] = x
+        out.append(vp)
+    return out if len(out) > 1 else out[0]

@@ -24,6 +24,7 @@ import sympy as sp
 
 from .chain import ChainDynamics, chain_ops
 from .program import Assign, Program
+from ..errors import FmugenError
 
 
 @dataclass(frozen=True)
@@ -39,6 +40,9 @@ class Variable:
     min: Optional[float] = None
     max: Optional[float] = None
     output: bool = False  # for states: also exposed as an output
+    # parameters: their physical sign, ">0" (an inertia, a time constant) or ">=0" (a leakage); every
+    # value given later (with_starts: --set, start tables, sweep points) is checked against it
+    sign: str = ""
 
 
 @dataclass(frozen=True)
@@ -201,6 +205,8 @@ class SymbolicModel:
             for st in prog.steps:
                 if isinstance(st, Assign):
                     e = st.expr.xreplace(env)
+                    if e.has(sp.zoo, sp.nan, sp.oo, -sp.oo):
+                        _undefined(self.name, st.symbol, e, values)
                     if e.is_Number:
                         env[st.symbol] = e
                     else:
@@ -213,7 +219,12 @@ class SymbolicModel:
         # the Jacobian program runs after the main one and sees its folded constants
         prog, env = fold_program(self.program, values)
         jprog, full = fold_program(self.jacobian, env)
-        sub = lambda e: sp.sympify(e).xreplace(full)  # noqa: E731
+        def sub(e):
+            r = sp.sympify(e).xreplace(full)
+            if r.has(sp.zoo, sp.nan, sp.oo, -sp.oo):
+                _undefined(self.name, "an equation", r, values)
+            return r
+
         subm = lambda m: None if m is None else m.xreplace(full)  # noqa: E731
         return replace(
             self,
@@ -270,10 +281,17 @@ class SymbolicModel:
 
     def with_starts(self, values: dict) -> "SymbolicModel":
         """A copy whose states, inputs or parameters named in ``values`` have new start values."""
+        from ..values import as_number, variable_problem
+
+        for v in self.parameters:  # the same physical check whatever path the value took
+            if v.name in values:
+                problem = variable_problem(v, values[v.name])
+                if problem:
+                    raise FmugenError(f"{self.name}: parameter {v.name} = {values[v.name]!r} {problem}")
         groups = {}
         for g in ("states", "inputs", "parameters"):
-            groups[g] = tuple(replace(v, start=float(values[v.name])) if v.name in values else v
-                              for v in getattr(self, g))
+            groups[g] = tuple(replace(v, start=as_number(values[v.name], f"{self.name}: {v.name}"))
+                              if v.name in values else v for v in getattr(self, g))
         known = {v.name for g in groups.values() for v in g}
         unknown = sorted(set(values) - known)
         if unknown:
@@ -347,6 +365,14 @@ def _finite_signs(expr):
     """
     return expr.replace(lambda e: e.is_Pow and isinstance(e.base, sp.sign) and e.exp.is_negative,
                         lambda e: e.base ** (-e.exp))
+
+
+def _undefined(model: str, where, expr, values: dict) -> None:
+    """Folding constants made ``expr`` undefined (a division by zero): name the values, never emit it as C."""
+    zeros = [f"{s} = 0" for s, v in values.items() if v == 0]
+    raise FmugenError(f"{model}: with {', '.join(zeros) or 'the values folded into constants'} the equations "
+                      f"divide by zero ({where} becomes {expr}); give {'these' if len(zeros) > 1 else 'it'} a "
+                      f"non-zero value")
 
 
 def _number(x) -> sp.Expr:

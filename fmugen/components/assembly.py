@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import Union
 
 from ..codegen.model import SymbolicModel, intersect_range
-from ..errors import InputFileError, check_identifier, read_text_file
+from ..errors import InputFileError, check_identifier, read_text_file, toml_problem
 from .amplifier import amplifier
 from .connect import assemble
 from .controller import controller
@@ -88,8 +88,8 @@ def load_assembly(path: Union[str, Path]) -> SymbolicModel:
     src = str(path)
     try:
         data = tomllib.loads(read_text_file(path, "assembly file"))
-    except tomllib.TOMLDecodeError as exc:
-        raise InputFileError(f"{src}: not valid TOML: {exc}") from None
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        raise InputFileError(f"{src}: {toml_problem(exc)}") from None
     extra = sorted(set(data) - {"assembly", "components"})
     if extra:
         raise InputFileError(f"{src}: unknown top-level key(s) {', '.join(extra)}; expected [assembly] and [components.*]")

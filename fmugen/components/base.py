@@ -16,13 +16,14 @@ mapping.  Assembly never renames it.
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Mapping, Optional, Sequence
 
 import sympy as sp
 
 from ..codegen.model import Variable
 from ..errors import FmugenError
-from .parameters import ParameterSet, load_parameter_set, value_problem
+from .parameters import SIGNS, ParameterSet, load_parameter_set, value_problem
 
 #: the model time, the ``t`` argument of the generated C functions
 TIME = sp.Symbol("t", real=True)
@@ -69,7 +70,7 @@ def parameters(family: str, specs: Sequence[tuple], used: Sequence[str], paramet
         if name not in used:
             continue
         value = overrides[name] if name in overrides else pset.value(family, name)
-        out[name] = var(name, unit, description, start=float(value))
+        out[name] = replace(var(name, unit, description, start=float(value)), sign=SIGNS.get(family, {}).get(name, ""))
     return out
 
 

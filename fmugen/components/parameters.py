@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping, Union
 
-from ..errors import IDENTIFIER_PATTERN, MAX_IDENTIFIER_LENGTH, FmugenError, InputFileError, read_text_file
+from ..errors import IDENTIFIER_PATTERN, MAX_IDENTIFIER_LENGTH, FmugenError, InputFileError, read_text_file, toml_problem
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
 
@@ -52,6 +52,10 @@ def value_problem(family: str, name: str, value) -> str | None:
     follow ``"name = value"``), or None."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         return "is not a number"
+    try:
+        value = float(value)
+    except OverflowError:  # an integer beyond the double range
+        return "is beyond the double-precision range"
     if not math.isfinite(value):
         return "is not finite"
     sign = SIGNS.get(family, {}).get(name)
@@ -131,7 +135,8 @@ def parse_parameter_set(data: Mapping, source: str, name: str = "") -> Parameter
         for key, val in table.items():
             problem = value_problem(family, key, val)
             if problem:
-                raise InputFileError(f"{source}: [{family}] {key} = {val!r} {problem}")
+                shown = repr(val) if len(repr(val)) <= 40 else repr(val)[:40] + "..."
+                raise InputFileError(f"{source}: [{family}] {key} = {shown} {problem}")
             sec[key] = float(val)
         sections[family] = sec
     return ParameterSet(name=name or Path(source).stem, source=source, sections=sections)
@@ -144,11 +149,16 @@ def load_parameter_set(name_or_path: Union[str, Path] = "default") -> ParameterS
     """Load a shipped set by name (``"default"``, ``"stiff"``, ``"puma_joint2"``)
     or any TOML file by path."""
     path = _resolve(name_or_path)
-    key = (str(path), path.stat().st_mtime)
+    text = read_text_file(path, "parameter set")
+    key = (str(path), text)  # by content: an edited file is read again, whatever its time stamp
     if key not in _cache:
         try:
-            data = tomllib.loads(read_text_file(path, "parameter set"))
+            data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise InputFileError(f"{path}: not valid TOML: {exc}") from None
+        except RecursionError:
+            raise InputFileError(f"{path}: {toml_problem(RecursionError())}") from None
+        if len(_cache) > 256:
+            _cache.clear()
         _cache[key] = parse_parameter_set(data, str(path), path.stem)
     return _cache[key]

@@ -79,12 +79,12 @@ def parse_at(items) -> dict:
 
 def load_model(path: Path, sets: dict, robot_outputs=(), formulation="newton_euler", without=()):
     """(SymbolicModel, parameter values) of a robot, assembly or scene file."""
-    from ..errors import InputFileError, read_text_file
+    from ..errors import InputFileError, read_text_file, toml_problem
 
     try:
         data = tomllib.loads(read_text_file(path, "TOML file"))
-    except tomllib.TOMLDecodeError as exc:
-        raise InputFileError(f"{path}: not valid TOML: {exc}") from None
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        raise InputFileError(f"{path}: {toml_problem(exc)}") from None
     if "scene" in data:
         from ..scene import load_scene
         from .scene import scene_model
@@ -96,14 +96,25 @@ def load_model(path: Path, sets: dict, robot_outputs=(), formulation="newton_eul
     if bad:
         raise FmugenError(f"{path}: --set {', '.join(f'{k}={v!r}' for k, v in bad.items())}: a parameter "
                           f"value must be a number")
+    from ..values import as_number, check_model_values, robot_value_problem
+
+    sets = {k: as_number(v, f"{path}: --set {k}") for k, v in sets.items()}
     if "robot" in data:
         import fmugen
 
-        return fmugen.load_robot(path, formulation).state_space_model(outputs=robot_outputs), sets
+        arm = fmugen.load_robot(path, formulation)
+        model = arm.state_space_model(outputs=robot_outputs)
+        problem = robot_value_problem(arm.robot, {k: v for k, v in sets.items()
+                                                  if k in {p.name for p in model.parameters}})
+        if problem:  # the checks the file's own values passed
+            raise FmugenError(f"{path}: --set: {problem}")
+        return model, sets
     if "assembly" in data:
         from ..components.assembly import load_assembly
 
-        return load_assembly(path), sets
+        model = load_assembly(path)
+        check_model_values(model, sets, lambda k: f"{path}: --set {k}")
+        return model, sets
     raise InputFileError(f"{path}: neither a robot file ([robot] table), an assembly ([assembly] table) "
                          f"nor a scene ([scene] table)")
 
@@ -129,12 +140,29 @@ def describe(lm, model, op=None, out=None) -> None:
           f"(modal test, states scaled by their nominal values, tol 1e-9)", file=out)
 
 
+def _warn_kinks(path: Path, sets: dict, model, op) -> None:
+    data = tomllib.loads(path.read_text())
+    if "scene" not in data:
+        return
+    from ..scene import load_scene
+    from .kinks import kink_warnings
+
+    for line in kink_warnings(load_scene(path, set=sets), model, op):
+        print(line)
+
+
 def run(args) -> int:
     from ..scene import parse_sets
     from .linearize import linear_model
     from .trim import trim
 
+    from .. import arguments
+
     path = Path(args.file)
+    # every argument first: named in its refusal, nothing derived or written before
+    args.tol = arguments.tolerance(args.tol, "--tol")
+    args.time = arguments.number(args.time, "--time")
+    arguments.output_file(args.out, "--out", inputs=[path])
     sets = parse_sets(args.set)
     at = parse_at(args.at)
     wanted = _split(args.outputs)
@@ -158,6 +186,8 @@ def run(args) -> int:
         op = trim(model, at=at, free=free, parameter_values=params, t=args.time, tol=args.tol)
         lm = linear_model(model, op, outputs=wanted or "all", inputs=_split(args.inputs) or None)
     describe(lm, model, op)
+    if op is not None and not args.no_trim:  # a smoothed kink at the operating point: say so (fmugen/control/kinks.py)
+        _warn_kinks(path, sets, model, op)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     np.savez(out, A=lm.A, B=lm.B, C=lm.C, D=lm.D, t=np.float64(lm.t), x0=lm.x0, u0=lm.u0, y0=lm.y0,

@@ -31,7 +31,7 @@ def _load(args):
 
 
 def _common(p) -> None:
-    p.add_argument("scene", help="scene TOML file")
+    p.add_argument("scene", help="scene TOML file, or an SSP archive (.ssp; cosim and report)")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="set a parameter, start value or option (repeatable)")
     p.add_argument("--stop", type=float, default=None, help="stop time [s] (default: the scene's)")
@@ -60,7 +60,7 @@ def add_cosim_commands(subparsers) -> None:
     p = subparsers.add_parser("reference", help="solve a scene as one model with Radau at 1e-12 (reference.csv, "
                               "plot)")
     _common(p)
-    p.add_argument("--points", type=int, default=2001, help="points of the uniform output grid (>= 1001)")
+    p.add_argument("--points", default=2001, help="points of the uniform output grid (>= 1001; at most 1e7)")
     p.set_defaults(func=cmd_reference)
 
     p = subparsers.add_parser("report", help="error against wall time over schemes and macro steps")
@@ -92,6 +92,37 @@ def _run_flags(p) -> None:
                    "step (default: the scene's [cosim] iterations, else the master's)")
     p.add_argument("--no-divergence-check", dest="detect_divergence", action="store_false", default=None,
                    help="do not stop a run whose coupling the master judges divergent")
+
+
+def _check_args(args, scene) -> None:
+    """Every argument of cosim/reference/report, checked before anything is built or written
+    (:mod:`fmugen.arguments`: each refusal names the argument)."""
+    from .. import arguments as a
+    from ..scene.file import check_time_grid
+
+    a.output_folder(args.out, "--out", inputs=[args.scene])
+    start, stop, step = scene.spec.start, scene.spec.stop, scene.spec.step
+    if args.stop is not None:
+        stop = a.number(args.stop, "--stop")
+        if not stop > start:
+            raise a.FmugenError(f"--stop {args.stop!r}: must be after the scene's start time {start!r}")
+    if getattr(args, "step", None) is not None:
+        step = a.positive(args.step, "--step", "a positive macro step [s]")
+    if getattr(args, "tol", None) is not None:
+        a.tolerance(args.tol, "--tol")
+    try:
+        check_time_grid(start, stop, min(step, stop - start), "--stop/--step:")
+    except a.FmugenError as exc:
+        raise a.FmugenError(str(exc)) from None
+    if getattr(args, "points", None) is not None:
+        args.points = a.count(args.points, "--points", 1, a.MAX_POINTS)
+    if getattr(args, "steps", None) is not None:
+        for h in a.number_list(args.steps, "--steps", lambda v, w: a.positive(v, w, "a positive macro step")):
+            check_time_grid(start, stop, min(h, stop - start), f"--steps {args.steps}:")
+    if getattr(args, "target", None) is not None:
+        a.positive(args.target, "--target", "a positive error target")
+    if getattr(args, "repeats", None) is not None:
+        args.repeats = a.count(args.repeats, "--repeats", 1, 1000)
 
 
 def _flags(args) -> dict:
@@ -155,20 +186,47 @@ def write_results(result, out_dir, units=None) -> dict:
 
 
 def cmd_cosim(args) -> int:
-    from ..scene.analysis_cache import build_scene_cached
+    from ..ssp import is_ssp
     from .master import run
-    from .settings import resolve_file
+    from .settings import resolve, resolve_file
 
-    # every setting checked before anything is built or written: the file's [cosim], --set, the flags
-    resolve_file(args.scene, args.set, **_flags(args))
+    cached = None
+    if is_ssp(args.scene):  # an SSP archive: its system as written (fmugen/ssp)
+        from ..ssp.cli import scene_like, system_from_args
+
+        scene, system = None, system_from_args(args)
+        _check_args(args, scene_like(system))
+        resolve(system.settings, **_flags(args))
+    else:
+        from ..scene.analysis_cache import cached_analysis
+
+        # the scene's analysis from its cache when nothing changed (nothing derived: simulating starts
+        # within a second), else the scene analysed now
+        cached = cached_analysis(args.scene, args.set, getattr(args, "allow_factories", False))
+        scene = cached.scene if cached is not None else _load(args)
+        _check_args(args, scene)
+        # every run setting checked before anything is built or written: the file's [cosim], --set, the flags
+        resolve_file(args.scene, args.set, **_flags(args))
     out = Path(args.out)
-    # from the cached scene analysis and FMUs when nothing changed: simulating starts within a second
-    built = build_scene_cached(args.scene, out / "fmus", sets=args.set,
-                               allow_factories=getattr(args, "allow_factories", False))
-    system = built.system
+    if scene is not None:
+        from ..scene.analysis_cache import build_scene_cached
+
+        built = cached.materialise(out / "fmus") if cached is not None else None
+        if built is None:
+            built = build_scene_cached(args.scene, out / "fmus", sets=args.set, scene=scene,
+                                       allow_factories=getattr(args, "allow_factories", False))
+        system = built.system
     result = run(system, **_flags(args))  # the scene's [cosim] (with --set), then the flags
     paths = write_results(result, out, {r.column: r.physical_unit for r in system.recorded})
     print(result.summary)
+    if scene is not None and scene.spec.bonds:  # power and energy per bond of the scene's connect (those recorded)
+        from ..scene.bonds import bond_lines
+
+        lines = bond_lines(scene.spec.bonds, result.time, result.__getitem__)
+        if lines:
+            print("\n".join(lines))
+            with open(paths["summary"], "a") as fh:
+                fh.write("\n".join(lines) + "\n")
     print(f"wrote {paths['csv']}, {paths['npz']}, {paths['plot']}, {paths['summary']}")
     if not result.ok:
         print("fmugen cosim: " + str(result.summary.failure).splitlines()[0], file=sys.stderr)
@@ -182,7 +240,15 @@ def cmd_reference(args) -> int:
     from .reference import solve_reference, write_reference_csv
     from .system import ReferenceProblem
 
+    from ..ssp import is_ssp
+
+    if is_ssp(args.scene):
+        from .errors import CosimError
+
+        raise CosimError(f"{args.scene}: an SSP archive has no symbolic model to solve as one ODE; "
+                         f"fmugen report {args.scene} measures against the master's own finest run instead")
     scene = _load(args)
+    _check_args(args, scene)
     p = scene.reference_problem()
     if args.stop is not None:
         p = ReferenceProblem(p.model, p.x0, p.u, p.columns, p.start_time, float(args.stop), p.nominals)
@@ -199,6 +265,10 @@ def cmd_reference(args) -> int:
              "confirmed by: " + "; ".join(ref.settings["confirm"]),
              "error estimate per column (max difference between the solves):"]
     lines += [f"  {c:<28} {e:.3g}" for c, e in zip(ref.columns, ref.error)]
+    if scene.spec.bonds:  # the bonds' energies without coupling error, to hold a co-simulation's against
+        from ..scene.bonds import bond_lines
+
+        lines += bond_lines(scene.spec.bonds, ref.time, ref.__getitem__)
     (out / "reference.txt").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     print(f"wrote {out / 'reference.csv'}, {out / 'reference.txt'}, {out / 'reference.png'}")
@@ -210,20 +280,32 @@ def cmd_report(args) -> int:
 
     from .master import check_choices
     from .report import DEFAULT_SCHEMES, make_report, write_report
+    from ..ssp import is_ssp
     from .settings import resolve_file
     from .system import CosimSystem, Recorded, Unit
 
+    if is_ssp(args.scene):  # no symbolic model: a self-convergence reference (fmugen/ssp/report.py)
+        from ..ssp.report import cmd_report_ssp
+
+        return cmd_report_ssp(args)
+    scene = _load(args)
+    _check_args(args, scene)
     schemes = [tuple(s.split("/", 1)) if "/" in s else (s, "hold") for s in args.schemes.split(",")] \
         if args.schemes else DEFAULT_SCHEMES
     schemes = [check_choices(*sc) for sc in schemes]  # before anything is built or written
     # the other run settings: the scene's [cosim] (with --set), then the flags; schemes and steps are the grid
     settings = resolve_file(args.scene, args.set, **_flags(args))
-    scene = _load(args)
+    internal = []
+    for item in (args.internal.split(",") if args.internal else []):
+        meth, _, tl = item.partition(":")
+        from .. import arguments as a
+
+        internal.append((meth.strip().lower(), a.tolerance(tl.strip(), f"--internal {item!r}: tolerance")))
     out = Path(args.out)
     built = scene.build(out / "fmus")
     system = built.system
     H = float(settings.step or system.step)  # the scene's [cosim] step, else its [scene] step
-    steps = [float(h) for h in args.steps.split(",")] if args.steps else [8 * H, 4 * H, 2 * H, H, H / 2]
+    steps = [float(h) for h in args.steps.split(",")] if args.steps else [8 * H, 4 * H, 2 * H, H, H / 2]  # checked
     problem = scene.reference_problem()
     extra = []
     if not args.no_monolithic:
@@ -239,15 +321,6 @@ def cmd_report(args) -> int:
         rec = tuple(Recorded(r.column, "monolithic", r.column, r.physical_unit) for r in system.recorded)
         extra.append(("monolithic FMU", CosimSystem(system.name + "_monolithic", (unit,), (), rec,
                                                      system.start_time, system.stop_time, system.step)))
-    internal = []
-    for item in (args.internal.split(",") if args.internal else []):
-        meth, _, tl = item.partition(":")
-        try:
-            internal.append((meth.strip().lower(), float(tl)))
-        except ValueError:
-            from .errors import CosimError
-
-            raise CosimError(f"--internal: expected solver:tolerance, got {item!r}") from None
     rep = make_report(system, problem, steps, schemes, repeats=args.repeats, target=args.target, extra_rows=extra,
                       settings=settings, stop=args.stop, progress=lambda s: print("  " + s, file=sys.stderr, flush=True),
                       internal=internal)

@@ -28,7 +28,8 @@ collocation coefficients) with the error estimate, keyed by a hash of the
 model's equations, parameter values, x0, u, the time span and the settings.
 Another grid over the same problem is evaluated from it (states from the
 polynomials, computed outputs through the model's output function) without
-solving again.
+solving again.  An entry holds its key and a sha256 of its arrays, and is served
+only when both match (a truncated, swapped or edited file is solved again).
 """
 from __future__ import annotations
 
@@ -47,7 +48,7 @@ from .system import ReferenceProblem
 
 RTOL = 1e-12
 DOP853_MAX_STEPS = 300_000
-CACHE_VERSION = 2  # 2: the dense output, not one grid's values
+CACHE_VERSION = 3  # 2: entries carry their key and a digest; 3: the dense output, not one grid's values
 MAX_ERROR_POINTS = 200_001  # evaluation points of the error estimate (step points, midpoints)
 
 
@@ -141,6 +142,17 @@ class DenseOutput:
         return out
 
 
+def _digest(arrays, settings: str) -> str:
+    """sha256 of a stored solution's arrays and settings: an entry is served only when it still matches."""
+    h = hashlib.sha256()
+    for a in arrays:
+        a = np.ascontiguousarray(np.asarray(a, dtype=float))
+        h.update(repr(a.shape).encode())
+        h.update(a.tobytes())
+    h.update(settings.encode())
+    return h.hexdigest()
+
+
 def default_times(problem: ReferenceProblem, n: int = 2001) -> np.ndarray:
     return np.linspace(problem.start_time, problem.stop_time, max(int(n), 1001))
 
@@ -190,10 +202,13 @@ def solve_reference(problem: ReferenceProblem, times: Optional[Sequence[float]] 
     if cache and path.is_file():
         try:
             with np.load(path, allow_pickle=False) as z:
-                dense = DenseOutput(z["ts"], z["y_old"], z["Q"])
-                error, settings = z["error"], json.loads(str(z["settings"]))
-            return ReferenceSolution(times, values_at(dense(times)), tuple(problem.columns), error, settings,
-                                     cached=True)
+                ts, y_old, Q, error, text = z["ts"], z["y_old"], z["Q"], z["error"], str(z["settings"])
+                whole = (str(z["key"]) == key and str(z["digest"]) == _digest((ts, y_old, Q, error), text)
+                         and error.shape == (len(cols),) and Q.ndim == 3 and Q.shape[:2] == y_old.shape
+                         and y_old.shape[1] == m.nx and len(ts) == len(y_old) + 1)
+            if whole:  # this entry, as written: a truncated, swapped or edited file is recomputed
+                return ReferenceSolution(times, values_at(DenseOutput(ts, y_old, Q)(times)), tuple(problem.columns),
+                                         error, json.loads(text), cached=True)
         except Exception:  # a damaged cache file is recomputed
             pass
     if x0.shape != (m.nx,) or u.shape != (m.nu,):
@@ -255,8 +270,10 @@ def solve_reference(problem: ReferenceProblem, times: Optional[Sequence[float]] 
     if cache:
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
-            np.savez(tmp, ts=dense.ts, y_old=dense.y_old, Q=dense.Q, error=err, settings=json.dumps(settings))
+            tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")  # one per writer
+            text = json.dumps(settings)
+            np.savez(tmp, ts=dense.ts, y_old=dense.y_old, Q=dense.Q, error=err, settings=text, key=key,
+                     digest=_digest((dense.ts, dense.y_old, dense.Q, err), text))
             os.replace(tmp, path)
         except OSError:
             pass  # a read-only home: no cache

@@ -75,18 +75,29 @@ def compose(P: Program, T, A, hint="T"):
     return out + [[Z, Z, Z, ONE]]
 
 
-def body_frames(P: Program, robot: Robot, q, trig: TrigCache = None, transform=None) -> list:
-    """[^0T_1, ..., ^0T_N]: every body frame in base coordinates (0-based list).
+def body_frames(P: Program, robot: Robot, q, trig: TrigCache = None, transform=None, frames=None) -> list:
+    """[^0T_1, ..., ^0T_N]: body frames in base coordinates (0-based list).
 
     ``transform(i, q_i) -> (R, p)`` defaults to :func:`joint_transform`; the
     dynamics pass their engine's, so the bound rotations are shared.
+    ``frames`` (names): compute only the bodies on their paths to the base
+    (the others are None) -- a tool frame on one branch of a tree costs only
+    that branch.
     """
     trig = trig or TrigCache(P)
     if transform is None:
         def transform(i, q_i):
             return joint_transform(P, trig, robot.bodies[i], q_i)
+    needed = None
+    if frames is not None:
+        needed = set()
+        for name in frames:
+            needed |= set(robot.ancestors(robot.locate(name)[0]))
     Ts = []
     for i, b in enumerate(robot.bodies):
+        if needed is not None and i not in needed:
+            Ts.append(None)
+            continue
         A = homogeneous(*transform(i, q[i]))
         Ts.append(A if b.parent < 0 else compose(P, Ts[b.parent], A))
     return Ts

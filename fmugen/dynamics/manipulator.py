@@ -21,6 +21,7 @@ link's centre of mass).
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import Mapping, Optional, Sequence
 
@@ -44,6 +45,17 @@ FORMULATIONS = ("newton_euler", "lagrange")
 
 def _real(name):
     return sp.Symbol(name, real=True)
+
+
+def _joint_label(body) -> str:
+    """A joint as its file names it: the URDF joint name, or the DH link name."""
+    return body.joint_name or body.name
+
+
+def _frame_tag(name: str) -> str:
+    """A frame name as part of an FMI variable name: an identifier (never "ee": p_ee is taken)."""
+    tag = re.sub(r"[^A-Za-z0-9_]", "_", name)
+    return "ee_frame" if tag == "ee" else tag
 
 
 def _ee_label(robot) -> str:
@@ -153,11 +165,15 @@ class Manipulator:
         d = self.derivation(formulation)
         return d.program, self._bias_into(d)
 
-    def kinematics_program(self) -> tuple:
-        """(Program, T_N as 4x4 Matrix, J as 6 x n Matrix)."""
+    def kinematics_program(self, frame: Optional[str] = None) -> tuple:
+        """(Program, pose of ``frame`` as 4x4 Matrix, its J as 6 x n Matrix).
+
+        ``frame``: any body or frame name (:meth:`Robot.frame_names`); default
+        ``robot.end_frame`` (the last DH frame, the thesis's TRANSP).
+        """
         P = Program("_k")
         Ts = kinematics.body_frames(P, self.robot, self.q)
-        body, T = kinematics.frame_pose(P, self.robot, Ts, self.robot.end_frame)
+        body, T = kinematics.frame_pose(P, self.robot, Ts, frame or self.robot.end_frame)
         J = kinematics.geometric_jacobian(P, self.robot, Ts, [T[r][3] for r in range(3)], body)
         return P, sp.Matrix(T), J
 
@@ -187,9 +203,15 @@ class Manipulator:
         "loops" from :data:`~fmugen.codegen.chain.LOOP_MIN_LINKS` links on,
         for arms without locked joints.
 
-        ``outputs``: any of "p_ee" (end-effector position, frame N origin) and
-        "qdd" (joint accelerations, which have direct feedthrough from tau).
-        q and qd are outputs as states (no direct feedthrough).
+        ``outputs``: any of "p_ee" (end-effector position: the origin of
+        ``robot.end_frame``, frame N of a DH robot), "qdd" (joint
+        accelerations, which have direct feedthrough from tau) and, for any
+        body or frame NAME (a URDF link, a link merged by a fixed joint, a DH
+        ``frameI``), "p:NAME" (its origin, FMI ``p_NAME[1..3]``), "R:NAME"
+        (its orientation, ``R_NAME[r,c]``) and "J:NAME" (the 6 x n geometric
+        Jacobian of its origin, linear rows first, ``J_NAME[r,j]`` for each
+        free joint j); only the bodies between the named frames and the base
+        are computed.  q and qd are outputs as states (no direct feedthrough).
 
         ``locked`` ({joint number (1-based): position}) holds joints still:
         their q is the given number and their qd, qdd are zero, so the model
@@ -198,16 +220,16 @@ class Manipulator:
         M_ff qdd_f + h_f = tau_f; the locked links' mass and inertia act
         through the numbers they fold into.
         """
-        unknown = set(outputs) - {"p_ee", "qdd"}
-        if unknown:
-            raise ValueError(f"unknown outputs {sorted(unknown)}; choose from p_ee, qdd")
+        kin_outputs = self.frame_outputs(outputs)
         n, robot = self.n, self.robot
         locked = dict(locked or {})
         if strategy not in ("auto", "straight", "loops"):
             raise ValueError(f"strategy must be 'auto', 'straight' or 'loops', not {strategy!r}")
-        loopable = not locked and bool(robot.links)
+        # the runtime loops have no Coulomb friction term
+        loopable = not locked and bool(robot.links) and not kin_outputs and not any(b.friction != 0 for b in robot.bodies)
         if strategy == "loops" and not loopable:
-            why = "locked joints" if locked else "robots written as joints (URDF), only DH chains"
+            why = ("locked joints" if locked else "frame outputs" if kin_outputs
+                   else "robots written as joints (URDF), only DH chains")
             raise ValueError(f"{robot.name}: strategy='loops' does not handle {why}; "
                              f"use strategy='straight'")
         if strategy == "loops" or (strategy == "auto" and loopable and n >= LOOP_MIN_LINKS):
@@ -234,19 +256,50 @@ class Manipulator:
         for k, i in enumerate(free):
             qdd[i] = qdd_f[k]
         out_vars, out_exprs = [], []
-        if "p_ee" in outputs:
+        wanted = (["p_ee"] if "p_ee" in outputs else []) + kin_outputs
+        if wanted:
             transform = d.engine.rotation_translation if isinstance(d.engine, NestedBodyInverseDynamics) else None
-            Ts = kinematics.body_frames(P, robot, q, d.trig, transform)
-            _, T_ee = kinematics.frame_pose(P, robot, Ts, robot.end_frame)
-            for r in range(3):
-                out_vars.append(Variable(f"p_ee[{r + 1}]", _real(f"p_ee_{r + 1}"), "m",
-                                         f"end-effector position (origin of {_ee_label(robot)}), base {'xyz'[r]}"))
-                out_exprs.append(T_ee[r][3])
+            names = [robot.end_frame if w == "p_ee" else w[2:] for w in wanted]
+            Ts = kinematics.body_frames(P, robot, q, d.trig, transform, frames=names)
+            for w, frame in zip(wanted, names):
+                body, T = kinematics.frame_pose(P, robot, Ts, frame)
+                if w == "p_ee":
+                    for r in range(3):
+                        out_vars.append(Variable(f"p_ee[{r + 1}]", _real(f"p_ee_{r + 1}"), "m",
+                                                 f"end-effector position (origin of {_ee_label(robot)}), "
+                                                 f"base {'xyz'[r]}"))
+                        out_exprs.append(T[r][3])
+                    continue
+                kind, tag = w[0], _frame_tag(frame)
+                if kind == "p":
+                    for r in range(3):
+                        out_vars.append(Variable(f"p_{tag}[{r + 1}]", _real(f"out_p_{tag}_{r + 1}"), "m",
+                                                 f"position of frame {frame} (origin), base {'xyz'[r]}"))
+                        out_exprs.append(T[r][3])
+                elif kind == "R":
+                    for r in range(3):
+                        for c in range(3):
+                            out_vars.append(Variable(f"R_{tag}[{r + 1},{c + 1}]", _real(f"out_R_{tag}_{r + 1}_{c + 1}"),
+                                                     "1", f"orientation of frame {frame}: base {'xyz'[r]} component "
+                                                     f"of its {'xyz'[c]} axis"))
+                            out_exprs.append(T[r][c])
+                else:  # J: 6 x (free joints) geometric Jacobian of the frame origin
+                    J = kinematics.geometric_jacobian(P, robot, Ts, [T[r][3] for r in range(3)], body)
+                    for r in range(6):
+                        for i in free:
+                            unit = ("1" if robot.bodies[i].joint == REVOLUTE else "1/m") if r >= 3 else \
+                                ("m" if robot.bodies[i].joint == REVOLUTE else "1")
+                            out_vars.append(Variable(f"J_{tag}[{r + 1},{i + 1}]", _real(f"out_J_{tag}_{r + 1}_{i + 1}"),
+                                                     unit, f"geometric Jacobian of frame {frame}: "
+                                                     f"{('linear velocity', 'angular velocity')[r // 3]} "
+                                                     f"{'xyz'[r % 3]} per unit qd of joint {i + 1}"))
+                            out_exprs.append(J[r, i])
+        n_kin = len(out_vars)
         if "qdd" in outputs:
             for i in free:
                 unit = "rad/s2" if robot.bodies[i].joint == REVOLUTE else "m/s2"
                 out_vars.append(Variable(f"qdd[{i + 1}]", _real(f"qdd_out_{i + 1}"), unit,
-                                         f"acceleration of joint {i + 1} ({robot.bodies[i].name})"))
+                                         f"acceleration of joint {i + 1} ({_joint_label(robot.bodies[i])})"))
                 out_exprs.append(qdd[i])
 
         # exact Jacobians: ID(q, qd, qdd*) = tau  =>  dqdd/dz = -M^{-1} dID/dz
@@ -273,31 +326,14 @@ class Manipulator:
         dgdx = sp.zeros(len(out_vars), nx)
         dgdu = sp.zeros(len(out_vars), nu)
         row = 0
-        if "p_ee" in outputs:
-            Jk = differentiate([P], out_exprs[:3], qf, Jp)
-            dgdx[:3, :nf] = Jk
-            row = 3
+        if n_kin:
+            dgdx[:n_kin, :nf] = differentiate([P], out_exprs[:n_kin], qf, Jp)
+            row = n_kin
         if "qdd" in outputs:
             dgdx[row:row + nf, :] = Y[:, :nx]
             dgdu[row:row + nf, :] = Y[:, nx:]
 
-        states = []
-        for i in free:
-            L = robot.bodies[i]
-            rev = L.joint == REVOLUTE
-            states.append(Variable(f"q[{i + 1}]", self.q[i], "rad" if rev else "m",
-                                   f"position of joint {i + 1} ({L.name}, {L.joint})", start=0.0, output=True))
-        for i in free:
-            L = robot.bodies[i]
-            rev = L.joint == REVOLUTE
-            states.append(Variable(f"qd[{i + 1}]", self.qd[i], "rad/s" if rev else "m/s",
-                                   f"velocity of joint {i + 1} ({L.name})", start=0.0, output=True))
-        inputs = []
-        for i in free:
-            L = robot.bodies[i]
-            rev = L.joint == REVOLUTE
-            inputs.append(Variable(f"tau[{i + 1}]", self.tau[i], "N.m" if rev else "N",
-                                   f"{'torque' if rev else 'force'} applied by actuator {i + 1}", start=0.0))
+        states, inputs = self._joint_variables(free)
         inputs += self._wrench_inputs()
         params = tuple(
             Variable(p.name, p.symbol, p.unit, p.description, start=p.value) for p in robot.parameters
@@ -359,7 +395,7 @@ class Manipulator:
             for i in range(n):
                 unit = "rad/s2" if robot.bodies[i].joint == REVOLUTE else "m/s2"
                 out_vars.append(Variable(f"qdd[{i + 1}]", _real(f"qdd_out_{i + 1}"), unit,
-                                         f"acceleration of joint {i + 1} ({robot.bodies[i].name})"))
+                                         f"acceleration of joint {i + 1} ({_joint_label(robot.bodies[i])})"))
                 out_exprs.append(qdd[i])
         dfdx = sp.zeros(2 * n, 2 * n)
         dfdx[:n, n:] = sp.eye(n)
@@ -375,15 +411,7 @@ class Manipulator:
         if "qdd" in outputs:
             dgdx[row:row + n, :] = Y[:, :2 * n]
             dgdu[row:row + n, :] = Y[:, 2 * n:]
-        states = [Variable(f"q[{i + 1}]", self.q[i], "rad" if rev[i] else "m",
-                           f"position of joint {i + 1} ({L.name}, {L.joint})", start=0.0, output=True)
-                  for i, L in enumerate(robot.bodies)]
-        states += [Variable(f"qd[{i + 1}]", self.qd[i], "rad/s" if rev[i] else "m/s",
-                            f"velocity of joint {i + 1} ({L.name})", start=0.0, output=True)
-                   for i, L in enumerate(robot.bodies)]
-        inputs = [Variable(f"tau[{i + 1}]", self.tau[i], "N.m" if rev[i] else "N",
-                           f"{'torque' if rev[i] else 'force'} applied by actuator {i + 1}", start=0.0)
-                  for i in range(n)]
+        states, inputs = self._joint_variables(range(n))
         inputs += self._wrench_inputs()
         params = tuple(Variable(p.name, p.symbol, p.unit, p.description, start=p.value)
                        for p in robot.parameters)
@@ -396,6 +424,55 @@ class Manipulator:
             provenance=f"{robot.source or robot.name}; looped articulated-body algorithm and analytical "
                        f"Newton-Euler derivatives (c_runtime/chain_dynamics.c)",
         )
+
+    def frame_outputs(self, outputs) -> list:
+        """The frame outputs among ``outputs`` ("p:NAME", "R:NAME", "J:NAME"), checked; ValueError names the choices."""
+        out = []
+        for o in outputs:
+            if o in ("p_ee", "qdd"):
+                continue
+            kind, _, frame = str(o).partition(":")
+            if kind not in ("p", "R", "J") or not frame:
+                raise ValueError(f"unknown output {o!r}; choose from p_ee, qdd, p:FRAME, R:FRAME, J:FRAME "
+                                 f"(FRAME: a body or frame name)")
+            try:
+                self.robot.locate(frame)
+            except KeyError as exc:
+                raise ValueError(f"output {o!r}: {exc.args[0]}") from None
+            if o not in out:
+                out.append(o)
+        return out
+
+    def _joint_variables(self, joints) -> tuple:
+        """(states q[i] then qd[i], inputs tau[i]) of the given 0-based joints.
+
+        Names are indexed (``q[3]``, structured FMI names every scene and
+        command uses); each description names the joint as its file does
+        (the URDF joint name).  A URDF ``<limit>`` becomes the validity range
+        of q (lower, upper) and of tau (+-effort).
+        """
+        states, qds, inputs = [], [], []
+        for i in joints:
+            L = self.robot.bodies[i]
+            rev = L.joint == REVOLUTE
+            lim = L.limits
+            lo = None if lim is None else lim.lower
+            hi = None if lim is None else lim.upper
+            start = min(max(0.0, lo if lo is not None else 0.0), hi if hi is not None else 0.0) \
+                if (lo is not None and lo > 0) or (hi is not None and hi < 0) else 0.0
+            name = _joint_label(L)
+            states.append(Variable(f"q[{i + 1}]", self.q[i], "rad" if rev else "m",
+                                   f"position of joint {i + 1} ({name}, {L.joint})", start=start, output=True,
+                                   min=lo, max=hi))
+            qds.append(Variable(f"qd[{i + 1}]", self.qd[i], "rad/s" if rev else "m/s",
+                                f"velocity of joint {i + 1} ({name})", start=0.0, output=True))
+            effort = None if lim is None else lim.effort
+            inputs.append(Variable(f"tau[{i + 1}]", self.tau[i], "N.m" if rev else "N",
+                                   f"{'torque' if rev else 'force'} applied by actuator {i + 1} ({name})"
+                                   if L.joint_name else
+                                   f"{'torque' if rev else 'force'} applied by actuator {i + 1}", start=0.0,
+                                   min=None if effort is None else -effort, max=effort))
+        return states + qds, inputs
 
     def _wrench_inputs(self) -> list:
         """The external-wrench inputs, in the order of ``ext_symbols``."""
@@ -425,7 +502,7 @@ class Manipulator:
                                          (self.qdd, "qdd", ("rad/s2", "m/s2"), "acceleration")):
             for i, L in enumerate(robot.bodies):
                 unit = units[0] if L.joint == REVOLUTE else units[1]
-                inputs.append(Variable(f"{stem}[{i + 1}]", group[i], unit, f"{what} of joint {i + 1} ({L.name})",
+                inputs.append(Variable(f"{stem}[{i + 1}]", group[i], unit, f"{what} of joint {i + 1} ({_joint_label(L)})",
                                        start=0.0))
         inputs += self._wrench_inputs()
         outputs = tuple(
@@ -479,8 +556,8 @@ class Manipulator:
                 P, tau = self.inverse_dynamics_program(formulation)
                 fn = compile_program(P, [self.q, self.qd, self.qdd, self.ext_symbols, ps], [sp.Matrix(tau)],
                                      "inverse_dynamics")
-            elif key == "K":
-                P, T, J = self.kinematics_program()
+            elif isinstance(key, tuple) and key[0] == "K":
+                P, T, J = self.kinematics_program(key[1])
                 fn = compile_program(P, [self.q, ps], [T, J], "kinematics")
             else:
                 raise KeyError(key)
@@ -522,13 +599,21 @@ class Manipulator:
         L = np.linalg.cholesky(M)
         return np.linalg.solve(L.T, np.linalg.solve(L, self._vec("tau", tau) - h))
 
-    def fk(self, q, **params) -> np.ndarray:
-        """4x4 pose of the last link frame in base coordinates (thesis TRANSP)."""
-        return self._fn("K", None)(self._vec("q", q), self.parameter_vector(params))[0]
+    def fk(self, q, frame: Optional[str] = None, **params) -> np.ndarray:
+        """4x4 pose of ``frame`` in base coordinates (default: ``robot.end_frame``, the thesis's TRANSP).
 
-    def jacobian(self, q, **params) -> np.ndarray:
-        """6 x n geometric Jacobian of the last frame's origin, linear rows first."""
-        return self._fn("K", None)(self._vec("q", q), self.parameter_vector(params))[1]
+        ``frame``: a body (URDF link) or frame name: ``arm.fk(q, "tool0")``.
+        """
+        return self._fn(("K", frame or self.robot.end_frame), None)(self._vec("q", q),
+                                                                     self.parameter_vector(params))[0]
+
+    def jacobian(self, q, frame: Optional[str] = None, **params) -> np.ndarray:
+        """6 x n geometric Jacobian of ``frame``'s origin (default ``robot.end_frame``), linear rows first.
+
+        Columns of joints not between the frame and the base are zero.
+        """
+        return self._fn(("K", frame or self.robot.end_frame), None)(self._vec("q", q),
+                                                                     self.parameter_vector(params))[1]
 
     def energy(self, q, qd, **params) -> tuple:
         """(kinetic, potential) energy; kinetic = qd^T M qd / 2, potential from gravity.

@@ -141,7 +141,8 @@ class NestedBodyInverseDynamics:
         ``gravity``: base-frame gravitational acceleration, or None for none.
         ``external``: {body index: (force[3], torque[3])} in base coordinates,
         the force acting at the body's centre of mass.
-        ``joint_terms``: add rotor inertia Ia_i qdd_i and damping b_i qd_i.
+        ``joint_terms``: add rotor inertia Ia_i qdd_i, damping b_i qd_i and
+        smooth Coulomb friction F_c tanh(qd_i / v_c).
         """
         P, n = self.P, len(self.bodies)
         external = external or {}
@@ -203,6 +204,8 @@ class NestedBodyInverseDynamics:
             t = V.dot(k, nm) if L.joint == REVOLUTE else V.dot(k, f)
             if joint_terms:
                 t = t + L.rotor_inertia * qdd[i] + L.damping * qd[i]
+                if L.friction != 0:  # smooth Coulomb friction
+                    t = t + L.friction * sp.tanh(qd[i] / L.friction_velocity)
             tau[i] = P.let(t, "tau")
         return tau
 

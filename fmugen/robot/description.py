@@ -28,8 +28,10 @@ it, written as a fixed *placement* followed by a *motion*:
   centre of mass (tensor convention: off-diagonal entries are the negated
   products of inertia, I_xy = -int(x*y dm)) are given in the body frame.
 
-Rotor inertia ``Ia`` adds Ia qdd_i and viscous ``damping`` b adds b qd_i to
-the joint's generalized force (torque about, or force along, the axis).
+Rotor inertia ``Ia`` adds Ia qdd_i, viscous ``damping`` b adds b qd_i and
+Coulomb ``friction`` F_c adds the smooth F_c tanh(qd_i / v_c) (v_c:
+``friction_velocity``) to the joint's generalized force (torque about, or
+force along, the axis).
 
 ``Robot.frames`` are named frames rigidly attached to a body (or to the base,
 parent -1): :class:`Frame` ``(name, parent, rotation, translation)``, the
@@ -161,6 +163,8 @@ class Body:
     offset: sp.Expr = sp.Integer(0)  # constant added to q in the motion
     joint_name: str = ""  # the joint's own name (URDF); "" = the body's name
     limits: Optional[Limits] = None
+    friction: sp.Expr = sp.Integer(0)  # Coulomb level F_c of the smooth term F_c tanh(qd / friction_velocity)
+    friction_velocity: sp.Expr = sp.Integer(0)
 
 
 @dataclass(frozen=True)

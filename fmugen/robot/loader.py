@@ -49,7 +49,7 @@ from .checks import (
 )
 from .description import MODIFIED, PRISMATIC, REVOLUTE, STANDARD, Link, Parameter, Payload, Robot
 from .expressions import ExpressionError, NAME_PATTERN, check_double, quantity, snap_angle, symbol_name_problem
-from ..errors import MAX_IDENTIFIER_LENGTH, InputFileError, read_text_file
+from ..errors import MAX_IDENTIFIER_LENGTH, InputFileError, read_text_file, toml_problem
 
 TOP_KEYS = {"robot": True, "parameters": False, "links": True, "payload": False}
 ROBOT_KEYS = {
@@ -86,14 +86,24 @@ AXES = "xyz"
 PAIRS = ((0, 0, "xx"), (1, 1, "yy"), (2, 2, "zz"), (0, 1, "xy"), (0, 2, "xz"), (1, 2, "yz"))
 
 
+def is_urdf(path) -> bool:
+    """A URDF (or xacro) file, by its name: ``.urdf``, ``.xacro``."""
+    name = Path(path).name.lower()
+    return name.endswith((".urdf", ".xacro"))
+
+
 def load_robot_description(path) -> Robot:
-    """Read, check and convert the robot file at ``path``.
+    """Read, check and convert the robot file at ``path`` (TOML, or URDF: :mod:`fmugen.robot.urdf`).
 
     Raises :class:`RobotFileError` naming the file, link and field of the
     first problem found; warns (:class:`UnrealisableInertiaWarning`) for an
     unrealisable inertia the file explicitly allows.
     """
     path = Path(path)
+    if is_urdf(path):
+        from .urdf import load_urdf
+
+        return load_urdf(path)
     try:
         text = read_text_file(path, "robot file")
     except InputFileError as exc:
@@ -105,8 +115,9 @@ def robot_from_toml(text: str, source: str = "<string>") -> Robot:
     """Like :func:`load_robot_description` for TOML text; ``source`` names it in messages."""
     try:
         data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise RobotFileError(f"{source}: TOML syntax error: {exc}") from None
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        raise RobotFileError(f"{source}: " + (toml_problem(exc) if isinstance(exc, RecursionError)
+                             else f"TOML syntax error: {exc}")) from None
     return _Reader(source).robot(data)
 
 

@@ -7,11 +7,11 @@ derived (the PUMA's: seconds of sympy), the connections checked, the state of
 rest solved.  This module caches the outcome of that analysis -- the
 :class:`~fmugen.cosim.system.CosimSystem` (couplings, recorded columns, the
 consistent start values of every FMU), the report of the initial state and
-the cache keys of the group FMUs -- as a separate artefact, ``analysis/<key>.json``
-in the cache folder, under its own **content key**: the generator (every
+the FMUs themselves (copies, each with its sha256) -- as a separate artefact,
+``analysis/<key>.json`` and ``analysis/<key>/`` in the cache folder, under its own **content key**: the generator (every
 source file of fmugen and of its C runtime), the scene file's bytes and
 location, the ``--set`` overrides, and the bytes of every ``.toml`` file the
-scene names (robot files, parameter sets).  Change any of them and the scene
+scene names (robot files, URDF, parameter sets, component files).  Change any of them and the scene
 is analysed again.  Scenes with Python factories are never cached this way
 (their code is not part of the key).
 
@@ -23,6 +23,7 @@ loads the full :class:`~fmugen.scene.Scene` only when something asks for it.
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import os
@@ -34,18 +35,18 @@ from typing import Optional
 from .build import BuiltScene, FmuReport, Progress, cache_dir, generator_fingerprint
 from .settings import parse_sets
 
-FORMAT = 1  # of the stored record
+FORMAT = 2  # of the stored record (2: the FMUs copied into the artefact)
 
 
 def _toml_names(data, out: set) -> None:
-    """Every string in the file data that names a .toml file (robots, parameter sets)."""
+    """Every string in the file data that names a .toml or .urdf file (robots, parameter sets, components)."""
     if isinstance(data, dict):
         for v in data.values():
             _toml_names(v, out)
     elif isinstance(data, list):
         for v in data:
             _toml_names(v, out)
-    elif isinstance(data, str) and data.endswith(".toml"):
+    elif isinstance(data, str) and data.lower().endswith((".toml", ".urdf")):
         out.add(data)
 
 
@@ -79,6 +80,10 @@ def analysis_key(path, sets=None) -> Optional[str]:
 
 def _record_path(key: str) -> Path:
     return cache_dir() / "analysis" / f"{key}.json"
+
+
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 def _system_to_json(system) -> dict:
@@ -116,14 +121,42 @@ class _CachedInitial:
         return getattr(self._scene.full.initial, name)
 
 
-class DeferredScene:
-    """Stands in for the :class:`~fmugen.scene.Scene` of a cached analysis; loads it on first use."""
+class _CachedSpec:
+    """What the commands read of a scene's spec before running (times, [cosim], bonds); the rest loads it."""
 
-    def __init__(self, path, sets, allow_factories, name, initial_report, x0):
+    def __init__(self, d: dict, scene):
+        self.name, self.start, self.stop, self.step = d["name"], d["start"], d["stop"], d["step"]
+        self.cosim, self._scene = dict(d["cosim"]), scene
+        self.bonds = _bonds_from_json(d["bonds"])
+
+    def __getattr__(self, name):
+        return getattr(self._scene.full.spec, name)
+
+
+def _bonds_to_json(bonds) -> list:
+    return [{"ends": list(b.ends), "type": b.type, "signals": [list(x) for x in b.signals], "power": list(b.power)}
+            for b in bonds]
+
+
+def _bonds_from_json(items) -> tuple:
+    if not items:
+        return ()
+    from .connect import Bond
+
+    return tuple(Bond(tuple(b["ends"]), b["type"], tuple(tuple(x) for x in b["signals"]), tuple(b["power"]))
+                 for b in items)
+
+
+class DeferredScene:
+    """Stands in for the :class:`~fmugen.scene.Scene` of a cached analysis; loads it on first use of
+    anything the cache does not hold (name, spec times, [cosim], bonds and the initial state's report)."""
+
+    def __init__(self, path, sets, allow_factories, record):
         self._args = (path, sets, allow_factories)
         self._full = None
-        self.name = name
-        self.initial = _CachedInitial(initial_report, x0, self)
+        self.name = record["name"]
+        self.spec = _CachedSpec(record["spec"], self)
+        self.initial = _CachedInitial(record["initial_report"], record["x0"], self)
 
     @property
     def full(self):
@@ -139,27 +172,78 @@ class DeferredScene:
 
 
 def store(key: str, scene, built: BuiltScene) -> None:
-    """Write the analysis of ``scene`` (built as ``built``) under ``key``; failures to write are ignored."""
-    from .build import _group_key
-
-    x0 = {k: float(v) for k, v in scene.initial.values.items()}
-    record = {"format": FORMAT, "name": scene.name, "initial_report": scene.initial.report(), "x0": x0,
-              "fmus": {g: _group_key(scene, g, True, scene.initial.values) for g in scene.groups},
-              "system": _system_to_json(built.system)}
+    """Write the analysis of ``scene`` (built as ``built``) and copies of its FMUs under ``key``; a failure
+    to write is ignored (the next run analyses again)."""
     target = _record_path(key)
+    folder = target.with_suffix("")
+    spec = scene.spec
     try:
-        target.parent.mkdir(parents=True, exist_ok=True)
+        folder.mkdir(parents=True, exist_ok=True)
+        fmus = {}
+        for g, r in built.fmus.items():
+            tmp = folder / f".{g}.{os.getpid()}.part"
+            shutil.copyfile(r.path, tmp)
+            os.replace(tmp, folder / f"{g}.fmu")
+            d = dataclasses.asdict(r)
+            d.pop("path")
+            fmus[g] = {"report": d, "sha256": _digest(folder / f"{g}.fmu")}
+        record = {"format": FORMAT, "name": scene.name, "initial_report": scene.initial.report(),
+                  "x0": {k: float(v) for k, v in scene.initial.values.items()},
+                  "spec": {"name": spec.name, "start": spec.start, "stop": spec.stop, "step": spec.step,
+                           "cosim": dict(spec.cosim or {}), "bonds": _bonds_to_json(getattr(spec, "bonds", ()))},
+                  "fmus": fmus, "system": _system_to_json(built.system), "inputs": list(built.inputs),
+                  "jacobi_limit": built.jacobi_limit if built.jacobi_limit != float("inf") else None,
+                  "default_step": built.default_step}
         fd, tmp = tempfile.mkstemp(dir=target.parent, suffix=".part")
         with os.fdopen(fd, "w") as f:
-            json.dump(record, f)
+            json.dump(record, f, default=str)
         os.replace(tmp, target)
-    except OSError:
+    except (OSError, TypeError, ValueError):
         pass
 
 
-def load_cached(path, out_dir, sets=None, allow_factories: bool = False,
-                progress=None) -> Optional[BuiltScene]:
-    """The built scene from the cached analysis and FMUs (copied into ``out_dir``), or None."""
+class CachedAnalysis:
+    """A scene's stored analysis: :attr:`scene` (a :class:`DeferredScene`) now, the FMUs on
+    :meth:`materialise`."""
+
+    def __init__(self, key: str, record: dict, path, sets, allow_factories):
+        self.key, self.record = key, record
+        self.scene = DeferredScene(path, sets, allow_factories, record)
+
+    def materialise(self, out_dir, progress=None) -> Optional[BuiltScene]:
+        """The FMUs copied into ``out_dir`` (checked against their digests) and the built scene; None when
+        a copy in the cache is damaged (then the caller builds as usual)."""
+        from .build import _remove_stale
+
+        progress = progress or Progress()
+        folder = _record_path(self.key).with_suffix("")
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        reports = {}
+        for g, entry in self.record["fmus"].items():
+            target = out / f"{g}.fmu"
+            tmp = out / f".{g}.fmu.{os.getpid()}.part"
+            try:
+                shutil.copyfile(folder / f"{g}.fmu", tmp)
+                if _digest(tmp) != entry["sha256"]:
+                    tmp.unlink()
+                    return None
+            except OSError:
+                return None
+            os.replace(tmp, target)
+            r = FmuReport(**{**entry["report"], "path": target, "cached": True, "build_seconds": 0.0})
+            r.members = tuple(r.members)
+            reports[g] = r
+            progress(r.line())
+        stale = _remove_stale(out, [f"{g}.fmu" for g in reports])
+        system = _system_from_json(self.record["system"], {g: out / f"{g}.fmu" for g in reports})
+        lim = self.record.get("jacobi_limit")
+        return BuiltScene(self.scene, out, reports, system, list(self.record.get("inputs", [])), stale,
+                          float("inf") if lim is None else float(lim), float(self.record.get("default_step", 0.0)))
+
+
+def cached_analysis(path, sets=None, allow_factories: bool = False) -> Optional[CachedAnalysis]:
+    """The stored analysis of the scene file ``path`` with ``sets``, when there is one with its FMUs."""
     key = analysis_key(path, sets)
     if key is None:
         return None
@@ -169,38 +253,28 @@ def load_cached(path, out_dir, sets=None, allow_factories: bool = False,
             return None
     except (OSError, ValueError):
         return None
-    cdir = cache_dir() / "fmus"
-    fmus = record["fmus"]
-    if not all((cdir / f"{k}.fmu").is_file() and (cdir / f"{k}.json").is_file() for k in fmus.values()):
+    folder = _record_path(key).with_suffix("")
+    if not all((folder / f"{g}.fmu").is_file() for g in record.get("fmus", {})):
         return None
-    progress = progress or Progress()
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    reports = {}
-    for g, k in fmus.items():
-        target = out / f"{g}.fmu"
-        tmp = out / f".{g}.fmu.{os.getpid()}.part"
-        shutil.copyfile(cdir / f"{k}.fmu", tmp)
-        os.replace(tmp, target)
-        r = FmuReport(**{**json.loads((cdir / f"{k}.json").read_text()), "path": target, "cached": True,
-                         "build_seconds": 0.0})
-        r.members = tuple(r.members)
-        reports[g] = r
-        progress(r.line())
-    scene = DeferredScene(path, sets, allow_factories, record["name"], record["initial_report"], record["x0"])
-    system = _system_from_json(record["system"], {g: out / f"{g}.fmu" for g in fmus})
-    return BuiltScene(scene, out, reports, system)
+    return CachedAnalysis(key, record, path, sets, allow_factories)
 
 
-def build_scene_cached(path, out_dir, sets=None, allow_factories: bool = False, progress=None) -> BuiltScene:
+def build_scene_cached(path, out_dir, sets=None, allow_factories: bool = False, progress=None,
+                       scene=None) -> BuiltScene:
     """The scene file ``path`` built into ``out_dir``: from the cached analysis and FMUs when both are there,
-    else analysed and built (and the analysis stored for next time)."""
-    built = load_cached(path, out_dir, sets, allow_factories, progress)
-    if built is not None:
-        return built
-    from .scene import load_scene
+    else analysed (or ``scene``, loaded already from the same path and sets) and built, and the analysis
+    stored for next time."""
+    if scene is None or isinstance(scene, DeferredScene):
+        cached = cached_analysis(path, sets, allow_factories)
+        if cached is not None:
+            built = cached.materialise(out_dir, progress)
+            if built is not None:
+                return built
+    if scene is None or isinstance(scene, DeferredScene):
+        from .scene import load_scene
 
-    scene = load_scene(path, set=sets, allow_factories=allow_factories)
+        scene = scene.full if isinstance(scene, DeferredScene) else load_scene(path, set=sets,
+                                                                               allow_factories=allow_factories)
     built = scene.build(out_dir, progress=progress)
     key = analysis_key(path, sets)
     if key is not None:

@@ -3,7 +3,8 @@
 ``[scene] connect = [["valve2.port", "act2.port"], ["act2.flange", "arm.joint[2]"], ["amp2.u", "drv2.u"]]``
 names two connectors (``instance.connector``: a component's declared
 connector, see :mod:`fmugen.components.connectors`, or an arm's
-``joint[k]``) or two variables (a plain signal).  For each variable of the
+``joint[k]`` -- also by the joint's name in its file: a URDF joint name, a
+DH link name) or two variables (a plain signal).  For each variable of the
 connector type that either side has, exactly one side must compute it (a
 state or an output) and the other need it (an input): that gives one
 connection from the first to the second.  Both computing it, neither
@@ -39,12 +40,18 @@ def ports(scene, inst: str) -> dict:
     spec = scene.spec.instances[inst]
     model = scene.base_models[inst]
     names = {v.name for g in (model.states, model.inputs, model.outputs) for v in g}
-    if spec.kind == "robot":
+    if spec.kind == "robot":  # joint[k], and the joint's own name (URDF joint, DH link) for the same port
+        import fmugen
+
+        bodies = fmugen.load_robot(spec.source).robot.bodies
         raw = {}
         for v in model.states:
             if v.name.startswith("q[") and v.name.endswith("]"):
                 k = int(v.name[2:-1])
                 raw[f"joint[{k}]"] = arm_joint(k, v.unit == "rad")
+                label = bodies[k - 1].joint_name or bodies[k - 1].name
+                if label and label not in raw and "." not in label:
+                    raw[label] = raw[f"joint[{k}]"]
     elif spec.kind == "file":
         from ..components.equations import read_cached
 

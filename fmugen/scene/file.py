@@ -16,11 +16,12 @@ from typing import Optional
 
 from ..components.assembly import COMPONENT_TYPES
 from ..cosim.settings import KEYS as COSIM_SETTING_KEYS, check_table
-from ..errors import read_text_file
+from ..errors import read_text_file, toml_problem
 from .errors import SceneError, did_you_mean
 
 SCENE_KEYS = {"name", "description", "parameter_set", "start", "stop", "step", "tolerance", "record",
-              "initial", "prune", "connections", "monolithic", "connect"}
+              "initial", "prune", "connections", "monolithic", "connect", "record_bonds",
+              "inputs"}
 COMMON_INSTANCE_KEYS = {"parameters", "fixed", "start", "hold"}
 ROBOT_KEYS = {"robot", "formulation", "locked", "outputs"}
 FACTORY_KEYS = {"factory", "options", "parameter_set"}
@@ -75,9 +76,17 @@ class SceneSpec:
     cosim: dict
     connect: tuple = ()  # of (end, end): bonds between connectors or signals, causality inferred (scene/connect.py)
     bonds: tuple = ()  # the expanded connect pairs (fmugen.scene.connect.Bond), set by Scene
+    record_bonds: bool = False  # also record each bond's effort and flow (fmugen/scene/bonds.py)
+    inputs: tuple = ()  # undriven inputs kept as inputs of the FMUs (not fixed) when pruning
 
 
 def _number(v, where, positive=False, nonneg=False) -> float:
+    if isinstance(v, int) and not isinstance(v, bool):
+        try:
+            v = float(v)
+        except OverflowError:  # an integer beyond the double range: a clear error, not a traceback
+            raise SceneError(f"{where} must be a finite number, got an integer of {len(str(abs(v)))} digits "
+                             f"(beyond the double-precision range)") from None
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
         raise SceneError(f"{where} must be a finite number, got {v!r}")
     if positive and v <= 0:
@@ -85,6 +94,28 @@ def _number(v, where, positive=False, nonneg=False) -> float:
     if nonneg and v < 0:
         raise SceneError(f"{where} must not be negative, got {v!r}")
     return float(v)
+
+
+#: most communication points one run may have (a step so small, or a run so long, that the
+#: master would take days and the results gigabytes is refused with the number)
+MAX_MACRO_STEPS = 10**8
+
+
+def check_time_grid(start: float, stop: float, step: float, where: str) -> int:
+    """The number of macro steps of a run, refused when no step fits between start and stop in
+    double precision (``start + step == start``: 1e15 to 1e15 + 1 ulp) or when there are more
+    than :data:`MAX_MACRO_STEPS`."""
+    span = stop - start
+    if start + step == start or span <= 4 * math.ulp(max(abs(start), abs(stop))):
+        raise SceneError(f"{where} no macro step fits between start {start!r} and stop {stop!r} "
+                         f"(double precision resolves about {math.ulp(max(abs(start), abs(stop))):.3g} s there; "
+                         f"step {step!r})")
+    n = (stop - start) / step
+    if not n <= MAX_MACRO_STEPS:
+        many = f"{n:.3g}" if math.isfinite(n) else "more than 1e308"
+        raise SceneError(f"{where} {many} macro steps of {step!r} s from {start!r} to {stop!r}: more than "
+                         f"{MAX_MACRO_STEPS:.0e}; use a larger step or a shorter run")
+    return int(math.ceil(n - 1e-9))
 
 
 def _identifier(v, where) -> str:
@@ -110,8 +141,8 @@ def read_toml(path: Path) -> dict:
     text = read_text_file(path, "scene file")
     try:
         return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"{path}: not valid TOML: {exc}") from None
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        raise SceneError(f"{path}: {toml_problem(exc)}") from None
 
 
 def apply_sets(data: dict, sets: dict, src: str) -> dict:
@@ -187,14 +218,17 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
     step = _number(sc.get("step", 1e-3), f"{src}: [scene] step", positive=True)
     if step > stop - start:
         raise SceneError(f"{src}: [scene] step ({step}) is longer than the run ({stop - start})")
+    check_time_grid(start, stop, step, f"{src}: [scene]")
     tolerance = _number(sc.get("tolerance", 1e-6), f"{src}: [scene] tolerance", positive=True)
     pset = sc.get("parameter_set", "default")
     if not isinstance(pset, str):
         raise SceneError(f"{src}: [scene] parameter_set must be a string")
+    if pset.endswith(".toml"):  # a file next to the scene, as every other file the scene names
+        pset = str(Path(pset) if Path(pset).is_absolute() else path.parent / pset)
     initial = sc.get("initial", "given")
     if initial not in INITIAL_MODES:
         raise SceneError(f"{src}: [scene] initial = {initial!r}; choose {' or '.join(map(repr, INITIAL_MODES))}")
-    for flag in ("prune", "monolithic"):
+    for flag in ("prune", "monolithic", "record_bonds"):
         if flag in sc and not isinstance(sc[flag], bool):
             raise SceneError(f"{src}: [scene] {flag} must be true or false")
     desc = sc.get("description", "")
@@ -235,6 +269,7 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
         conns.append((s_, t_, f_))
 
     record = _str_list(sc.get("record", []), f"{src}: [scene] record")
+    exposed = _str_list(sc.get("inputs", []), f"{src}: [scene] inputs")
     connect = sc.get("connect", [])
     if not isinstance(connect, list) or not all(isinstance(c, list) and len(c) == 2 and all(
             isinstance(e, str) for e in c) for c in connect):
@@ -273,7 +308,8 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
                      step=step, tolerance=tolerance, record=record, initial=initial,
                      prune=sc.get("prune", True), connections=tuple(conns), instances=instances,
                      groups=groups, monolithic=bool(monolithic), cosim=dict(cosim),
-                     connect=tuple(tuple(c) for c in connect))
+                     connect=tuple(tuple(c) for c in connect), record_bonds=bool(sc.get("record_bonds", False)),
+                     inputs=exposed)
 
 
 def _instance(iname: str, spec, path: Path) -> InstanceSpec:
@@ -315,8 +351,9 @@ def _instance(iname: str, spec, path: Path) -> InstanceSpec:
             raise SceneError(f"{where} formulation must be 'newton_euler' or 'lagrange', got {form!r}")
         outs = _str_list(spec.get("outputs", []), f"{where} outputs")
         for o in outs:
-            if o not in ("p_ee", "qdd"):
-                raise SceneError(f"{where} outputs: {o!r} is not a robot output (p_ee, qdd)")
+            if o not in ("p_ee", "qdd") and not (o[:2] in ("p:", "R:", "J:") and len(o) > 2):
+                raise SceneError(f"{where} outputs: {o!r} is not a robot output (p_ee, qdd, p:FRAME, R:FRAME, "
+                                 "J:FRAME)")
         locked_raw = spec.get("locked", {})
         if not isinstance(locked_raw, dict):
             raise SceneError(f"{where} locked must be a table like {{ \"q[4]\" = 0.3 }}")

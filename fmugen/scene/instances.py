@@ -14,6 +14,8 @@ import importlib
 from typing import Optional, Sequence
 
 from ..codegen.model import SymbolicModel
+from ..errors import FmugenError
+from ..values import as_number, check_model_values, robot_value_problem
 from ..components.assembly import COMPONENT_TYPES
 from .errors import SceneError, did_you_mean
 from .file import InstanceSpec
@@ -31,8 +33,9 @@ def instance_model(spec: InstanceSpec, default_set: str, src: str, sets: Optiona
     where = f"{src}: [instances.{spec.name}]"
     sets = dict(sets or {})
     overrides = dict(spec.parameters)
+    arm = None
     if spec.kind == "robot":
-        model = _robot_model(spec, where, robot_outputs, strategy)
+        model, arm = _robot_model(spec, where, robot_outputs, strategy)
     else:
         model = _component(spec, default_set, where, overrides)
         params = {v.name for v in model.parameters}
@@ -43,9 +46,23 @@ def instance_model(spec: InstanceSpec, default_set: str, src: str, sets: Optiona
                 sets.pop(k)
             model = _component(spec, default_set, where, overrides)
     values = dict(overrides) if spec.kind == "robot" else {}
+    origin = {k: f"{where} parameters.{k}" for k in values}
     values.update(spec.start)
+    origin.update({k: f"{where} start.{k}" for k in spec.start})
     for k, v in sets.items():
         values[k] = _float(v, f"--set {spec.name}.{k}")
+        origin[k] = f"--set {spec.name}.{k}"
+    # the physical checks a file value gets, for a value from parameters, start or --set
+    try:
+        check_model_values(model, values, origin.get)
+    except FmugenError as exc:
+        raise SceneError(str(exc)) from None
+    if arm is not None:
+        pnames = {v.name for v in model.parameters}
+        given = {k: v for k, v in values.items() if k in pnames}
+        problem = robot_value_problem(arm.robot, given)
+        if problem:
+            raise SceneError(f"{where} ({', '.join(origin[k] for k in given)}): {problem}")
     known = {v.name for g in (model.states, model.inputs, model.parameters) for v in g}
     for k in values:
         if k not in known:
@@ -68,7 +85,10 @@ def instance_model(spec: InstanceSpec, default_set: str, src: str, sets: Optiona
 def _float(v, where) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise SceneError(f"{where}: {v!r} must be a number")
-    return float(v)
+    try:
+        return as_number(v, where)
+    except FmugenError as exc:
+        raise SceneError(str(exc)) from None
 
 
 def _robot_model(spec: InstanceSpec, where: str, outputs, strategy: str = "straight") -> SymbolicModel:
@@ -79,7 +99,7 @@ def _robot_model(spec: InstanceSpec, where: str, outputs, strategy: str = "strai
         if spec.locked:
             strategy = "straight"  # the looped dynamics have no locked joints
         return arm.state_space_model(outputs=tuple(outputs), name=spec.name, locked=spec.locked or None,
-                                     strategy=strategy)
+                                     strategy=strategy), arm
     except SceneError:
         raise
     except (ValueError, KeyError) as exc:

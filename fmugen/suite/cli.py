@@ -34,13 +34,13 @@ def scene_case(path: Path, quick: bool, sets=None) -> Case:
     start values of parameters, inputs (held) and states by FMI name."""
     import tomllib
 
-    from ..errors import InputFileError, read_text_file
+    from ..errors import InputFileError, read_text_file, toml_problem
 
     text = read_text_file(path, "TOML file")
     try:
         data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise InputFileError(f"{path}: not valid TOML: {exc}") from None
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        raise InputFileError(f"{path}: {toml_problem(exc)}") from None
     if "scene" in data:
         from ..scene.scene import load_scene
 

@@ -226,7 +226,7 @@ def run_suite(names: Optional[Sequence[str]] = None, quick: bool = False, out="s
     """
     from .report import print_table, summary, write_csv
 
-    out = Path(out)
+    out = Path(out).resolve()  # fmpy hands the FMUs a file: URI of their folder, which must be absolute
     ctx = Context(out, log, repeats)
     if cases is None:
         chosen = [get_case(n) for n in names] if names else [c for c in CASES if c.quick or not quick]

@@ -59,6 +59,12 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     from .execute import sweep
 
+    if str(args.scene).lower().endswith(".ssp"):
+        from .errors import SweepError
+
+        raise SweepError(f"{args.scene}: fmugen sweep takes a scene file; an SSP archive is run by fmugen cosim and "
+                         f"fmugen report (vary its parameters with --set component.variable=value)")
+
     if not args.grid and not args.sample:
         from .errors import SweepError
 
@@ -76,11 +82,12 @@ def run(args) -> int:
     except KeyboardInterrupt:
         return 130
     bad = r.failed
+    refused = sum(row["status"] == "refused" for row in bad)
     print(f"{len(r.rows)} points ({r.ran} run now in {r.wall_time:.1f} s, {r.skipped} done before): "
-          f"{len(r.rows) - len(bad)} ok, {len(bad)} failed")
+          f"{len(r.rows) - len(bad)} ok, {len(bad) - refused} failed, {refused} refused (not run)")
     for row in bad[:5]:
         vals = ", ".join(f"{n}={row[n]:.6g}" for n in r.names)
-        print(f"  failed: {vals}: {row['failure'][:300]}")
+        print(f"  {'refused' if row['status'] == 'refused' else 'failed'}: {vals}: {row['failure'][:300]}")
     if len(bad) > 5:
         print(f"  ... {len(bad) - 5} more in the table")
     stats = r.statistics()

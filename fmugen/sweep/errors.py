@@ -6,3 +6,7 @@ from ..errors import FmugenError
 
 class SweepError(FmugenError):
     """A sweep specification the sweep refuses (bad ``--grid``/``--sample``, a folded parameter, ...)."""
+
+
+class PointRefused(SweepError):
+    """A point whose values fail the physical checks a file value gets: recorded as refused, never run."""

@@ -40,7 +40,7 @@ import numpy as np
 from ..scene import SceneError
 from . import metrics as _metrics
 from . import table as _table
-from .errors import SweepError
+from .errors import PointRefused, SweepError
 from .points import make_points, parse_grid, parse_samples, point_key
 from .prepare import SweepPlan, run_options
 from .worker import make_bundle, run_point
@@ -256,8 +256,9 @@ def sweep(scene, grid=None, sample=None, n: Optional[int] = None, seed: Optional
     for i in todo:
         try:
             tasks.append(plan.task(i, keys[i], points[i]))
-        except (SceneError, SweepError) as exc:  # no state of rest at this point: recorded, not run
-            record({"index": i, "key": keys[i], "status": "error", "failure": str(exc).replace("\n", " | "),
+        except (SceneError, SweepError) as exc:  # refused, or no state of rest at this point: recorded, not run
+            status = "refused" if isinstance(exc, PointRefused) else "error"
+            record({"index": i, "key": keys[i], "status": status, "failure": str(exc).replace("\n", " | "),
                     "wall_time": 0.0, "macro_steps": 0, "worker": "client",
                     **{m: math.nan for m in mnames}})
     w0 = time.perf_counter()

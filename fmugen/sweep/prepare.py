@@ -29,7 +29,7 @@ from typing import Mapping, Optional, Sequence
 import numpy as np
 
 from ..scene import SceneError, load_scene
-from .errors import SweepError
+from .errors import PointRefused, SweepError
 
 def run_options(settings: Mapping[str, object], overrides: Optional[Mapping[str, object]] = None) -> dict:
     """Keywords of :func:`fmugen.cosim.master.run` from a scene's ``[cosim]`` table, then ``overrides``:
@@ -83,6 +83,7 @@ class SweepPlan:
         self.parameters, self.states = tuple(params), tuple(states)
         self.equilibrium = base.spec.initial == "equilibrium"
         self._evaluator = None
+        self._arms = {}  # robot instance -> Robot description (for the point checks)
         try:
             self.scene = base.keeping(params)
         except SceneError as exc:
@@ -147,11 +148,40 @@ class SweepPlan:
         # model with the point's parameter values: the hydraulic checks read them (supply pressure)
         return solve_equilibrium(self.scene, model.with_starts(pv), x, evaluator=ev).values
 
+    def check_point(self, index: int, values: Mapping[str, float]) -> None:
+        """Refuse (:class:`PointRefused`) a point a file could not hold: each swept parameter's physical
+        sign, and a robot's masses, inertias and mass matrix with the point's values (:mod:`fmugen.values`)."""
+        from ..values import robot_value_problem, variable_problem
+
+        by_inst: dict = {}
+        for n in self.parameters:
+            inst, par = n.split(".", 1)
+            by_inst.setdefault(inst, {})[par] = values[n]
+        for inst, given in by_inst.items():
+            m = self.scene.base_models[inst]
+            pvars = {v.name: v for v in m.parameters}
+            for par, val in given.items():
+                problem = variable_problem(pvars[par], val)
+                if problem:
+                    raise PointRefused(f"refused: {inst}.{par} = {val!r} {problem}")
+            if self.scene.spec.instances[inst].kind == "robot":
+                import fmugen
+
+                if inst not in self._arms:
+                    self._arms[inst] = fmugen.load_robot(self.scene.spec.instances[inst].source).robot
+                full = {v.name: v.start for v in m.parameters if v.start is not None}
+                full.update(given)
+                problem = robot_value_problem(self._arms[inst], full)
+                if problem:
+                    raise PointRefused(f"refused: {inst}: {problem}")
+
     def task(self, index: int, key: str, values: Mapping[str, float]) -> PointTask:
-        """The point's start values; raises :class:`fmugen.scene.SceneError` when it has no state of rest."""
+        """The point's start values; raises :class:`fmugen.scene.SceneError` when it has no state of rest
+        and :class:`PointRefused` when its values fail the physical checks."""
         for n, v in values.items():
             if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
-                raise SweepError(f"point {index}: {n} = {v!r} is not a finite number")
+                raise PointRefused(f"refused: point {index}: {n} = {v!r} is not a finite number")
+        self.check_point(index, values)
         x0 = dict(self.scene.initial.values)
         if self.equilibrium and values:
             x0 = self._equilibrium(values)

@@ -62,6 +62,7 @@ class ComponentFile:
     order: list  # intermediates and outputs in dependency order
     sets: dict  # set name -> {parameter: value}
     connectors: dict = field(default_factory=dict)  # name -> (type, {connector var: variable}), checked
+    kinks: list = field(default_factory=list)  # (equation, text, function, [distances], eps): smoothed kinks
 
     def of_kind(self, kind: str) -> list:
         return [d for d in self.declared.values() if d.kind == kind]
@@ -178,7 +179,7 @@ def read_component_file(path) -> ComponentFile:
 
     connectors = check_file_connectors(connectors, declared, src)
     cf = ComponentFile(path, name, desc, prov, declared, equations, order, sets, connectors)
-    _build_all(cf)  # the language's refusals first (they say what is wrong with the text) ...
+    _build_all(cf, cf.kinks)  # the language's refusals first (they say what is wrong with the text) ...
     _check_dimensions(cf)  # ... then the dimensions of what it says
     return cf
 
@@ -358,22 +359,25 @@ def component_model(cf: ComponentFile, name: Optional[str] = None, parameter_set
         raise _err(src, str(exc)) from None
 
 
-def _build_all(cf: ComponentFile) -> tuple:
+def _build_all(cf: ComponentFile, kinks: Optional[list] = None) -> tuple:
     """(derivative expressions, output expressions); intermediates substituted, parameters symbolic."""
     symbols = {n: sp.Symbol(n, real=True) for n in cf.declared
                if cf.declared[n].kind in ("parameter", "input", "state")}
     constant = {symbols[d.name] for d in cf.of_kind("parameter")}
     names = dict(symbols)
     for n in cf.order:  # intermediates and outputs, each after what it reads
-        names[n] = _build(cf, n, names, constant)
-    ders = [_build(cf, d.name, names, constant) for d in cf.of_kind("state")]
+        names[n] = _build(cf, n, names, constant, kinks)
+    ders = [_build(cf, d.name, names, constant, kinks) for d in cf.of_kind("state")]
     return ders, [names[d.name] for d in cf.of_kind("output")]
 
 
-def _build(cf, target, names, constant):
+def _build(cf, target, names, constant, kinks=None):
     lhs, rhs, tree, python = cf.equations[target]
     try:
-        expr = language.EquationBuilder(python, names, constant).build(tree)
+        builder = language.EquationBuilder(python, names, constant)
+        expr = builder.build(tree)
+        if kinks is not None:
+            kinks += [(f"{lhs} = {rhs}",) + k for k in builder.kinks]
         language.check_finite_constants(expr, rhs)
     except ExpressionError as exc:
         raise _err(cf.path, f"equation '{lhs} = {rhs}': {str(exc).replace(repr(python), repr(rhs))}") from None

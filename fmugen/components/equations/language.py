@@ -192,6 +192,10 @@ class EquationBuilder(_Builder):
         super().__init__(text)
         self.names = names
         self.constant = constant
+        self.kinks = []  # (text, name, [distances to the kink], eps): where a smoothed kink sits
+
+    def _site(self, node, name, distances, eps):
+        self.kinks.append((ast.unparse(node), name, distances, eps))
 
     def _is_constant(self, expr) -> bool:
         return expr.free_symbols <= self.constant
@@ -231,6 +235,10 @@ class EquationBuilder(_Builder):
             raise ExpressionError(f"{name}() takes {n} argument{'s' if n > 1 else ''} and an optional "
                                   f"smoothing width eps, got {len(args)} in {self.text!r}")
         if len(args) == n + 1:
+            a = args
+            dist = ([a[0] - a[1]] if name in ("min", "max") else [a[0] - a[1], a[0] - a[2]]
+                    if name in ("sat", "deadzone") else [a[0]])
+            self._site(node, name, dist, a[n])
             return _smooth_form(name, args[:n], args[n])
         if not all(self._is_constant(a) for a in args):
             raise ExpressionError(
@@ -259,6 +267,7 @@ class EquationBuilder(_Builder):
         greater = isinstance(test.ops[0], (ast.Gt, ast.GtE))
         if eps is not None:
             d = lhs - rhs if greater else rhs - lhs
+            self._site(node.test, "if", [d], eps)
             return b + (a - b) * _smooth_form("step", [d], eps)
         if not (self._is_constant(lhs) and self._is_constant(rhs)):
             raise ExpressionError(

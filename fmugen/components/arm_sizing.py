@@ -1,0 +1,241 @@
+"""Actuator parameter sets for any arm: the PUMA sets' rule (sizing.py), generalised.
+
+What each joint needs (:func:`requirements`), from the arm's own dynamics:
+
+* ``tau_g`` -- the worst static gravity torque |h(q, 0)_j| over a set of
+  poses (a grid over a full turn of every revolute joint and the stated range
+  of every prismatic one, the joints' limits where the robot file gives them,
+  or poses you pass);
+* ``J`` -- the worst inertia about the joint, max M(q)_jj over the same poses
+  (exact; the PUMA rule's sum m (d^2 + rho^2) was an estimate);
+* with a trajectory (times, q): the worst inverse-dynamics torque
+  |M qdd + h| and the worst speed |qd| along it (qd, qdd by finite
+  differences of the samples).
+
+Proposals, one parameter set per joint (the families of ``data/default.toml``),
+margins stated in each file's header:
+
+* hydraulic (:func:`hydraulic_sets`): stall torque P_s D_m >= max(margin
+  tau_g, margin tau_peak, J alpha_ref); D_m rounded up to 2 digits; the
+  default set's Q_N, V_t, K_c0, C_tm, C_im scaled by f = D_m/D_m(default)
+  (same no-load speed K_q0/D_m, same leakage per displacement), Q_N raised
+  further when that speed is below 1.25x the required joint speed; B_m with
+  J.  The hydraulic natural frequency, damping and the P loop's velocity gain
+  are reported.
+* electric (:func:`electric_sets`, RobotR3-style ``dc_motor``): the default
+  motor (k_t, J_m) with a current limit i_max and a top speed w_m_max (both
+  stated assumptions); gear ratio |n| >= margin max(tau_g, tau_peak, J alpha_ref)
+  / (k_t i_max), rounded up (a prismatic joint: n in rad/m, a screw);
+  refused (named in the notes) when n w_peak exceeds w_m_max -- no gear
+  serves both torque and speed with that motor.
+
+``fmugen size ROBOT.toml [--trajectory q.csv] [--kind hydraulic|electric] --out DIR``
+writes the sets; ``parameter_set = "DIR/joint2.toml"`` uses one in a scene.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional, Sequence
+
+import numpy as np
+
+from ..errors import FmugenError
+from .parameters import load_parameter_set
+from .sizing import _round_up
+
+PRISMATIC_RANGE = (-0.5, 0.5)  # m, a prismatic joint's range when the file states none
+
+
+@dataclass
+class JointNeed:
+    joint: int
+    revolute: bool
+    tau_g: float  # worst static gravity torque/force
+    J: float  # worst inertia (mass) about/along the joint
+    tau_peak: Optional[float] = None  # worst torque along the trajectory
+    w_peak: Optional[float] = None  # worst speed along the trajectory (or the joint's velocity limit)
+
+
+def _arm(robot):
+    import fmugen
+
+    return fmugen.load_robot(robot) if isinstance(robot, (str, Path)) else robot
+
+
+def pose_grid(arm, n_grid: int = 5, max_poses: int = 4096, seed: int = 0) -> np.ndarray:
+    """Poses: a grid of ``n_grid`` values per joint (the first joint left at 0: about a vertical base
+    axis it changes no gravity torque -- checked, not assumed: see :func:`requirements`), sampled at
+    random down to ``max_poses`` when the grid is larger."""
+    ranges = []
+    for k, link in enumerate(arm.robot.bodies):
+        lim = getattr(link, "limits", None)
+        rev = str(link.joint).lower().startswith("r")
+        lo, hi = (-math.pi, math.pi) if rev else PRISMATIC_RANGE
+        if lim is not None:
+            lo = lim.lower if lim.lower is not None else lo
+            hi = lim.upper if lim.upper is not None else hi
+        ranges.append(np.linspace(lo, hi, n_grid) if k > 0 else np.array([0.0]))
+    n = int(np.prod([len(r) for r in ranges]))
+    if n <= max_poses:
+        return np.array(list(itertools.product(*ranges)))
+    rng = np.random.default_rng(seed)
+    return np.array([[rng.choice(r) for r in ranges] for _ in range(max_poses)])
+
+
+def requirements(robot, poses: Optional[np.ndarray] = None, trajectory: Optional[tuple] = None,
+                 n_grid: int = 5, speed: float = 1.0) -> list:
+    """[JointNeed] per joint (module doc).  ``trajectory``: (times, q[n_samples, n]);
+    ``speed``: the required joint speed [rad/s or m/s] when there is no trajectory and no velocity limit."""
+    arm = _arm(robot)
+    n = arm.n
+    P = pose_grid(arm, n_grid) if poses is None else np.atleast_2d(np.asarray(poses, dtype=float))
+    if P.shape[1] != n:
+        raise FmugenError(f"sizing: poses have {P.shape[1]} joints, the arm {n}")
+    zero = np.zeros(n)
+    tau_g, J = np.zeros(n), np.zeros(n)
+    for q in P:
+        tau_g = np.maximum(tau_g, np.abs(np.asarray(arm.bias(q, zero), dtype=float)))
+        J = np.maximum(J, np.diag(np.asarray(arm.mass_matrix(q), dtype=float)))
+    tau_peak = w_peak = None
+    if trajectory is not None:
+        t, Q = np.asarray(trajectory[0], dtype=float), np.atleast_2d(np.asarray(trajectory[1], dtype=float))
+        if Q.shape != (len(t), n) or len(t) < 3 or not np.all(np.diff(t) > 0):
+            raise FmugenError(f"sizing: the trajectory needs increasing times and q of shape (samples, {n})")
+        Qd = np.gradient(Q, t, axis=0, edge_order=2)
+        Qdd = np.gradient(Qd, t, axis=0, edge_order=2)
+        tau_peak = np.max(np.abs([np.asarray(arm.inverse_dynamics(q, qd, qdd), dtype=float)
+                                  for q, qd, qdd in zip(Q, Qd, Qdd)]), axis=0)
+        w_peak = np.max(np.abs(Qd), axis=0)
+    out = []
+    for j, link in enumerate(arm.robot.bodies):
+        lim = getattr(link, "limits", None)
+        w = (w_peak[j] if w_peak is not None else
+             lim.velocity if lim is not None and lim.velocity is not None else speed)
+        out.append(JointNeed(j + 1, str(link.joint).lower().startswith("r"), float(tau_g[j]),
+                             max(float(J[j]), 1e-2), None if tau_peak is None else float(tau_peak[j]), float(w)))
+    return out
+
+
+def hydraulic_sets(needs: Sequence[JointNeed], base="default", margin: float = 2.0,
+                   alpha_ref: float = 100.0) -> list:
+    """[(set {family: {name: value}}, notes)] per joint (module doc)."""
+    b = load_parameter_set(base).sections
+    P_s = b["servo_valve"]["P_s"]
+    out = []
+    for nd in needs:
+        T = max(margin * nd.tau_g, margin * (nd.tau_peak or 0.0), nd.J * alpha_ref)
+        D_m = _round_up(T / P_s)
+        f = D_m / b["hydraulic_actuator"]["D_m"]
+        s = {fam: dict(v) for fam, v in b.items()}
+        sv, ha = s["servo_valve"], s["hydraulic_actuator"]
+        sv["Q_N"] *= f
+        sv["K_c0"] *= f
+        for k in ("V_t", "C_tm", "C_im"):
+            ha[k] *= f
+        ha["D_m"] = D_m
+        J = round(nd.J, 4)
+        s["joint_inertia"]["J"] = J
+        s["joint_inertia"]["B_m"] = b["joint_inertia"]["B_m"] * J / b["joint_inertia"]["J"]
+        w_nl = sv["Q_N"] * math.sqrt(P_s / sv["dp_N"]) / D_m  # no-load speed, valve fully open
+        if w_nl < 1.25 * nd.w_peak:
+            sv["Q_N"] *= 1.25 * nd.w_peak / w_nl
+            w_nl = 1.25 * nd.w_peak
+        w_h = math.sqrt(4 * ha["beta_e"] * D_m**2 / (ha["V_t"] * J))
+        K_q0 = sv["Q_N"] * math.sqrt(P_s / sv["dp_N"])
+        z_h = (sv["K_c0"] + ha["C_tm"]) / D_m * math.sqrt(ha["beta_e"] * J / ha["V_t"]) \
+            + s["joint_inertia"]["B_m"] / (4 * D_m) * math.sqrt(ha["V_t"] / (ha["beta_e"] * J))
+        K_v = s["amplifier"]["K_a"] * s["current_driver"]["G_i"] * K_q0 / sv["i_rated"] / D_m
+        notes = dict(joint=nd.joint, kind="hydraulic", tau_g=nd.tau_g, tau_peak=nd.tau_peak, J=J,
+                     w_peak=nd.w_peak, stall=P_s * D_m, D_m=D_m, f=f, no_load_speed=w_nl, omega_h=w_h,
+                     zeta_h=z_h, K_v=K_v, margin=P_s * D_m / max(nd.tau_g, nd.tau_peak or 0.0, 1e-12))
+        out.append((s, notes))
+    return out
+
+
+def electric_sets(needs: Sequence[JointNeed], base="default", margin: float = 1.5, i_max: float = 10.0,
+                  w_m_max: float = 420.0, alpha_ref: float = 100.0) -> list:
+    """[(set, notes)] per joint: the default dc_motor with the gear ratio chosen (module doc)."""
+    b = load_parameter_set(base).sections
+    k_t, sign = b["dc_motor"]["k_t"], math.copysign(1.0, b["dc_motor"]["ratio"])
+    out = []
+    for nd in needs:
+        T = max(nd.tau_g, nd.tau_peak or 0.0, nd.J * alpha_ref)
+        n = max(1, math.ceil(margin * T / (k_t * i_max)))
+        s = {fam: dict(v) for fam, v in b.items()}
+        s["dc_motor"]["ratio"] = sign * n
+        speed = n * nd.w_peak
+        notes = dict(joint=nd.joint, kind="electric", tau_g=nd.tau_g, tau_peak=nd.tau_peak, J=nd.J,
+                     w_peak=nd.w_peak, ratio=n, max_torque=n * k_t * i_max, motor_speed=speed,
+                     margin=n * k_t * i_max / max(T, 1e-12), feasible=speed <= w_m_max,
+                     i_max=i_max, w_m_max=w_m_max)
+        out.append((s, notes))
+    return out
+
+
+def write_sets(sets: list, directory, robot_name: str = "arm") -> list:
+    """One TOML parameter set per joint (``joint<k>.toml``), the rule and the margins in its header."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for s, n in sets:
+        head = [f"# Parameter set for joint {n['joint']} of {robot_name} ({n['kind']}), proposed by "
+                f"fmugen.components.arm_sizing (rule: its module docstring).",
+                f"#   worst gravity torque {n['tau_g']:.4g}, worst trajectory torque "
+                f"{'-' if n['tau_peak'] is None else format(n['tau_peak'], '.4g')}, inertia {n['J']:.4g}, "
+                f"required speed {n['w_peak']:.4g}"]
+        if n["kind"] == "hydraulic":
+            head.append(f"#   stall torque P_s D_m = {n['stall']:.4g} (margin {n['margin']:.2f}x the worst need), "
+                        f"D_m = {n['D_m']:.3g} m3/rad, no-load speed {n['no_load_speed']:.3g}")
+            head.append(f"#   omega_h = {n['omega_h']:.4g} rad/s, zeta_h = {n['zeta_h']:.3f}, K_v = {n['K_v']:.4g} 1/s "
+                        f"(a P loop needs K_v < 2 zeta_h omega_h = {2 * n['zeta_h'] * n['omega_h']:.4g})")
+        else:
+            head.append(f"#   gear ratio {n['ratio']}, torque at i_max = {n['i_max']} A: {n['max_torque']:.4g} "
+                        f"(margin {n['margin']:.2f}x), motor speed at the required speed {n['motor_speed']:.4g} "
+                        f"rad/s of at most {n['w_m_max']} -- {'ok' if n['feasible'] else 'TOO FAST: a bigger motor'}")
+        lines = head + ["# Units: as in default.toml (SI).", ""]
+        for fam, vals in s.items():
+            lines.append(f"[{fam}]")
+            lines += [f"{k} = {float(v)!r}" for k, v in vals.items()]
+            lines.append("")
+        p = directory / f"joint{n['joint']}.toml"
+        p.write_text("\n".join(lines))
+        paths.append(p)
+    return paths
+
+
+# -- command line: fmugen size ------------------------------------------------------------------
+def add_parser(sub) -> None:
+    p = sub.add_parser("size", help="propose an actuator parameter set per joint of an arm (hydraulic or electric)")
+    p.add_argument("robot", help="robot file (TOML or URDF)")
+    p.add_argument("--kind", default="hydraulic", choices=("hydraulic", "electric"))
+    p.add_argument("--trajectory", help="CSV with a header: time, q[1], ..., q[n] (the motion to serve)")
+    p.add_argument("--grid", type=int, default=5, help="poses per joint for the worst gravity torque (default 5)")
+    p.add_argument("--speed", type=float, default=1.0, help="required joint speed without a trajectory [rad/s]")
+    p.add_argument("--margin", type=float, default=None, help="torque margin (default 2 hydraulic, 1.5 electric)")
+    p.add_argument("--out", required=True, help="folder for joint<k>.toml")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    traj = None
+    if args.trajectory:
+        data = np.genfromtxt(args.trajectory, delimiter=",", names=True)
+        if data.dtype.names is None or len(data.dtype.names) < 2:
+            raise FmugenError(f"{args.trajectory}: expected a CSV with a header time, q[1], ..., q[n]")
+        cols = data.dtype.names
+        traj = (np.asarray(data[cols[0]], dtype=float), np.column_stack([data[c] for c in cols[1:]]))
+    if not 1 <= args.grid <= 50 or not (math.isfinite(args.speed) and args.speed > 0):
+        raise FmugenError("size: --grid must be 1..50 and --speed a positive number")
+    needs = requirements(args.robot, trajectory=traj, n_grid=args.grid, speed=args.speed)
+    if args.kind == "hydraulic":
+        sets = hydraulic_sets(needs, margin=args.margin or 2.0)
+    else:
+        sets = electric_sets(needs, margin=args.margin or 1.5)
+    paths = write_sets(sets, args.out, Path(args.robot).stem)
+    for p in paths:
+        print("\n".join(line for line in p.read_text().splitlines() if line.startswith("#   ")))
+    print(f"wrote {', '.join(str(p) for p in paths)}")
+    return 0

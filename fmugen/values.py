@@ -1,0 +1,187 @@
+"""One physical check for every path by which a value arrives.
+
+A parameter value can come from a file (a robot file, a parameter set), from
+a scene's ``parameters`` or ``start`` table, from ``--set``, from a sweep
+point or from the Python API.  The file readers check what they read
+(:mod:`fmugen.robot.checks`, :func:`fmugen.components.parameters.value_problem`);
+the functions here apply the *same* rules to a value arriving any other way,
+so an override can never make a model the file could not:
+
+* :func:`as_number` -- a finite double, or a clear error (never ``OverflowError``
+  for an integer beyond the double range);
+* :func:`variable_problem` -- the physical sign a parameter declares
+  (:attr:`fmugen.codegen.model.Variable.sign`: a time constant, an inertia,
+  a volume is ``> 0``; a leakage or a friction ``>= 0``);
+* :func:`robot_value_problem` -- a robot's quantities re-evaluated with the
+  new values, through the robot-file checks: every mass, length, inertia a
+  finite number (``mass = "m1/k"`` with ``k = 0`` is a division by zero),
+  masses positive, rotor inertias and damping not negative, every link a
+  realisable rigid body (unless the file's own values were not), and a mass
+  matrix that is not singular.
+"""
+from __future__ import annotations
+
+import math
+import sys
+from typing import Mapping, Optional
+
+from .errors import FmugenError
+
+__all__ = ["as_number", "sign_problem", "variable_problem", "robot_value_problem", "check_model_values"]
+
+
+def as_number(value, where: str) -> float:
+    """``value`` as a finite float; bool, text, NaN, infinity and integers beyond the double range
+    are an :class:`FmugenError` at ``where``."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise FmugenError(f"{where}: {value!r} is not a number")
+    try:
+        v = float(value)
+    except OverflowError:
+        digits = len(str(abs(value))) if isinstance(value, int) and abs(value) < 10 ** 4000 else "many"
+        raise FmugenError(f"{where}: an integer of {digits} digits is beyond the double-precision range "
+                          f"(|value| <= {sys.float_info.max:.3g})") from None
+    if not math.isfinite(v):
+        raise FmugenError(f"{where}: {value!r} is not a finite number")
+    return v
+
+
+def sign_problem(sign: str, value: float) -> Optional[str]:
+    """Why ``value`` breaks the sign rule ``">0"`` / ``">=0"`` (a phrase), or None."""
+    if sign == ">0" and not value > 0:
+        return "is not > 0 (the equations need a positive value)"
+    if sign == ">=0" and not value >= 0:
+        return "is negative (must be >= 0)"
+    return None
+
+
+def variable_problem(var, value) -> Optional[str]:
+    """Why ``value`` cannot be the value of Variable ``var`` (its declared sign), or None."""
+    try:
+        v = as_number(value, var.name)
+    except FmugenError as exc:
+        return str(exc).split(": ", 1)[1]
+    return sign_problem(getattr(var, "sign", "") or "", v)
+
+
+def check_model_values(model, values: Mapping[str, object], where_of) -> None:
+    """Refuse a value of ``values`` (name -> value) that a parameter of ``model`` cannot take.
+
+    ``where_of(name)`` gives the place to name in the message (``"--set joint.J"``,
+    ``"scene.toml: [instances.joint] start.J"``).
+    """
+    params = {v.name: v for v in model.parameters}
+    for name, value in values.items():
+        var = params.get(name)
+        if var is None:
+            continue
+        problem = variable_problem(var, value)
+        if problem:
+            raise FmugenError(f"{where_of(name)} = {value!r} {problem}")
+
+
+def robot_value_problem(robot, values: Mapping[str, float]) -> Optional[str]:
+    """Why ``robot`` with parameter ``values`` (name -> float, over the file's own) is not a
+    physical arm -- the robot-file checks applied to the new numbers -- or None."""
+    import numpy as np
+    import sympy as sp
+
+    from .robot.checks import inertia_problems, singular_joint
+    from .robot.description import MODIFIED, PRISMATIC
+
+    if not values:
+        return None
+    base = {p.symbol: p.value for p in robot.parameters if p.value is not None}
+    new = dict(base)
+    by_name = {p.name: p.symbol for p in robot.parameters}
+    for k, v in values.items():
+        if k in by_name:
+            new[by_name[k]] = float(v)
+
+    def num(e, subs):
+        e = sp.sympify(e)
+        if e.free_symbols - set(subs):
+            return None
+        with np.errstate(all="ignore"):
+            x = e.xreplace(subs)
+            try:
+                f = float(x)
+            except (TypeError, ValueError, OverflowError):
+                return math.nan  # zoo, nan: a division by zero
+        return f
+
+    changed = ", ".join(f"{k} = {v!r}" for k, v in values.items() if k in by_name)
+    data, complete = [], True
+    dh = bool(robot.links)  # a DH file (links), or a robot written as joints (bodies: URDF)
+    for i, L in enumerate(robot.links or robot.bodies, start=1):
+        label = f"{'link' if dh else 'body'} {i} ({L.name})"
+        fields = {"mass": L.mass, "rotor_inertia": L.rotor_inertia, "damping": L.damping}
+        if dh:
+            fields.update(a=L.a, d=L.d)
+        else:
+            fields.update({f"translation[{k}]": e for k, e in enumerate(L.translation)}, offset=L.offset)
+        vals = {}
+        for field, e in fields.items():
+            x = num(e, new)
+            if x is not None and not math.isfinite(x):
+                return f"{label}: {field} = {e} is not a finite number with {changed} (a division by zero?)"
+            vals[field] = x
+        com = [num(e, new) for e in L.com]
+        I = [[num(e, new) for e in row] for row in L.inertia_com]
+        for x in com + [y for row in I for y in row]:
+            if x is not None and not math.isfinite(x):
+                return f"{label}: its centre of mass or inertia is not finite with {changed}"
+        m = vals["mass"]
+        if m is not None and m <= 0 and not (sp.sympify(L.mass) == 0):
+            return f"{label}: mass = {L.mass} = {m:g} kg with {changed}; a body's mass must be positive"
+        for field in ("rotor_inertia", "damping"):
+            if vals[field] is not None and vals[field] < 0:
+                return f"{label}: {field} = {fields[field]} = {vals[field]:g} is negative with {changed}"
+        if m is None or None in com or any(y is None for row in I for y in row) or None in vals.values():
+            complete = False
+            continue
+        I = np.array(I)
+        for r in range(3):
+            if I[r, r] < 0:
+                return f"{label}: moment of inertia [{r}][{r}] = {I[r, r]:g} kg m^2 is negative with {changed}"
+        problems = inertia_problems(m, I)
+        if problems:
+            I0 = [[num(e, base) for e in row] for row in L.inertia_com]
+            m0 = num(L.mass, base)
+            was_ok = m0 is not None and all(y is not None for row in I0 for y in row) \
+                and not inertia_problems(m0, np.array(I0, dtype=float))
+            if was_ok:  # the file's values made a rigid body: an override may not unmake it
+                return f"{label}: not a realisable rigid body with {changed}: {'; '.join(problems)}"
+        if not dh:
+            continue
+        th = num(L.theta, new)
+        al = num(L.alpha, new)
+        if th is None or al is None:
+            complete = False
+            continue
+        data.append(dict(prismatic=L.joint == PRISMATIC, a=vals["a"], alpha=al, d=vals["d"], theta=th, mass=m,
+                         com=com, inertia=I, rotor=vals["rotor_inertia"]))
+    payload = None
+    if robot.payload is not None:
+        pm = num(robot.payload.mass, new)
+        pc = [num(e, new) for e in robot.payload.com]
+        if pm is not None and (not math.isfinite(pm) or pm < 0):
+            return f"payload: mass = {robot.payload.mass} = {pm:g} kg with {changed}; must be >= 0 and finite"
+        if pm is None or None in pc:
+            complete = False
+        elif not all(map(math.isfinite, pc)):
+            return f"payload: com is not finite with {changed}"
+        payload = (pm, pc)
+    for k, g in enumerate(robot.gravity):
+        x = num(g, new)
+        if x is not None and not math.isfinite(x):
+            return f"gravity[{k}] = {g} is not finite with {changed}"
+    if complete and data:
+        found = singular_joint(data, robot.convention == MODIFIED, payload)
+        if found is not None:
+            j, _ = found
+            if j < 0:
+                return f"the mass matrix overflows double precision with {changed}"
+            return (f"link {j + 1} ({robot.links[j].name}): the mass matrix is singular with {changed}: joint "
+                    f"{j + 1} moves no mass, no inertia about its axis and no rotor inertia")
+    return None
