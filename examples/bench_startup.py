@@ -1,6 +1,7 @@
 """Start-up of the ``fmugen`` command: ``fmugen --help``, and a co-simulation whose FMUs are cached.
 
     python examples/bench_startup.py [--scene examples/scenes/puma_hydraulic.toml] [--repeats 7]
+                                     [--compare OTHER_SOURCE_TREE]
 
 Measures, as medians over ``--repeats`` fresh processes (after one warm-up run that fills the
 FMU and scene-analysis caches):
@@ -11,7 +12,9 @@ FMU and scene-analysis caches):
   ``run`` entered, every FMU instantiated and initialised): goal < 1 s with the FMUs cached;
 * the same command's whole wall time for two macro steps (results, plot and summary written).
 
-Each process is started with ``python -m fmugen.cli``, as the ``fmugen`` script does.
+Each process is started with ``python -m fmugen.cli``, as the ``fmugen`` script does.  ``--compare``
+runs the same rows from another fmugen source tree (e.g. an older commit unpacked with ``git archive``),
+interleaved with these, so both see the same load; each tree keeps its own FMU cache.
 """
 from __future__ import annotations
 
@@ -60,22 +63,30 @@ def _first_step(args, env) -> float:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--scene", default=str(ROOT / "examples" / "scenes" / "puma_hydraulic.toml"))
+    ap.add_argument("--scene", default="examples/scenes/puma_hydraulic.toml",
+                    help="scene file, relative to each source tree (default: the PUMA hydraulic scene)")
     ap.add_argument("--repeats", type=int, default=7, help="fresh processes per measurement (median)")
+    ap.add_argument("--compare", default=None, help="another fmugen source tree to measure alongside")
+    ap.add_argument("--compare-cache", default=None, help="FMUGEN_CACHE of the other tree (default: a fresh one)")
     args = ap.parse_args(argv)
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     py = [sys.executable]
+    trees = [("", ROOT)] + ([("other: ", Path(args.compare).resolve())] if args.compare else [])
     with tempfile.TemporaryDirectory() as tmp:
-        out = str(Path(tmp) / "run")
-        cosim = ["cosim", args.scene, "--out", out, "--stop", "0.002", "--step", "0.001"]
-        print(f"warm-up (fills the caches): fmugen {' '.join(cosim)}", flush=True)
-        _wall(py + ["-m", "fmugen.cli", *cosim], env)
-        rows = {
-            "python -c pass": lambda: _wall(py + ["-c", "pass"], env),
-            "fmugen --help": lambda: _wall(py + ["-m", "fmugen.cli", "--help"], env),
-            "fmugen cosim: first macro step": lambda: _first_step(cosim, env),
-            "fmugen cosim: whole command, 2 steps": lambda: _wall(py + ["-m", "fmugen.cli", *cosim], env),
-        }
+        rows = {"python -c pass": lambda: _wall(py + ["-c", "pass"], dict(os.environ))}
+        for label, tree in trees:
+            env = dict(os.environ, PYTHONPATH=str(tree))
+            if label:
+                env["FMUGEN_CACHE"] = args.compare_cache or str(Path(tmp) / "other_cache")
+            out = str(Path(tmp) / f"run{len(rows)}")
+            cosim = ["cosim", str(tree / args.scene), "--out", out, "--stop", "0.002", "--step", "0.001"]
+            print(f"warm-up (fills the caches): {label}fmugen {' '.join(cosim)}", flush=True)
+            _wall(py + ["-m", "fmugen.cli", *cosim], env)
+            rows.update({
+                f"{label}fmugen --help": lambda env=env: _wall(py + ["-m", "fmugen.cli", "--help"], env),
+                f"{label}fmugen cosim: first macro step": lambda env=env, c=cosim: _first_step(c, env),
+                f"{label}fmugen cosim: whole, 2 steps": lambda env=env, c=cosim: _wall(py + ["-m", "fmugen.cli", *c],
+                                                                                     env),
+            })
         res = {k: [] for k in rows}
         for _ in range(args.repeats):  # interleaved: a change in the machine's load hits every row alike
             for k, f in rows.items():

@@ -63,7 +63,7 @@ def _rig(folder: Path, desc="one joint", J=None) -> Path:
 
 def _key(path) -> str:
     sc = load_scene(path)
-    return _group_key(sc, "joint", True, sc.initial.values)
+    return _group_key(sc, "joint", True, sc.initial.values, sc.rest_inputs)
 
 
 def test_every_input_file_enters_the_key_by_content_resolved_next_to_the_scene(tmp_path, monkeypatch):
