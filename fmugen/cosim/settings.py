@@ -97,7 +97,7 @@ def _number(where, v):
         raise CosimError(f"{where} must be a number, not {v!r}")
     try:
         x = float(v)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise CosimError(f"{where} must be a number, not {v!r}") from None
     if not math.isfinite(x):
         raise CosimError(f"{where} must be finite, not {v!r}")
@@ -108,7 +108,7 @@ def _positive(where, v):
     x = _number(where, v) if isinstance(v, bool) else v
     try:
         x = float(x)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise CosimError(f"{where} must be a number, not {v!r}") from None
     if not (math.isfinite(x) and x > 0):
         raise CosimError(f"{where} must be finite and positive, not {v!r}")

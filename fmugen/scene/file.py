@@ -269,6 +269,9 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
         conns.append((s_, t_, f_))
 
     record = _str_list(sc.get("record", []), f"{src}: [scene] record")
+    twice = sorted({r for r in record if record.count(r) > 1})
+    if twice:  # a result table has one column per name: refused here, not after the run
+        raise SceneError(f"{src}: [scene] record lists {', '.join(twice)} more than once")
     exposed = _str_list(sc.get("inputs", []), f"{src}: [scene] inputs")
     connect = sc.get("connect", [])
     if not isinstance(connect, list) or not all(isinstance(c, list) and len(c) == 2 and all(
@@ -300,7 +303,10 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
     cosim = data.get("cosim", {})
     if not isinstance(cosim, dict):
         raise SceneError(f"{src}: [cosim] must be a table")
-    try:  # every key and value checked as every command and the API will read it
+    for k in cosim:
+        if isinstance(cosim[k], (int, float)) and not isinstance(cosim[k], bool):
+            _number(cosim[k], f"{src}: [cosim] {k}")  # finite, and an int within the double range
+    try:  # every key and value checked as every command and the API will read it (unknown keys listed)
         check_table(cosim, f"{src}: [cosim]")
     except ValueError as exc:
         raise SceneError(str(exc)) from None
