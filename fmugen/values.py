@@ -86,7 +86,8 @@ def check_model_values(model, values: Mapping[str, object], where_of) -> None:
             continue
         problem = variable_problem(var, value)
         if problem:
-            raise FmugenError(f"{where_of(name)} = {value!r} {problem}")
+            shown = repr(value) if len(repr(value)) <= 40 else repr(value)[:20] + "..."
+            raise FmugenError(f"{where_of(name)} = {shown} {problem}")
 
 
 def robot_value_problem(robot, values: Mapping[str, float]) -> Optional[str]:

@@ -41,6 +41,10 @@ def instance_model(spec: InstanceSpec, default_set: str, src: str, sets: Optiona
         params = {v.name for v in model.parameters}
         late = {k: v for k, v in sets.items() if k in params}
         if late:  # parameters change derived start values too: make the model again
+            try:  # named as the user wrote it, before the model is made again
+                check_model_values(model, late, lambda k: f"--set {spec.name}.{k}")
+            except FmugenError as exc:
+                raise SceneError(str(exc)) from None
             for k, v in late.items():
                 overrides[k] = _float(v, f"--set {spec.name}.{k}")
                 sets.pop(k)
