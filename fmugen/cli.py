@@ -99,12 +99,12 @@ def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler", mo
         from .values import as_number, check_model_values, robot_value_problem
 
         sets = {k: as_number(v, f"{path}: --set {k}") for k, v in sets.items()}
-        check_model_values(m, sets, lambda k: f"{path}: --set {k}")  # the checks file values get
-        if kind == "robot":
+        if kind == "robot":  # the robot file's checks, with the link and quantity named
             params = {p.name for p in m.parameters}
             problem = robot_value_problem(arm.robot, {k: v for k, v in sets.items() if k in params})
             if problem:
                 raise SceneError(f"{path}: --set: {problem}")
+        check_model_values(m, sets, lambda k: f"{path}: --set {k}")  # the checks file values get
         m = m.with_starts(sets)
     return m
 

@@ -67,6 +67,10 @@ def variable_problem(var, value) -> Optional[str]:
         return problem
     lo, hi = getattr(var, "min", None), getattr(var, "max", None)  # a declared range (component files)
     if lo is not None and v < lo:
+        if lo == sys.float_info.min:  # the FMU's form of "> 0" (FMI's min is inclusive)
+            return "is not > 0 (the quantity must be positive)"
+        if lo == 0.0:
+            return "is negative (must be >= 0)"
         return f"is below its minimum {lo!r}"
     if hi is not None and v > hi:
         return f"is above its maximum {hi!r}"
