@@ -27,15 +27,16 @@ def load_robot(path, formulation: str = "newton_euler") -> Manipulator:
     return Manipulator(load_robot_description(path), formulation)
 
 
-def load_scene(path, set=None):
+def load_scene(path, set=None, allow_factories: bool = False):
     """Read a scene file (a whole system: arm, actuator chains, controllers, paths).
 
     ``set`` overrides values by name (``{"joint.J": 5}`` or ``["joint.J=5"]``);
-    see :mod:`fmugen.scene`.
+    ``allow_factories``: run the Python factories the scene names (code: only for files you
+    trust); see :mod:`fmugen.scene`.
     """
     from .scene import load_scene as _load
 
-    return _load(path, set=set)
+    return _load(path, set=set, allow_factories=allow_factories)
 
 
 def load_system(path, record=None):

@@ -213,6 +213,8 @@ def _cmd_info(args) -> int:
                   f"{', '.join([v.name for v in m.states if v.output] + [v.name for v in m.outputs]) or '-'}")
             for r in removed:
                 print(f"    pruned: {r}")
+        for b in scene.spec.bonds:  # the physical bonds of connect, and the signals that make each
+            print(f"bond {b}: " + ", ".join(f"{v}: {src} -> {dst}" for v, src, dst in b.signals))
         return 0
     model = symbolic_model(path, sets=args.set)
     print(f"{model.name}: {model.description}")
@@ -238,9 +240,9 @@ def main(argv=None) -> int:
     p.set_defaults(func=_cmd_equations)
 
     p = sub.add_parser("build", help="derive, generate, compile and zip an FMI 2.0 FMU")
-    p.add_argument("file", help="robot or assembly TOML file")
+    p.add_argument("file", help="robot, assembly, component or scene TOML file")
     p.add_argument("--fmi-type", default=None, choices=["me", "cs", "both"],
-                   help="robot and assembly files (default both); a scene's FMUs take their group's fmi_type")
+                   help="robot, assembly and component files (default both); a scene's FMUs take their group's fmi_type")
     p.add_argument("-o", "--output", help="path of the .fmu (default: <model name>.fmu); a folder for a scene")
     p.add_argument("--outputs", default="p_ee", help="robot outputs besides q, qd: p_ee, qdd (comma separated)")
     p.add_argument("--formulation", default="newton_euler", choices=["newton_euler", "lagrange"])

@@ -463,9 +463,14 @@ def test_state_feedback_file_splits_long_rows(tmp_path, monkeypatch):
     b = NumericModel(load_component(fbm.state_feedback_file(tmp_path / "b.toml", K, plant, ["s", "v"], ["F"],
                                                             [0.1, 0.2], [1.0])))
     assert "s_1_2 = K_1_2*(v - ref_v)" in (tmp_path / "b.toml").read_text()
+    np.savetxt(tmp_path / "K.csv", K, delimiter=",")  # the gain from a file
+    c = NumericModel(load_component(fbm.state_feedback_file(tmp_path / "c.toml", tmp_path / "K.csv", plant,
+                                                            ["s", "v"], ["F"], [0.1, 0.2], [1.0])))
     u = [0.7, -0.4]
     assert a.g(0, [], u)[0] == pytest.approx(1.0 - 3.0 * 0.6 - 0.5 * (-0.6), rel=1e-14)
-    assert b.g(0, [], u)[0] == a.g(0, [], u)[0]
+    assert b.g(0, [], u)[0] == a.g(0, [], u)[0] == c.g(0, [], u)[0]
+    with pytest.raises(FmugenError, match="K is 1x3, expected 1x2"):
+        fbm.state_feedback_file(tmp_path / "d.toml", np.ones((1, 3)), plant, ["s", "v"], ["F"])
 
 
 def test_linearising_at_rest_inside_a_smoothed_coulomb_term_is_flagged(tmp_path):
@@ -531,3 +536,20 @@ def test_declarations_are_checked(tmp_path, old, new, message):
     p.write_text(p.read_text().replace(old, new).replace("der(w)", "der(w)"))
     with pytest.raises(InputFileError, match=message):
         read_component_file(p)
+
+
+def test_exact_kinks_on_parameters_in_an_fmu(tmp_path):
+    """if/abs/sign/min/max/sat/deadzone/step on parameters stay exact in C and follow a parameter set at run
+    time: x' = -k x/T + 8 x0/T (k = 2) or -x/T (k = 1/2), y = 2x or x -- closed forms."""
+    import fmpy
+
+    from fmugen.fmi.build import build_fmu
+
+    m = load_component(ROOT / "tests/data/exact_parameter_kinks.toml")
+    fmu = tmp_path / "pw.fmu"
+    build_fmu(m, fmu, fmi_type="cs")
+    for k, n_el, x, y in ((2.0, 1.0, 0.004 + 0.996 * math.exp(-2), 2), (0.5, -1.0, math.exp(-1), 1)):
+        r = fmpy.simulate_fmu(str(fmu), stop_time=0.1, start_values={"k": k, "n_el": n_el, "solver.method": 2,
+                                                                    "solver.rtol": 1e-10, "solver.atol": 1e-12},
+                              output=["x", "y"])
+        assert r["x"][-1] == pytest.approx(x, rel=1e-7) and r["y"][-1] == pytest.approx(y * x, rel=1e-7)

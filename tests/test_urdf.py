@@ -452,3 +452,35 @@ def test_rpy_of_rotations_round_trips_including_gimbal_lock():
     for rpy in cases:
         R = rpy_matrix(rpy)
         assert np.abs(rpy_matrix(rotation_rpy(R)) - R).max() < 1e-14
+
+
+def test_shipped_ur5_scene_starts_at_rest_held_by_its_drives():
+    """examples/scenes/ur5_electric.toml: the URDF arm in a scene; at the solved state of rest each drive's
+    joint torque equals the arm's gravity torque (Manipulator's own evaluator) and nothing moves."""
+    from fmugen.codegen.evaluate import ModelEvaluator
+
+    root = Path(__file__).resolve().parents[1]
+    init = fmugen.load_scene(root / "examples/scenes/ur5_electric.toml").initial
+    m = init.model
+    x = np.array([init.values[v.name] for v in m.states])
+    ev = ModelEvaluator(m)
+    f = ev.f(0.0, x, np.zeros(m.nu))
+    nom = np.array([v.nominal or 1.0 for v in m.states])
+    assert np.max(np.abs(f) / nom) < 1e-6
+    y = ev.g(0.0, x, np.zeros(m.nu))
+    out = [v.name for v in m.outputs]
+    tau = np.array([y[out.index(f"mot{k}.tau")] for k in range(1, 7)])
+    arm = fmugen.load_robot(root / "robots/ur5.urdf")
+    q = np.array([init.values[f"arm.q[{k}]"] for k in range(1, 7)])
+    g = arm.bias(q, np.zeros(6))
+    assert np.allclose(tau, g, rtol=1e-8, atol=1e-8 * np.max(np.abs(g)))
+    assert abs(g[1]) > 30  # the shoulder carries the arm
+    p = np.array([y[out.index(f"arm.p_tool0[{r}]")] for r in (1, 2, 3)])
+    assert np.abs(p - arm.fk(q, "tool0")[:3, 3]).max() < 1e-12
+
+
+def test_a_joint_that_moves_nothing_is_refused(tmp_path):
+    text = arm_urdf(tool_mass="0.0").replace('<mass value="1.2"/>', '<mass value="0"/>').replace(
+        '<inertia ixx="0.002" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/>', '').replace(
+        '<inertia ixx="0.001" ixy="0.0001" ixz="0" iyy="0.002" iyz="0" izz="0.0015"/>', '')
+    refused(text, "joint 'elbow': moves no mass", tmp_path)

@@ -23,11 +23,8 @@ def _load(args):
     import fmugen
     from fmugen.scene import parse_sets
 
-    kw = {"allow_factories": True} if getattr(args, "allow_factories", False) else {}
-    try:
-        return fmugen.load_scene(args.scene, set=parse_sets(args.set), **kw)
-    except TypeError:  # an API without allow_factories
-        return fmugen.load_scene(args.scene, set=parse_sets(args.set))
+    return fmugen.load_scene(args.scene, set=parse_sets(args.set),
+                             allow_factories=bool(getattr(args, "allow_factories", False)))
 
 
 def _common(p) -> None:

@@ -145,8 +145,9 @@ def _factory_digest(ref: str) -> str:
     return _file_digest(origin) if origin and Path(origin).is_file() else ref
 
 
-def _group_key(scene, group: str, prune: bool, x0: dict, u0: dict) -> str:
+def _group_key(scene, group: str, prune: bool, x0: dict, u0: Optional[dict] = None) -> str:
     """Everything that shapes the group's FMU, files by their content (never by their names)."""
+    u0 = u0 or {}
     g = scene.groups[group]
     members = set(g.members)
     parts = {

@@ -269,6 +269,9 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
         conns.append((s_, t_, f_))
 
     record = _str_list(sc.get("record", []), f"{src}: [scene] record")
+    twice = sorted({r for r in record if record.count(r) > 1})
+    if twice:  # a result table has one column per name: refused here, not after the run
+        raise SceneError(f"{src}: [scene] record lists {', '.join(twice)} more than once")
     exposed = _str_list(sc.get("inputs", []), f"{src}: [scene] inputs")
     connect = sc.get("connect", [])
     if not isinstance(connect, list) or not all(isinstance(c, list) and len(c) == 2 and all(
@@ -303,8 +306,8 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
     for k in cosim:
         if k not in COSIM_KEYS:
             raise SceneError(f"{src}: [cosim] has unknown key {k!r}{did_you_mean(k, COSIM_KEYS)}")
-        if isinstance(cosim[k], float) and not math.isfinite(cosim[k]):
-            raise SceneError(f"{src}: [cosim] {k} must be finite")
+        if isinstance(cosim[k], (int, float)) and not isinstance(cosim[k], bool):
+            _number(cosim[k], f"{src}: [cosim] {k}")  # finite, and an int within the double range
     return SceneSpec(path=path, name=name, description=desc, parameter_set=pset, start=start, stop=stop,
                      step=step, tolerance=tolerance, record=record, initial=initial,
                      prune=sc.get("prune", True), connections=tuple(conns), instances=instances,
