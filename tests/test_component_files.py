@@ -553,3 +553,26 @@ def test_exact_kinks_on_parameters_in_an_fmu(tmp_path):
                                                                     "solver.rtol": 1e-10, "solver.atol": 1e-12},
                               output=["x", "y"])
         assert r["x"][-1] == pytest.approx(x, rel=1e-7) and r["y"][-1] == pytest.approx(y * x, rel=1e-7)
+
+
+def test_component_files_in_an_assembly_file(tmp_path):
+    (tmp_path / "asm.toml").write_text("""
+[assembly]
+name = "rig"
+inputs = ["ctl.r"]
+connections = [["load.phi", "ctl.y"], ["ctl.u", "load.tau", 1.0]]
+[components.ctl]
+type = "lib:pd"
+parameters = { K_p = 50.0 }
+[components.load]
+type = "lib:stribeck"
+parameter_set = "heavy"
+""")
+    m = fmugen.components.load_assembly(tmp_path / "asm.toml")
+    p = params(m)
+    assert p["ctl.K_p"] == 50.0 and p["load.J"] == 0.5 and [v.name for v in m.inputs] == ["ctl.r"]
+    ev = NumericModel(m)
+    x = {"ctl.x_d": 0.01, "load.phi": 0.1, "load.w": 0.0}
+    d = dict(zip([v.name for v in m.states], ev.f(0, [x[v.name] for v in m.states], [0.3])))
+    u = 50.0 * 0.2 + 5.0 * (0.2 - 0.01) / 2e-3
+    assert d["load.w"] == pytest.approx(u / 0.5, rel=1e-12)  # at rest: the smoothed sign is 0
