@@ -140,6 +140,7 @@ def test_a_device_fifo_or_huge_file_is_refused_before_it_is_read(tmp_path, capsy
     (["--scheduler", "tcp://127.0.0.1:1"], "cannot reach"),
     (["--scheduler", "not an address"], "--scheduler"),
     (["--grid", "amp.K_a=linspace(1,2,200000)", "--grid", "joint.B_m=linspace(0,1,300000)"], "1.2e+11 points"),
+    (["--sample", "joint.B_m=uniform(0,1)", "-n", "7" * 330, "--seed", "1"], "a 330-digit number of samples"),
 ])
 def test_a_sweep_refuses_before_writing_anything(tmp_path, capsys, extra, named):
     out = tmp_path / "sweep"
