@@ -313,6 +313,17 @@ class Master:
                 raise CosimError(f"{what}: FMU {u.name!r} cannot interpolate inputs (canInterpolateInputs = "
                                  f"false); use {self.scheme}/linear")
 
+    def _check_states(self, adaptive: bool) -> None:
+        """Iterated schemes and adaptive steps repeat a macro step from saved FMU states: refuse, before
+        anything runs, an FMU that declares it cannot save them (canGetAndSetFMUstate = false)."""
+        for u in self.units:
+            if not getattr(u, "can_save_state", True):
+                what = (f"{self.scheme} iteration" if self.scheme in ("iterative", "newton") else
+                        "adaptive macro steps")
+                raise CosimError(f"{self.system.name}: FMU {u.name!r} ({u.unit.path}) declares "
+                                 f"canGetAndSetFMUstate=\"false\", but {what} repeat macro steps from saved FMU "
+                                 f"states; run it with jacobi or gauss-seidel at a fixed step")
+
     def _gather(self, Unew, G, units=None) -> int:
         """The coupled values into Unew and G[:nu]; with Hermite inputs also their slopes into G[nu:], read by
         fmi2GetRealOutputDerivatives from the sources (``units``: only those).  Returns the number of calls."""
@@ -370,6 +381,8 @@ class Master:
         cap = int(min(max((stop - t0) / Hmin, 16), 1_000_000)) + 2 if not adaptive else 1024
         rec = _Recording(cap, self.Y, self.rec_idx)
         wall0 = _time.perf_counter()
+        if adaptive or implicit:  # both repeat macro steps from saved FMU states
+            self._check_states(adaptive)
         no_prior = 0 if (adaptive or implicit) else 1  # fmi2DoStep's noSetFMUStatePriorToCurrentPoint
         if self.scheme != "gauss-seidel":
             self.executor = SweepExecutor(self.units, self._do, self.workers)

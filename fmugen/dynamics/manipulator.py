@@ -33,12 +33,21 @@ from ..codegen.differentiate import differentiate
 from ..codegen.model import SymbolicModel, Variable
 from ..codegen.program import Program
 from ..codegen.python_code import compile_program
+from ..robot.bounds import parameter_bounds
 from ..robot.description import REVOLUTE, Robot
 from . import crba, kinematics
 from .joint_frames import joint_frame_chain
 from .lagrange import RecursiveLagrange
 from .newton_euler import NestedBodyInverseDynamics
 from .trig import TrigCache
+
+
+def robot_parameters(robot: Robot) -> tuple:
+    """The robot's parameters as model Variables, with the physical ranges of
+    those that are a link's quantity themselves (:func:`fmugen.robot.bounds.parameter_bounds`)."""
+    lows = parameter_bounds(robot)
+    return tuple(Variable(p.name, p.symbol, p.unit, p.description, start=p.value, min=lows.get(p.name))
+                 for p in robot.parameters)
 
 FORMULATIONS = ("newton_euler", "lagrange")
 
@@ -335,9 +344,7 @@ class Manipulator:
 
         states, inputs = self._joint_variables(free)
         inputs += self._wrench_inputs()
-        params = tuple(
-            Variable(p.name, p.symbol, p.unit, p.description, start=p.value) for p in robot.parameters
-        )
+        params = robot_parameters(robot)
         model = SymbolicModel(
             name=name or robot.name,
             description=robot.description or f"{robot.name}: {n}-link manipulator",
@@ -413,8 +420,7 @@ class Manipulator:
             dgdu[row:row + n, :] = Y[:, 2 * n:]
         states, inputs = self._joint_variables(range(n))
         inputs += self._wrench_inputs()
-        params = tuple(Variable(p.name, p.symbol, p.unit, p.description, start=p.value)
-                       for p in robot.parameters)
+        params = robot_parameters(robot)
         return SymbolicModel(
             name=name or robot.name,
             description=robot.description or f"{robot.name}: {n}-link manipulator",
@@ -511,7 +517,7 @@ class Manipulator:
             for i, L in enumerate(robot.bodies))
         Jp = Program("_j")
         D = differentiate([P], tau, [v.symbol for v in inputs], Jp)
-        params = tuple(Variable(p.name, p.symbol, p.unit, p.description, start=p.value) for p in robot.parameters)
+        params = robot_parameters(robot)
         return SymbolicModel(
             name=name or f"{robot.name}_inverse_dynamics",
             description=f"{robot.name}: tau = M(q) qdd + h(q, qd), inverse dynamics",

@@ -432,7 +432,7 @@ def _group(gname, g, instances, src) -> GroupSpec:
     if fmi_type not in ("cs", "me"):
         raise SceneError(f"{where} fmi_type must be \"cs\" or \"me\", got {fmi_type!r}")
     solver = g.get("solver", "rodas3")
-    if solver not in SOLVERS:
+    if not isinstance(solver, str) or solver not in SOLVERS:  # a table or array is no key (unhashable)
         raise SceneError(f"{where} solver = {solver!r}; choose one of {', '.join(SOLVERS)}")
     tol = g.get("tolerance")
     if tol is not None:
