@@ -516,17 +516,26 @@ def _rows(M: sp.Matrix) -> tuple:
 
 
 def _combine(parts) -> tuple:
-    """(mass, com, inertia about the COM) of rigid parts given in one frame (exact, symbolic)."""
-    parts = [(sp.sympify(m), sp.Matrix(c), sp.Matrix(I)) for m, c, I in parts if sp.sympify(m) != 0]
-    if not parts:
-        return _Z, (_Z, _Z, _Z), tuple(tuple(_Z for _ in range(3)) for _ in range(3))
-    if len(parts) == 1:
-        m, c, I = parts[0]
-        return m, tuple(c), tuple(tuple(I.row(r)) for r in range(3))
-    M = sum(m for m, _, _ in parts)
-    com = sum((m * c for m, c, _ in parts), sp.zeros(3, 1)) / M
-    I_tot = sp.zeros(3, 3)
-    for m, c, I in parts:
+    """(mass, com, inertia about the COM) of rigid parts given in one frame (exact, symbolic).
+
+    A part without mass but with inertia (URDF allows it; Pinocchio adds it)
+    adds its inertia and nothing else.
+    """
+    parts = [(sp.sympify(m), sp.Matrix(c), sp.Matrix(I)) for m, c, I in parts]
+    massive = [(m, c, I) for m, c, I in parts if m != 0]
+    extra = sp.zeros(3, 3)
+    for m, _, I in parts:
+        if m == 0:
+            extra += I
+    if not massive:
+        return _Z, (_Z, _Z, _Z), _rows(extra)
+    if len(massive) == 1:
+        m, c, I = massive[0]
+        return m, tuple(c), _rows(I + extra)
+    M = sum(m for m, _, _ in massive)
+    com = sum((m * c for m, c, _ in massive), sp.zeros(3, 1)) / M
+    I_tot = extra
+    for m, c, I in massive:
         d = c - com
         I_tot += I + m * ((d.T * d)[0, 0] * sp.eye(3) - d * d.T)
-    return M, tuple(com), tuple(tuple(I_tot.row(r)) for r in range(3))
+    return M, tuple(com), _rows(I_tot)
