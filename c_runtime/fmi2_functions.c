@@ -169,6 +169,10 @@ static const char *model_problem(const fmugen_model_def *m)
     if (m->np && (!m->p_start || !m->p_names)) return "p_start or p_names is NULL";
     for (int i = 0; i < m->nx; i++)
         if (!(m->x_nominal[i] > 0) || !isfinite(m->x_nominal[i])) return "a nominal value is not positive";
+    if (m->solver_start < 0 || m->solver_start > FMUGEN_SOLVER_RK4) return "solver_start is not a solver";
+    if (m->rt_start)
+        for (int i = 0; i < FMUGEN_RT_COUNT; i++)
+            if (!(m->rt_start[i] >= 0) || !isfinite(m->rt_start[i])) return "a runtime start value is negative";
     return NULL;
 }
 

@@ -91,6 +91,15 @@ typedef struct fmugen_model_def {
     const double *x_min, *x_max;
     const double *u_min, *u_max;
     const double *y_min, *y_max;
+
+    /* Start values of the runtime's own parameters that differ from its
+     * defaults (a scene's internal solver and tolerances, baked in so that
+     * every importer integrates as the scene does): rt_start holds
+     * FMUGEN_RT_RTOL..FMUGEN_RT_FIXED_STEP (NULL: the defaults), solver_start
+     * a FMUGEN_SOLVER_* (0: the default).  modelDescription.xml states the
+     * same values as start. */
+    const double *rt_start;
+    int solver_start;
 } fmugen_model_def;
 
 /* Symbols shared by the runtime and model.c but not part of the FMU's

@@ -134,6 +134,8 @@ void fmugen_set_defaults(fmugen_instance *inst)
     inst->s.rt[FMUGEN_RT_MAX_STEP] = 0.0;
     inst->s.rt[FMUGEN_RT_FIXED_STEP] = 0.0;
     inst->s.solver = FMUGEN_SOLVER_DOPRI5;
+    if (m->rt_start) memcpy(inst->s.rt, m->rt_start, FMUGEN_RT_COUNT * sizeof(double));
+    if (m->solver_start) inst->s.solver = m->solver_start;
     inst->s.range_check = FMUGEN_RANGE_WARN;
     inst->range_messages = 0;
     inst->s.facold = 1e-4;

@@ -7,9 +7,12 @@ found through the installed distribution) the script
    fixed base) -- files Pinocchio cannot load, or loads without joints, are
    listed as such;
 2. reads it with fmugen (:mod:`fmugen.robot.urdf`), derives the FMU's
-   state-space model (forward dynamics and its exact Jacobian), generates
-   ``model.c`` and compiles it (the "build" column: derive + generate +
-   compile, wall seconds; an FMU build adds the XML and the zip);
+   state-space model (forward dynamics; with ``--jacobian`` also its exact
+   Jacobian, as in the FMU), generates ``model.c`` and compiles it (the
+   "build" column: derive + generate + compile, wall seconds and, in
+   brackets, CPU seconds of Python and the compiler -- the figure that does
+   not depend on how busy the machine is; an FMU build adds the XML and the
+   zip);
 3. compares, at ``--states`` random states (damping and friction set to zero:
    Pinocchio's algorithms model neither), the compiled forward dynamics
    against ``pin.aba`` (relative inf-norm error), M(q) (Python evaluator of
@@ -21,9 +24,9 @@ found through the installed distribution) the script
    from Python (the call overhead, measured on an empty model, subtracted),
    medians of ``--repeat`` rounds in the same run.
 
-Robots with more than ``--max-dof`` joints (default 12) are listed with their
-size but not built: straight-line code grows as n^2..n^3 and the looped
-runtime does not handle trees yet.
+Robots with more than ``--max-dof`` joints (default 12) are built with the
+runtime's looped dynamics (``strategy="loops"``: straight-line code grows as
+n^2..n^3) where it takes them, else listed with their size as not built.
 
     python examples/urdf_table.py                       # the whole table (long: run it on a quiet machine)
     python examples/urdf_table.py --only ur5_robot panda --states 2
@@ -37,6 +40,7 @@ import statistics
 import sys
 import time
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -48,6 +52,31 @@ sys.path.insert(0, str(ROOT))
 def erd_robots() -> Path:
     dist = importlib.metadata.distribution("example-robot-data")
     return Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots"))
+
+
+def _cpu() -> float:
+    """CPU seconds of this process and its finished children (the C compiler): robust to a busy machine."""
+    import resource
+
+    c = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + c.ru_utime + c.ru_stime
+
+
+def all_frames(arm, names):
+    """One compiled program for the pose and Jacobian of every named frame: f(q, p) -> [T1, J1, T2, J2, ...]."""
+    import sympy as sp
+
+    from fmugen.codegen.program import Program
+    from fmugen.codegen.python_code import compile_program
+    from fmugen.dynamics import kinematics
+
+    P = Program("_k")
+    Ts = kinematics.body_frames(P, arm.robot, arm.q)
+    out = []
+    for name in names:
+        body, T = kinematics.frame_pose(P, arm.robot, Ts, name)
+        out += [sp.Matrix(T), kinematics.geometric_jacobian(P, arm.robot, Ts, [T[r][3] for r in range(3)], body)]
+    return compile_program(P, [arm.q, arm.parameter_symbols], out, "frames")
 
 
 def measure(path: Path, args) -> dict:
@@ -79,16 +108,23 @@ def measure(path: Path, args) -> dict:
         return row
     row["kind"] = "chain" if robot.is_chain else "tree"
     row["frames"] = len(robot.frame_names())
-    if robot.n > args.max_dof:
-        row["status"] = f"not built (> {args.max_dof} DoF)"
-        return row
     arm = Manipulator(robot)
     zero = {p.name: 0.0 for p in robot.parameters if p.name.startswith(("b_", "fc_"))}
-    t0 = time.perf_counter()
-    sm = arm.state_space_model(outputs=())
+    t0, c0 = time.perf_counter(), _cpu()
+    if robot.n > args.max_dof:  # straight-line code grows as n^2..n^3: the runtime's loops, where they take trees
+        try:
+            sm = arm.state_space_model(outputs=(), strategy="loops")
+        except ValueError as exc:
+            row["status"] = f"not built (> {args.max_dof} DoF; looped runtime: {str(exc)[:60]})"
+            return row
+    else:
+        sm = arm.state_space_model(outputs=())
+    row["strategy"] = "loops" if any(type(st).__name__ == "ChainDynamics" for st in sm.program.steps) else "straight"
+    if not args.jacobian:
+        sm = replace(sm, jacobian=None, dfdx=None, dfdu=None, dgdx=None, dgdu=None)
     source = generate_c(sm).source
     cm = CompiledModel.build(source)
-    row["build_s"] = time.perf_counter() - t0
+    row["build_s"], row["build_cpu_s"] = time.perf_counter() - t0, _cpu() - c0
     try:
         p = [zero.get(v.name, v.start) for v in sm.parameters]
         data = model.createData()
@@ -110,12 +146,13 @@ def measure(path: Path, args) -> dict:
             e_m = max(e_m, np.abs(arm.mass_matrix(q, **zero) - Mp).max() / np.abs(Mp).max())
         pin.computeJointJacobians(model, data, qp)
         pin.updateFramePlacements(model, data)
-        for name in robot.frame_names():
-            fid = model.getFrameId(name)
-            T = arm.fk(q, name)
+        names = robot.frame_names()
+        poses = all_frames(arm, names)(q, arm.parameter_vector())
+        for name, T, J in zip(names, poses[0::2], poses[1::2]):
+            fid = model.getFrameId(name, pin.BODY)
             e_fk = max(e_fk, np.abs(T[:3, 3] - data.oMf[fid].translation).max())
             Jp = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)[:, iv]
-            e_j = max(e_j, np.abs(arm.jacobian(q, name) - Jp).max())
+            e_j = max(e_j, np.abs(J - Jp).max())
         row.update(fd_err=e_fd, m_err=e_m, fk_err=e_fk, j_err=e_j)
 
         empty = pin.Model()
@@ -154,22 +191,29 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--csv", type=Path, default=None, help="also write the rows as CSV")
+    ap.add_argument("--jacobian", action="store_true",
+                    help="build the model with its exact Jacobian, as the FMU has it (default: forward dynamics only)")
     args = ap.parse_args(argv)
     files = sorted(erd_robots().rglob("*.urdf"), key=lambda p: p.name)
     if args.only:
         files = [f for f in files if f.stem in args.only]
-    head = ("| file | DoF | chain/tree | build s | FD err | M err | FK err m | J err | FD µs | aba µs | FD/aba "
+    head = ("| file | DoF | chain/tree | build s (CPU) | FD err | M err | FK err m | J err | FD µs | aba µs | FD/aba "
             "| status |")
     print(head)
     print("|" + "---|" * 12)
     rows = []
     for f in files:
-        r = measure(f, args)
+        try:
+            r = measure(f, args)
+        except Exception as exc:  # noqa: BLE001 -- a row that says what went wrong, then the next file
+            r = {"file": f.name, "dof": "", "kind": "", "status": f"ERROR {type(exc).__name__}: {exc}"[:120]}
         rows.append(r)
 
         def g(key, fmt):
             return format(r[key], fmt) if key in r else ""
-        print(f"| {r['file']} | {r['dof']} | {r['kind']} | {g('build_s', '.1f')} | {g('fd_err', '.1e')} | "
+        build = f"{g('build_s', '.1f')} ({g('build_cpu_s', '.1f')})" if "build_s" in r else ""
+        kind = r["kind"] + (" (loops)" if r.get("strategy") == "loops" else "")
+        print(f"| {r['file']} | {r['dof']} | {kind} | {build} | {g('fd_err', '.1e')} | "
               f"{g('m_err', '.1e')} | {g('fk_err', '.1e')} | {g('j_err', '.1e')} | {g('fd_us', '.2f')} | "
               f"{g('aba_us', '.2f')} | {g('ratio', '.2f')} | {r['status']} |", flush=True)
     built = [r for r in rows if r["status"] == "ok"]

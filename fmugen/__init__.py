@@ -38,6 +38,15 @@ def load_scene(path, set=None):
     return _load(path, set=set)
 
 
+def load_system(path, record=None):
+    """An SSP archive (``x.ssp``: fmugen's export or anyone's FMI 2.0 FMUs) as a co-simulation system
+    for :func:`fmugen.cosim.run`; ``record``: the "component.connector" columns to keep (default:
+    every output, or the scene's record list for an archive fmugen wrote).  See :mod:`fmugen.ssp`."""
+    from .ssp import load_system as _load
+
+    return _load(path, record=record)
+
+
 def build_fmu(model, output_path, fmi_type: str = "both", **options):
     """Generate, compile and package ``model`` (a SymbolicModel) as an FMU."""
     from .fmi.build import build_fmu as _build
@@ -48,4 +57,4 @@ def build_fmu(model, output_path, fmi_type: str = "both", **options):
 from .codegen.evaluate import ModelEvaluator  # noqa: E402
 from .control import linearize, trim  # noqa: E402  (operating points and A, B, C, D for python-control)
 
-__all__ = ["load_robot", "load_scene", "build_fmu", "linearize", "trim", "ModelEvaluator", "Manipulator", "FORMULATIONS", "__version__"]
+__all__ = ["load_robot", "load_scene", "load_system", "build_fmu", "linearize", "trim", "ModelEvaluator", "Manipulator", "FORMULATIONS", "__version__"]

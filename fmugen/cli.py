@@ -4,6 +4,7 @@
     fmugen build FILE.toml --fmi-type me|cs|both -o OUT.fmu [--outputs p_ee,qdd] [--fold all]
                            [--model inverse_dynamics]
     fmugen info FILE.toml
+    fmugen export-urdf ROBOT.toml -o ROBOT.urdf [--set NAME=VALUE ...]   (any robot as URDF, fmugen/robot)
     fmugen build SCENE.toml -o DIR [--set NAME=VALUE ...] [--no-prune] [--no-cache]
     fmugen suite [FILE.toml] [--cases NAME ...] [--quick] --out DIR   (stiff and extreme cases, fmugen/suite)
     fmugen linearize FILE.toml [--at NAME=VALUES ...] [--trim NAMES] [--inputs ...] [--outputs ...]
@@ -14,6 +15,8 @@
                  [--step H] [--adaptive --tol E] [--stop T] [--set ...] --out DIR   (co-simulation, fmugen/cosim)
     fmugen reference SCENE.toml [--points N] [--set ...] --out DIR   (the scene as one model, Radau at 1e-12)
     fmugen report SCENE.toml [--steps H1,H2,...] [--schemes S/E,...] [--repeats 5] --out DIR   (error vs wall time)
+    fmugen ssp SCENE.toml -o OUT.ssp [--set ...]   (the scene as an SSP 1.0 archive, fmugen/ssp)
+    fmugen cosim | report SYSTEM.ssp ...           (any SSP of FMI 2.0 FMUs run by fmugen's master)
 
 FILE is a robot file (a ``[robot]`` table), an assembly of actuator-chain
 components (an ``[assembly]`` table), a component file (a ``[component]``
@@ -115,8 +118,25 @@ def _cmd_equations(args) -> int:
     return 0
 
 
+def _cmd_export_urdf(args) -> int:
+    from .robot.loader import load_robot_description
+    from .robot.urdf_export import robot_to_urdf
+    from .scene import parse_sets
+
+    robot = load_robot_description(args.robot)
+    text = robot_to_urdf(robot, parse_sets(args.set) or None)
+    Path(args.output).write_text(text)
+    print(f"wrote {args.output}: {robot.n} joints, {len(robot.frames)} frames")
+    return 0
+
+
 def _cmd_build_scene(args) -> int:
     from .scene import load_scene
+
+    if args.fmi_type is not None:  # one flag for all groups would hide what the file says per FMU
+        raise ValueError(f"{args.file}: --fmi-type does not apply to a scene: each FMU's type is its group's "
+                         f"fmi_type (\"cs\" or \"me\"; \"me\" FMUs carry both interfaces), e.g. "
+                         f"--set fmus.<group>.fmi_type=me")
 
     from .arguments import output_folder
 
@@ -127,7 +147,7 @@ def _cmd_build_scene(args) -> int:
     if out.suffix == ".fmu":
         raise ValueError(f"{args.file}: a scene builds one FMU per group: -o names a folder, not {out}")
     output_folder(out, "-o", inputs=[args.file])
-    built = scene.build(out, prune=not args.no_prune, use_cache=not args.no_cache)
+    built = scene.build(out, prune=False if args.no_prune else None, use_cache=not args.no_cache)
     print(built.summary())
     print(f"wrote {len(built.fmus)} FMU(s) into {out}")
     return 0
@@ -169,7 +189,7 @@ def _cmd_build(args) -> int:
         print(f" {t1 - t0:.1f} s", file=sys.stderr, flush=True)
     fold = None if args.fold == "none" else ("all" if args.fold == "all" else args.fold.split(","))
     out = output_file(args.output or f"{model.name}.fmu", "-o", inputs=[path])
-    result = build_fmu(model, out, fmi_type=args.fmi_type, fold_parameters=fold, budget_start=t0,
+    result = build_fmu(model, out, fmi_type=args.fmi_type or "both", fold_parameters=fold, budget_start=t0,
                        budget_seconds=args.budget_seconds, budget_memory=memory)
     t2 = time.perf_counter()
     print(f"wrote {result.path}  (derive {t1 - t0:.2f} s, generate+compile+zip {t2 - t1:.2f} s)")
@@ -187,12 +207,14 @@ def _cmd_info(args) -> int:
         scene = load_scene(path, set=args.set, allow_factories=args.allow_factories)
         print(f"scene {scene.name}: {scene.spec.description}")
         for g in scene.groups:
-            m, removed = scene.group_model(g)
+            m, removed = scene.group_model(g, prune=scene.spec.prune)
             print(f"FMU {g} ({', '.join(scene.groups[g].members)}): {m.nx} states; inputs "
                   f"{', '.join(v.name for v in m.inputs) or '-'}; outputs "
                   f"{', '.join([v.name for v in m.states if v.output] + [v.name for v in m.outputs]) or '-'}")
             for r in removed:
                 print(f"    pruned: {r}")
+        for b in scene.spec.bonds:  # the physical bonds of connect, and the signals that make each
+            print(f"bond {b}: " + ", ".join(f"{v}: {src} -> {dst}" for v, src, dst in b.signals))
         return 0
     model = symbolic_model(path, sets=args.set)
     print(f"{model.name}: {model.description}")
@@ -218,8 +240,9 @@ def main(argv=None) -> int:
     p.set_defaults(func=_cmd_equations)
 
     p = sub.add_parser("build", help="derive, generate, compile and zip an FMI 2.0 FMU")
-    p.add_argument("file", help="robot or assembly TOML file")
-    p.add_argument("--fmi-type", default="both", choices=["me", "cs", "both"])
+    p.add_argument("file", help="robot, assembly, component or scene TOML file")
+    p.add_argument("--fmi-type", default=None, choices=["me", "cs", "both"],
+                   help="robot, assembly and component files (default both); a scene's FMUs take their group's fmi_type")
     p.add_argument("-o", "--output", help="path of the .fmu (default: <model name>.fmu); a folder for a scene")
     p.add_argument("--outputs", default="p_ee", help="robot outputs besides q, qd: p_ee, qdd (comma separated)")
     p.add_argument("--formulation", default="newton_euler", choices=["newton_euler", "lagrange"])
@@ -242,6 +265,12 @@ def main(argv=None) -> int:
                    help="scenes: allow instances made by a Python factory (runs code named in the file)")
     p.set_defaults(func=_cmd_build)
 
+    p = sub.add_parser("export-urdf", help="write a robot (TOML or URDF) as a URDF file, parameters at their values")
+    p.add_argument("robot")
+    p.add_argument("-o", "--output", required=True, help="the .urdf file to write")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="parameter values")
+    p.set_defaults(func=_cmd_export_urdf)
+
     p = sub.add_parser("info", help="list the variables a file's model will have")
     p.add_argument("file")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
@@ -261,6 +290,10 @@ def main(argv=None) -> int:
     from .sweep.cli import add_parser as add_sweep_parser  # fmugen sweep: parameter studies on Dask
 
     add_sweep_parser(sub)
+
+    from .ssp.cli import add_parser as add_ssp_parser  # fmugen ssp: a scene as an SSP archive (fmugen/ssp)
+
+    add_ssp_parser(sub)
 
     from .cosim.commands import add_cosim_commands  # fmugen cosim | reference | report: fmugen/cosim
 

@@ -463,9 +463,14 @@ def test_state_feedback_file_splits_long_rows(tmp_path, monkeypatch):
     b = NumericModel(load_component(fbm.state_feedback_file(tmp_path / "b.toml", K, plant, ["s", "v"], ["F"],
                                                             [0.1, 0.2], [1.0])))
     assert "s_1_2 = K_1_2*(v - ref_v)" in (tmp_path / "b.toml").read_text()
+    np.savetxt(tmp_path / "K.csv", K, delimiter=",")  # the gain from a file
+    c = NumericModel(load_component(fbm.state_feedback_file(tmp_path / "c.toml", tmp_path / "K.csv", plant,
+                                                            ["s", "v"], ["F"], [0.1, 0.2], [1.0])))
     u = [0.7, -0.4]
     assert a.g(0, [], u)[0] == pytest.approx(1.0 - 3.0 * 0.6 - 0.5 * (-0.6), rel=1e-14)
-    assert b.g(0, [], u)[0] == a.g(0, [], u)[0]
+    assert b.g(0, [], u)[0] == a.g(0, [], u)[0] == c.g(0, [], u)[0]
+    with pytest.raises(FmugenError, match="K is 1x3, expected 1x2"):
+        fbm.state_feedback_file(tmp_path / "d.toml", np.ones((1, 3)), plant, ["s", "v"], ["F"])
 
 
 def test_linearising_at_rest_inside_a_smoothed_coulomb_term_is_flagged(tmp_path):
@@ -491,3 +496,43 @@ def test_linearising_at_rest_inside_a_smoothed_coulomb_term_is_flagged(tmp_path)
 
     x1 = np.array([{"load.phi": 0.0, "load.w": 1.0}[v.name] for v in m.states])
     assert kink_warnings(sc, m, SimpleNamespace(x=x1, u=np.array([2.0]), t=0.0)) == []
+
+
+def test_hostile_text_of_a_component_file_stays_inside_comments_and_xml(tmp_path):
+    """Descriptions and provenance are data: escaped in model.c and modelDescription.xml."""
+    import xml.dom.minidom
+
+    from fmugen.codegen.c_code import generate_c
+    from fmugen.fmi.model_description import model_description_xml
+
+    evil = '*/ int pwned = 1; /* ??/ <!-- ]]> &amp; "q" </fmiModelDescription>'
+    p = write(tmp_path, ["der(phi) = w", "der(w) = tau/J"])
+    text = p.read_text().replace('name = "c"', f'name = "c"\ndescription = {_toml_string(evil)}\n'
+                                                f'provenance = {_toml_string(evil)}')
+    text = text.replace('[inputs]\ntau = { unit = "N.m", start = 0.0 }',
+                        f'[inputs]\ntau = {{ unit = "N.m", start = 0.0, description = {_toml_string(evil)} }}')
+    p.write_text(text)
+    m = load_component(p)
+    assert "pwned" in m.description and "pwned" in m.provenance
+    c = generate_c(m).source
+    for line in c.splitlines():
+        if "pwned" in line:
+            assert "*/ int" not in line and "??/" not in line
+    doc = xml.dom.minidom.parseString(model_description_xml(m, "{00000000-0000-0000-0000-000000000000}", "c"))
+    assert "pwned" in doc.documentElement.getAttribute("description")
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ("w = { unit = \"rad/s\" }", "\"w;x\" = { unit = \"rad/s\" }", "must be an identifier"),
+    ("w = { unit = \"rad/s\" }", "w__x = { unit = \"rad/s\" }", "must be an identifier"),
+    ("w = { unit = \"rad/s\" }", "w = { unit = \"rad/s</x>\" }", "unit"),
+    ("w = { unit = \"rad/s\" }", "w = { unit = \"rad/s\", start = inf }", "finite"),
+    ("w = { unit = \"rad/s\" }", "w = { unit = \"rad/s\", nominal = -1.0 }", "nominal must be positive"),
+    ("w = { unit = \"rad/s\" }", "w = { unit = \"rad/s\", min = 2.0, max = 1.0 }", "min .* is above max"),
+    ("w = { unit = \"rad/s\" }", "w = { unit = \"rad/s\", evil = 1 }", "unknown key"),
+])
+def test_declarations_are_checked(tmp_path, old, new, message):
+    p = write(tmp_path, ["der(phi) = w", "der(w) = tau/J"])
+    p.write_text(p.read_text().replace(old, new).replace("der(w)", "der(w)"))
+    with pytest.raises(InputFileError, match=message):
+        read_component_file(p)

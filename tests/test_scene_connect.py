@@ -29,7 +29,7 @@ def test_shipped_scenes_with_connect_are_the_scenes_written_out(name):
     # the build cache key hashes everything that shapes an FMU: equal keys, identical FMUs
     x0 = {"arm.q[2]": -0.4}
     for g in old.groups:
-        assert _group_key(new, g, True, x0) == _group_key(old, g, True, x0)
+        assert _group_key(new, g, True, x0, {}) == _group_key(old, g, True, x0, {})
 
 
 def test_puma_hydraulic_with_connect_is_the_scene_written_out():

@@ -69,7 +69,7 @@ def compare_with_pinocchio(path, states=3, seed=0):
     pin.computeJointJacobians(model, data, qp)
     pin.updateFramePlacements(model, data)
     for name in robot.frame_names():
-        fid = model.getFrameId(name)
+        fid = model.getFrameId(name, pin.BODY)
         assert fid < len(model.frames), name
         T = arm.fk(q, name)
         err["fk"] = max(err["fk"], np.abs(T[:3, 3] - data.oMf[fid].translation).max(),
@@ -335,3 +335,145 @@ members = ["arm"]
     assert [v.name for v in m.states] == ["q[1]", "qd[1]"]
     assert [v.name for v in m.outputs][:3] == ["p_tcp[1]", "p_tcp[2]", "p_tcp[3]"]
     assert "J_tool[6,1]" in [v.name for v in m.outputs] and "J_tool[1,2]" not in [v.name for v in m.outputs]
+
+
+# ------------------------------------------------------------- the two derivations over a tree
+def random_tree(n=7, seed=5):
+    """A random tree in the general joint model: unaligned axes, rotated placements, prismatic joints,
+    offsets, rotor inertia, full inertia tensors (Robot written as joints, no file)."""
+    import sympy as sp
+
+    from fmugen.robot.description import Body, Frame, Robot
+
+    rng = np.random.default_rng(seed)
+
+    def rot():
+        qm, r = np.linalg.qr(rng.normal(size=(3, 3)))
+        qm = qm @ np.diag(np.sign(np.diag(r)))
+        return qm if np.linalg.det(qm) > 0 else -qm
+
+    def f(x):
+        return sp.Float(float(x))
+
+    bodies, path = [], [-1]
+    for i in range(n):
+        # depth-first numbering (each subtree contiguous, as URDF files are read): the parent is
+        # the base or a body on the path to the previous one
+        parent = int(rng.choice(path))
+        path = path[:path.index(parent) + 1] + [i]
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        R, Rb = rot(), rot()
+        I = Rb @ np.diag(rng.uniform(0.01, 0.05, 3) + [0.0, 0.0, 0.02]) @ Rb.T
+        bodies.append(Body(
+            name=f"b{i}", joint="prismatic" if i % 3 == 2 else "revolute", parent=parent,
+            rotation=tuple(tuple(f(x) for x in row) for row in R), translation=tuple(f(x) for x in rng.uniform(-0.3, 0.3, 3)),
+            axis=tuple(f(x) for x in axis), mass=f(rng.uniform(0.5, 2)), com=tuple(f(x) for x in rng.uniform(-0.1, 0.1, 3)),
+            inertia_com=tuple(tuple(f(x) for x in row) for row in 0.5 * (I + I.T)),
+            rotor_inertia=f(0.01 * i), offset=f(0.1 * i), joint_name=f"j{i}"))
+    frames = (Frame("tip", n - 1, ((1, 0, 0), (0, 1, 0), (0, 0, 1)), (f(0.1), f(0), f(0.05))),)
+    return Robot(name="tree", convention="joints", links=(), gravity=(f(0.3), f(-0.2), f(-9.81)),
+                 bodies=tuple(bodies), frames=frames, end_frame="tip")
+
+
+def test_newton_euler_and_composite_bodies_agree_on_a_random_tree_and_equal_pinocchio():
+    """Two derivations over a tree: M by CRBA equals M by n Newton-Euler passes (unit accelerations);
+    both, and the forward dynamics, equal Pinocchio's crba/rnea/aba on the same bodies."""
+    import sympy as sp
+
+    from fmugen.codegen.benchmarks import pinocchio_model
+    from fmugen.codegen.python_code import compile_program
+
+    robot = random_tree()
+    assert not robot.is_chain and len(robot.children(-1)) >= 1
+    arm = Manipulator(robot)
+    d = arm.derivation()
+    n, zeros = robot.n, [sp.Integer(0)] * robot.n
+    cols = [d.engine.torques(arm.q, zeros, [sp.Integer(int(k == j)) for k in range(n)]) for j in range(n)]
+    M_ne = compile_program(d.program, [arm.q], [sp.Matrix(n, n, lambda i, j: cols[j][i])], "m")
+    model = pinocchio_model(robot)
+    data = model.createData()
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        q, qd, qdd, tau = (rng.uniform(-1, 1, n) for _ in range(4))
+        M = arm.mass_matrix(q)
+        assert np.abs(M - M_ne(q)[0]).max() < 1e-13 * np.abs(M).max()
+        Mp = pin.crba(model, data, q)
+        assert np.abs(M - (np.triu(Mp) + np.triu(Mp, 1).T)).max() < 1e-12 * np.abs(M).max()
+        tp = pin.rnea(model, data, q, qd, qdd)
+        assert np.abs(arm.inverse_dynamics(q, qd, qdd) - tp).max() < 1e-12 * np.abs(tp).max()
+        ap = pin.aba(model, data, q, qd, tau)
+        assert np.abs(arm.forward_dynamics(q, qd, tau) - ap).max() < 1e-10 * np.abs(ap).max()
+
+
+# ------------------------------------------------------------- export
+@pytest.mark.parametrize("robot_file", ["puma_thesis_com.toml", "stanford_arm.toml"])
+def test_export_urdf_gives_pinocchio_the_same_dynamics(tmp_path, robot_file):
+    """fmugen export-urdf: Pinocchio's URDF parser reads the file into the dynamics of the TOML robot,
+    and fmugen reads it back into the same bodies (frames frame1..frameN included)."""
+    from fmugen.cli import main
+
+    out = tmp_path / "robot.urdf"
+    src = Path(__file__).resolve().parents[1] / "robots" / robot_file
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["export-urdf", str(src), "-o", str(out)]) == 0
+        arm = fmugen.load_robot(src)
+    robot = arm.robot
+    model = pin.buildModelFromUrdf(str(out))
+    model.armature = np.array([float(b.rotor_inertia.xreplace(robot.parameter_values())) for b in robot.bodies])
+    data = model.createData()
+    mp = pinocchio_urdf_map(model, load_urdf(out))
+    iv = [m[1] for m in mp]
+    back = Manipulator(load_urdf(out))
+    rng = np.random.default_rng(7)
+    for _ in range(3):
+        q, qd, tau = rng.uniform(-2, 2, 6), rng.uniform(-1, 1, 6), rng.uniform(-20, 20, 6)
+        qp, vp = to_pinocchio(model, mp, q, qd)
+        taup = np.zeros(6)
+        taup[iv] = tau
+        ap = pin.aba(model, data, qp, vp, taup)[iv]
+        assert np.abs(arm.forward_dynamics(q, qd, tau) - ap).max() < 1e-10 * np.abs(ap).max()
+        Mp = pin.crba(model, data, qp)
+        Mp = (np.triu(Mp) + np.triu(Mp, 1).T)[np.ix_(iv, iv)]
+        assert np.abs(back.mass_matrix(q) + np.diag(model.armature[iv]) - Mp).max() < 1e-12 * np.abs(Mp).max()
+        pin.framesForwardKinematics(model, data, qp)
+        T = data.oMf[model.getFrameId("frame6")]
+        assert np.abs(arm.fk(q)[:3, 3] - T.translation).max() < 1e-12
+        assert np.abs(back.fk(q, "frame6") - arm.fk(q)).max() < 1e-12
+
+
+def test_rpy_of_rotations_round_trips_including_gimbal_lock():
+    from fmugen.robot.urdf import rpy_matrix
+    from fmugen.robot.urdf_export import rotation_rpy
+
+    rng = np.random.default_rng(1)
+    cases = [rng.uniform(-np.pi, np.pi, 3) for _ in range(50)] + [[0.3, np.pi / 2, -0.2], [1.0, -np.pi / 2, 0.4]]
+    for rpy in cases:
+        R = rpy_matrix(rpy)
+        assert np.abs(rpy_matrix(rotation_rpy(R)) - R).max() < 1e-14
+
+
+def test_shipped_ur5_scene_starts_at_rest_held_by_its_drives():
+    """examples/scenes/ur5_electric.toml: the URDF arm in a scene; at the solved state of rest each drive's
+    joint torque equals the arm's gravity torque (Manipulator's own evaluator) and nothing moves."""
+    from fmugen.codegen.evaluate import ModelEvaluator
+
+    root = Path(__file__).resolve().parents[1]
+    init = fmugen.load_scene(root / "examples/scenes/ur5_electric.toml").initial
+    m = init.model
+    x = np.array([init.values[v.name] for v in m.states])
+    ev = ModelEvaluator(m)
+    f = ev.f(0.0, x, np.zeros(m.nu))
+    nom = np.array([v.nominal or 1.0 for v in m.states])
+    assert np.max(np.abs(f) / nom) < 1e-6
+    y = ev.g(0.0, x, np.zeros(m.nu))
+    out = [v.name for v in m.outputs]
+    tau = np.array([y[out.index(f"mot{k}.tau")] for k in range(1, 7)])
+    arm = fmugen.load_robot(root / "robots/ur5.urdf")
+    q = np.array([init.values[f"arm.q[{k}]"] for k in range(1, 7)])
+    g = arm.bias(q, np.zeros(6))
+    assert np.allclose(tau, g, rtol=1e-8, atol=1e-8 * np.max(np.abs(g)))
+    assert abs(g[1]) > 30  # the shoulder carries the arm
+    p = np.array([y[out.index(f"arm.p_tool0[{r}]")] for r in (1, 2, 3)])
+    assert np.abs(p - arm.fk(q, "tool0")[:3, 3]).max() < 1e-12

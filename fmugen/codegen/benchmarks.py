@@ -121,6 +121,12 @@ def pinocchio_model(robot, values: Optional[dict] = None):
            for p in robot.parameters}
     env = {s: sp.sympify(v) for s, v in env.items() if v is not None}
 
+    # Pinocchio's algorithms take every subtree as a contiguous range of joints (depth-first numbering)
+    for i in range(robot.n):
+        below = [k for k in range(robot.n) if i in robot.ancestors(k)]
+        if below != list(range(i, i + len(below))):
+            raise ValueError(f"{robot.name}: bodies are not numbered depth-first (the subtree of body {i} is "
+                             f"{below}); Pinocchio needs each subtree contiguous")
     model = pin.Model()
     model.name = robot.name
     armature = []

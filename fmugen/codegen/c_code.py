@@ -914,10 +914,21 @@ def _variable_table(model: SymbolicModel) -> list:
     return rows
 
 
+#: the runtime's Real parameters in FMUGEN_RT_* order (c_runtime/fmugen_model.h)
+RT_START_ORDER = ("solver.rtol", "solver.atol", "solver.max_step", "solver.fixed_step")
+
+
+def _runtime_start_fields(runtime_start) -> list:
+    if not runtime_start:
+        return []
+    return ["    .rt_start = rt_start,", f"    .solver_start = {int(runtime_start['solver.method'])},"]
+
+
 def generate_c(
     model: SymbolicModel,
     model_identifier: Optional[str] = None,
     guid: Optional[str] = None,
+    runtime_start: Optional[dict] = None,
 ) -> GeneratedC:
     """Print ``model`` as the ``model.c`` of the fmugen runtime.
 
@@ -925,6 +936,9 @@ def generate_c(
     ``guid`` to a hash of the generated text (identical models give identical
     files).  Pass :data:`GUID_PLACEHOLDER` to get a source to hash together
     with the modelDescription.xml, then substitute (what the FMU builder does).
+    ``runtime_start``: start values of the runtime's own parameters
+    (``solver.method``, ``solver.rtol``, ...) that differ from its defaults
+    (:func:`fmugen.fmi.model_description.runtime_starts` checks and completes them).
     """
     _check_model(model)
     ident = model_identifier or c_identifier(model.name)
@@ -1017,7 +1031,13 @@ def generate_c(
     def names_array(name, vars_):
         return _array("char *const", name, [_c_string(v.name) for v in vars_])
 
+    if runtime_start:
+        from ..fmi.model_description import runtime_starts
+
+        runtime_start = runtime_starts(runtime_start)
     decls = [
+        *([_array("double", "rt_start", [_c_double(runtime_start[n]) for n in RT_START_ORDER])]
+          if runtime_start else []),
         _array("double", "x_start", [_c_double(v.start) for v in model.states]),
         _array("double", "x_nominal", [_c_double(v.nominal if v.nominal else 1.0) for v in model.states]),
         _array("double", "u_start", [_c_double(v.start if v.start is not None else 0.0)
@@ -1055,6 +1075,7 @@ def generate_c(
         "    .evaluate = evaluate,",
         f"    .jacobian = {'jacobian' if has_jac else 'NULL'},",
         *(f"    .{k}_min = {lo}, .{k}_max = {hi}," for k, (lo, hi) in ranges.items()),
+        *_runtime_start_fields(runtime_start),
         "};",
     ]
     looped = ev.n_chains + (jb.n_chains if has_jac else 0)

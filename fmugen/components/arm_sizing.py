@@ -57,6 +57,7 @@ class JointNeed:
     J: float  # worst inertia (mass) about/along the joint
     tau_peak: Optional[float] = None  # worst torque along the trajectory
     w_peak: Optional[float] = None  # worst speed along the trajectory (or the joint's velocity limit)
+    effort: Optional[float] = None  # the robot file's effort limit (URDF), reported against the proposal
 
 
 def _arm(robot):
@@ -115,7 +116,8 @@ def requirements(robot, poses: Optional[np.ndarray] = None, trajectory: Optional
         w = (w_peak[j] if w_peak is not None else
              lim.velocity if lim is not None and lim.velocity is not None else speed)
         out.append(JointNeed(j + 1, str(link.joint).lower().startswith("r"), float(tau_g[j]),
-                             max(float(J[j]), 1e-2), None if tau_peak is None else float(tau_peak[j]), float(w)))
+                             max(float(J[j]), 1e-2), None if tau_peak is None else float(tau_peak[j]), float(w),
+                             None if lim is None else lim.effort))
     return out
 
 
@@ -148,9 +150,9 @@ def hydraulic_sets(needs: Sequence[JointNeed], base="default", margin: float = 2
         z_h = (sv["K_c0"] + ha["C_tm"]) / D_m * math.sqrt(ha["beta_e"] * J / ha["V_t"]) \
             + s["joint_inertia"]["B_m"] / (4 * D_m) * math.sqrt(ha["V_t"] / (ha["beta_e"] * J))
         K_v = s["amplifier"]["K_a"] * s["current_driver"]["G_i"] * K_q0 / sv["i_rated"] / D_m
-        notes = dict(joint=nd.joint, kind="hydraulic", tau_g=nd.tau_g, tau_peak=nd.tau_peak, J=J,
+        notes = dict(joint=nd.joint, kind="hydraulic", effort=nd.effort, tau_g=nd.tau_g, tau_peak=nd.tau_peak, J=J,
                      w_peak=nd.w_peak, stall=P_s * D_m, D_m=D_m, f=f, no_load_speed=w_nl, omega_h=w_h,
-                     zeta_h=z_h, K_v=K_v, margin=P_s * D_m / max(nd.tau_g, nd.tau_peak or 0.0, 1e-12))
+                     zeta_h=z_h, K_v=K_v, margin=_margin(P_s * D_m, nd))
         out.append((s, notes))
     return out
 
@@ -167,12 +169,22 @@ def electric_sets(needs: Sequence[JointNeed], base="default", margin: float = 1.
         s = {fam: dict(v) for fam, v in b.items()}
         s["dc_motor"]["ratio"] = sign * n
         speed = n * nd.w_peak
-        notes = dict(joint=nd.joint, kind="electric", tau_g=nd.tau_g, tau_peak=nd.tau_peak, J=nd.J,
+        notes = dict(joint=nd.joint, kind="electric", effort=nd.effort, tau_g=nd.tau_g, tau_peak=nd.tau_peak, J=nd.J,
                      w_peak=nd.w_peak, ratio=n, max_torque=n * k_t * i_max, motor_speed=speed,
-                     margin=n * k_t * i_max / max(T, 1e-12), feasible=speed <= w_m_max,
+                     margin=_margin(n * k_t * i_max, nd), feasible=speed <= w_m_max,
                      i_max=i_max, w_m_max=w_m_max)
         out.append((s, notes))
     return out
+
+
+def _margin(capacity: float, nd: JointNeed):
+    """capacity / the worst load (gravity or trajectory), or None when there is none (sized by inertia)."""
+    load = max(nd.tau_g, nd.tau_peak or 0.0)
+    return capacity / load if load > 1e-9 * max(capacity, 1.0) else None
+
+
+def _margin_text(m) -> str:
+    return "no gravity or trajectory load: sized by J alpha_ref" if m is None else f"margin {m:.2f}x the worst load"
 
 
 def write_sets(sets: list, directory, robot_name: str = "arm") -> list:
@@ -187,14 +199,18 @@ def write_sets(sets: list, directory, robot_name: str = "arm") -> list:
                 f"{'-' if n['tau_peak'] is None else format(n['tau_peak'], '.4g')}, inertia {n['J']:.4g}, "
                 f"required speed {n['w_peak']:.4g}"]
         if n["kind"] == "hydraulic":
-            head.append(f"#   stall torque P_s D_m = {n['stall']:.4g} (margin {n['margin']:.2f}x the worst need), "
+            head.append(f"#   stall torque P_s D_m = {n['stall']:.4g} ({_margin_text(n['margin'])}), "
                         f"D_m = {n['D_m']:.3g} m3/rad, no-load speed {n['no_load_speed']:.3g}")
             head.append(f"#   omega_h = {n['omega_h']:.4g} rad/s, zeta_h = {n['zeta_h']:.3f}, K_v = {n['K_v']:.4g} 1/s "
                         f"(a P loop needs K_v < 2 zeta_h omega_h = {2 * n['zeta_h'] * n['omega_h']:.4g})")
         else:
             head.append(f"#   gear ratio {n['ratio']}, torque at i_max = {n['i_max']} A: {n['max_torque']:.4g} "
-                        f"(margin {n['margin']:.2f}x), motor speed at the required speed {n['motor_speed']:.4g} "
+                        f"({_margin_text(n['margin'])}), motor speed at the required speed {n['motor_speed']:.4g} "
                         f"rad/s of at most {n['w_m_max']} -- {'ok' if n['feasible'] else 'TOO FAST: a bigger motor'}")
+        if n.get("effort") is not None:
+            cap = n["stall"] if n["kind"] == "hydraulic" else n["max_torque"]
+            head.append(f"#   the robot file's effort limit {n['effort']:.4g}: the proposal gives {cap / n['effort']:.2f}x it"
+                        + (" (lower alpha_ref or the margin to stay within it)" if cap > n["effort"] else ""))
         lines = head + ["# Units: as in default.toml (SI).", ""]
         for fam, vals in s.items():
             lines.append(f"[{fam}]")
@@ -215,6 +231,8 @@ def add_parser(sub) -> None:
     p.add_argument("--grid", type=int, default=5, help="poses per joint for the worst gravity torque (default 5)")
     p.add_argument("--speed", type=float, default=1.0, help="required joint speed without a trajectory [rad/s]")
     p.add_argument("--margin", type=float, default=None, help="torque margin (default 2 hydraulic, 1.5 electric)")
+    p.add_argument("--alpha", type=float, default=100.0,
+                   help="joint acceleration the actuator must give the worst inertia [rad/s^2] (default 100)")
     p.add_argument("--out", required=True, help="folder for joint<k>.toml")
     p.set_defaults(func=run)
 
@@ -227,13 +245,14 @@ def run(args) -> int:
             raise FmugenError(f"{args.trajectory}: expected a CSV with a header time, q[1], ..., q[n]")
         cols = data.dtype.names
         traj = (np.asarray(data[cols[0]], dtype=float), np.column_stack([data[c] for c in cols[1:]]))
-    if not 1 <= args.grid <= 50 or not (math.isfinite(args.speed) and args.speed > 0):
-        raise FmugenError("size: --grid must be 1..50 and --speed a positive number")
+    if not 1 <= args.grid <= 50 or not all(math.isfinite(x) and x > 0 for x in (args.speed, args.alpha,
+                                                                                args.margin or 1.0)):
+        raise FmugenError("size: --grid must be 1..50; --speed, --alpha and --margin positive numbers")
     needs = requirements(args.robot, trajectory=traj, n_grid=args.grid, speed=args.speed)
     if args.kind == "hydraulic":
-        sets = hydraulic_sets(needs, margin=args.margin or 2.0)
+        sets = hydraulic_sets(needs, margin=args.margin or 2.0, alpha_ref=args.alpha)
     else:
-        sets = electric_sets(needs, margin=args.margin or 1.5)
+        sets = electric_sets(needs, margin=args.margin or 1.5, alpha_ref=args.alpha)
     paths = write_sets(sets, args.out, Path(args.robot).stem)
     for p in paths:
         print("\n".join(line for line in p.read_text().splitlines() if line.startswith("#   ")))

@@ -50,18 +50,37 @@ def _ratio_unit(num: str, den: str) -> str:
     return ".".join(parts) or "1"
 
 
+def read_gain(path) -> np.ndarray:
+    """A gain matrix from a file: ``.npy``, ``.npz`` (array ``K``) or ``.csv`` (rows = inputs)."""
+    p = Path(path)
+    try:
+        if p.suffix == ".npy":
+            return np.load(p, allow_pickle=False)
+        if p.suffix == ".npz":
+            with np.load(p, allow_pickle=False) as z:
+                if "K" not in z:
+                    raise FmugenError(f"{p}: no array 'K' (arrays: {', '.join(z.files)})")
+                return z["K"]
+        if p.suffix == ".csv":
+            return np.loadtxt(p, delimiter=",", ndmin=2)
+    except (OSError, ValueError) as exc:
+        raise FmugenError(f"{p}: cannot read the gain matrix: {exc}") from None
+    raise FmugenError(f"{p}: a gain matrix is a .npy, .npz (array K) or .csv file")
+
+
 def state_feedback_file(path, K, model, states: Sequence[str], inputs: Sequence[str],
                         x_ref: Optional[Sequence[float]] = None, u_ff: Optional[Sequence[float]] = None,
                         name: str = "state_feedback", description: str = "") -> Path:
     """Write ``u = u_ff - K (x - x_ref)`` as a component file; returns its path.
 
+    ``K``: the (inputs x states) gain, or a file holding it (:func:`read_gain`);
     ``model``: the plant (SymbolicModel or scene) whose ``states`` and
     ``inputs`` (FMI names) K was designed for -- their units give the file's.
     """
     from .linearize import as_model
 
     m = as_model(model)
-    K = np.atleast_2d(np.asarray(K, dtype=float))
+    K = np.atleast_2d(np.asarray(read_gain(K) if isinstance(K, (str, Path)) else K, dtype=float))
     if K.shape != (len(inputs), len(states)):
         raise FmugenError(f"state feedback: K is {K.shape[0]}x{K.shape[1]}, expected {len(inputs)}x{len(states)} "
                           f"(inputs x states)")

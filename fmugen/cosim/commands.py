@@ -32,7 +32,7 @@ def _load(args):
 
 
 def _common(p) -> None:
-    p.add_argument("scene", help="scene TOML file")
+    p.add_argument("scene", help="scene TOML file, or an SSP archive (.ssp; cosim and report)")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="set a parameter, start value or option (repeatable)")
     p.add_argument("--stop", type=float, default=None, help="stop time [s] (default: the scene's)")
@@ -157,23 +157,31 @@ def write_results(result, out_dir) -> dict:
 
 
 def cmd_cosim(args) -> int:
+    from ..ssp import is_ssp
     from .master import check_choices, run
 
-    scene = _load(args)
-    _check_args(args, scene)
-    st = dict(scene.spec.cosim or {})
+    if is_ssp(args.scene):  # an SSP archive: its system as written (fmugen/ssp)
+        from ..ssp.cli import scene_like, system_from_args
+
+        scene, system = None, system_from_args(args)
+        _check_args(args, scene_like(system))
+        st = dict(system.settings)
+    else:
+        scene = _load(args)
+        _check_args(args, scene)
+        st = dict(scene.spec.cosim or {})
     # the choices are checked before anything is built or written
     scheme, ext = check_choices(args.scheme or st.get("scheme", "gauss-seidel"),
                                 args.extrapolation or st.get("extrapolation", "linear"))
     _check_workers(args.workers)
     out = Path(args.out)
-    built = scene.build(out / "fmus")
-    system = built.system
+    if scene is not None:
+        system = scene.build(out / "fmus").system
     result = run(system, scheme, ext, step=args.step, adaptive=args.adaptive, tol=args.tol, stop=args.stop,
                  workers=args.workers)
     paths = write_results(result, out)
     print(result.summary)
-    if scene.spec.bonds:  # power and energy per bond of the scene's connect (those recorded)
+    if scene is not None and scene.spec.bonds:  # power and energy per bond of the scene's connect (those recorded)
         from ..scene.bonds import bond_lines
 
         lines = bond_lines(scene.spec.bonds, result.time, result.__getitem__)
@@ -197,6 +205,13 @@ def cmd_reference(args) -> int:
     from .reference import solve_reference, write_reference_csv
     from .system import ReferenceProblem
 
+    from ..ssp import is_ssp
+
+    if is_ssp(args.scene):
+        from .errors import CosimError
+
+        raise CosimError(f"{args.scene}: an SSP archive has no symbolic model to solve as one ODE; "
+                         f"fmugen report {args.scene} measures against the master's own finest run instead")
     scene = _load(args)
     _check_args(args, scene)
     p = scene.reference_problem()
@@ -211,6 +226,10 @@ def cmd_reference(args) -> int:
              "confirmed by: " + "; ".join(ref.settings["confirm"]),
              "error estimate per column (max difference between the solves):"]
     lines += [f"  {c:<28} {e:.3g}" for c, e in zip(ref.columns, ref.error)]
+    if scene.spec.bonds:  # the bonds' energies without coupling error, to hold a co-simulation's against
+        from ..scene.bonds import bond_lines
+
+        lines += bond_lines(scene.spec.bonds, ref.time, ref.__getitem__)
     (out / "reference.txt").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     print(f"wrote {out / 'reference.csv'}")
@@ -224,6 +243,12 @@ def cmd_report(args) -> int:
     from .report import DEFAULT_SCHEMES, make_report, write_report
     from .system import CosimSystem, Recorded, Unit
 
+    from ..ssp import is_ssp
+
+    if is_ssp(args.scene):  # no symbolic model: a self-convergence reference (fmugen/ssp/report.py)
+        from ..ssp.report import cmd_report_ssp
+
+        return cmd_report_ssp(args)
     scene = _load(args)
     _check_args(args, scene)
     schemes = [tuple(s.split("/", 1)) if "/" in s else (s, "hold") for s in args.schemes.split(",")] \

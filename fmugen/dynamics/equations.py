@@ -35,9 +35,9 @@ def final_equations(arm: Manipulator, formulation=None, latex: bool = False, for
         "tau = M(q) qdd + h(q, qd)   [DYNAMAN eq. 17: B(x) x'' = f(x, x') + e]",
         "",
     ]
-    for i, L in enumerate(robot.links):
+    for i, L in enumerate(robot.bodies):
         kind = "angle" if L.joint == "revolute" else "displacement"
-        lines.append(f"  x{i + 1} = q_{i + 1}: {kind} of joint {i + 1} ({L.name}, {L.joint})")
+        lines.append(f"  x{i + 1} = q_{i + 1}: {kind} of joint {i + 1} ({L.joint_name or L.name}, {L.joint})")
     g = ", ".join(str(x) for x in robot.gravity)
     lines += [f"  gravity g0 = [{g}]", ""]
 

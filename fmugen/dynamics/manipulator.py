@@ -225,7 +225,8 @@ class Manipulator:
         locked = dict(locked or {})
         if strategy not in ("auto", "straight", "loops"):
             raise ValueError(f"strategy must be 'auto', 'straight' or 'loops', not {strategy!r}")
-        loopable = not locked and bool(robot.links) and not kin_outputs
+        # the runtime loops have no Coulomb friction term
+        loopable = not locked and bool(robot.links) and not kin_outputs and not any(b.friction != 0 for b in robot.bodies)
         if strategy == "loops" and not loopable:
             why = ("locked joints" if locked else "frame outputs" if kin_outputs
                    else "robots written as joints (URDF), only DH chains")

@@ -336,6 +336,7 @@ def build_fmu(
     keep_sources: bool = True,
     model_identifier: Optional[str] = None,
     default_experiment: Optional[dict] = None,
+    runtime_start: Optional[dict] = None,
     budget_seconds: Optional[float] = None,
     budget_memory: Optional[float] = None,
     progress: Optional[bool] = None,
@@ -355,6 +356,9 @@ def build_fmu(
         keep_sources     put ``sources/`` into the FMU
         model_identifier defaults to a C identifier made from the model name
         default_experiment  optional {startTime, stopTime, stepSize, tolerance}
+        runtime_start    start values of solver.method, solver.rtol, solver.atol,
+                         solver.max_step, solver.fixed_step (in the XML and the
+                         binary's defaults alike), e.g. a scene's RODAS3 at 1e-10
         budget_seconds   stop with :class:`BuildBudgetExceeded` when the build
                          (generate, compile, zip) takes longer (wall clock, s)
         budget_memory    ... or when it holds more memory (bytes: this process
@@ -377,11 +381,13 @@ def build_fmu(
     budget = _Budget(budget_seconds, budget_memory, t0 if budget_start is None else budget_start)
     with _terminate_as_exception():
         return _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_sources,
-                      model_identifier, default_experiment, budget, _Progress(progress, model.name), t0)
+                      model_identifier, default_experiment, budget, _Progress(progress, model.name), t0,
+                      runtime_start)
 
 
 def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_sources, model_identifier,
-           default_experiment, budget: _Budget, progress: _Progress, t0: float) -> BuildResult:
+           default_experiment, budget: _Budget, progress: _Progress, t0: float,
+           runtime_start: Optional[dict] = None) -> BuildResult:
     progress.start("generate", f"{model.nx} states")
     model = _fold(model, fold_parameters)
     ident = model_identifier or c_identifier(model.name)
@@ -396,9 +402,9 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
     sources = runtime_c + ["model.c"]
 
     # generate with a placeholder GUID, hash C and XML together, substitute
-    gen = generate_c(model, model_identifier=ident, guid=GUID_PLACEHOLDER)
+    gen = generate_c(model, model_identifier=ident, guid=GUID_PLACEHOLDER, runtime_start=runtime_start)
     xml = model_description_xml(model, GUID_PLACEHOLDER, ident, types, sources if keep_sources else (),
-                                default_experiment=default_experiment)
+                                default_experiment=default_experiment, runtime_start=runtime_start)
     guid = deterministic_guid(gen.source, xml)
     c_src, xml = gen.source.replace(GUID_PLACEHOLDER, guid), xml.replace(GUID_PLACEHOLDER, guid)
     t_gen = time.perf_counter() - t0

@@ -124,6 +124,37 @@ def runtime_parameters() -> tuple:
     )
 
 
+#: runtime parameters whose start value a build may set (the scene's internal solver and tolerances)
+SETTABLE_RUNTIME_STARTS = ("solver.method", "solver.rtol", "solver.atol", "solver.max_step", "solver.fixed_step")
+
+
+def runtime_starts(values: dict) -> dict:
+    """Start values of the settable runtime parameters: ``values`` checked and completed with the defaults.
+
+    The FMU's C defaults (``rt_start``, ``solver_start`` of the model struct)
+    and the XML start values both come from this one dict, so an importer that
+    sets nothing gets what the XML says.
+    """
+    out = {r.name: r.start for r in runtime_parameters() if r.name in SETTABLE_RUNTIME_STARTS}
+    bounds = {r.name: (r.min, r.max) for r in runtime_parameters()}
+    for name, v in dict(values or {}).items():
+        if name not in out:
+            raise FmugenError(f"runtime start value {name!r}: only {', '.join(SETTABLE_RUNTIME_STARTS)} can be set")
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or v != v or v in (float("inf"), float("-inf")):
+            raise FmugenError(f"runtime start value {name} = {v!r} must be a finite number")
+        lo, hi = bounds[name]
+        if (lo is not None and v < lo) or (hi is not None and v > hi):
+            raise FmugenError(f"runtime start value {name} = {v!r} is outside [{lo}, {hi}]")
+        if name == "solver.method":
+            if int(v) != v:
+                raise FmugenError(f"runtime start value solver.method = {v!r} must be an integer")
+            v = int(v)
+        elif name == "solver.rtol" and not 0 < v < 1:
+            raise FmugenError(f"runtime start value solver.rtol = {v!r} must lie in (0, 1)")
+        out[name] = v if name == "solver.method" else float(v)
+    return out
+
+
 @dataclass
 class ScalarVariable:
     """One ``<ScalarVariable>``; ``index`` is its 1-based position in the list."""
@@ -284,6 +315,7 @@ def model_description_xml(
     fmi_types: Sequence[str] = ("me", "cs"),
     source_files: Sequence[str] = (),
     default_experiment: Optional[dict] = None,
+    runtime_start: Optional[dict] = None,
 ) -> str:
     """The text of modelDescription.xml.
 
@@ -291,12 +323,19 @@ def model_description_xml(
     tolerance}`` (a scene's run), written as ``<DefaultExperiment>``.
 
     ``fmi_types``: "me" and/or "cs"; ``source_files``: the C files of the
-    FMU's ``sources/`` to list under ``<SourceFiles>`` (FMI 2.0 sec. 2.2.6).
+    FMU's ``sources/`` to list under ``<SourceFiles>`` (FMI 2.0 sec. 2.2.6);
+    ``runtime_start``: start values of the runtime's solver parameters (see
+    :func:`runtime_starts`; the C model must be generated with the same).
     """
     fmi_types = tuple(fmi_types)
     if not fmi_types or any(t not in ("me", "cs") for t in fmi_types):
         raise FmugenError(f"fmi_types must be a non-empty subset of ('me', 'cs'), got {fmi_types!r}")
     layout = variable_layout(model)
+    if runtime_start:
+        rs = runtime_starts(runtime_start)
+        for v in layout.variables:
+            if v.kind == "runtime" and v.name in rs:
+                v.start = rs[v.name]
     has_jac = model.jacobian is not None
 
     root = ET.Element("fmiModelDescription")

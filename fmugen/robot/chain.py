@@ -168,6 +168,9 @@ def chain_to_toml(robot: Robot) -> str:
     symbol is declared in ``[parameters]`` with its value, unit and
     description.  Inertia is written about the centre of mass.
     """
+    if not robot.links:
+        raise ValueError(f"{robot.name}: written as joints (URDF), not in DH parameters; "
+                         "write it with fmugen.robot.urdf_export.robot_to_urdf (fmugen export-urdf)")
     fields = []  # (auto name, expression) in file order, to decide how to write each
     fields += [(f"g_{ax}", g) for ax, g in zip("xyz", robot.gravity)]
     for i, link in enumerate(robot.links, start=1):

@@ -375,7 +375,7 @@ class _Reader:
         params = tuple(p for p in self.params.values() if p.symbol in used)
         return Robot(
             name=name, convention=JOINTS, links=(), gravity=gravity, parameters=params,
-            description=f"{raw_name}: read from the URDF file {Path(self.file).name}",
+            description=f"{name}: read from a URDF file",  # the file's own text never reaches C or XML
             source=self.file, bodies=tuple(out), frames=tuple(frames), end_frame=out[-1].name)
 
     def _joint(self, el, links) -> dict:

@@ -33,6 +33,7 @@ from typing import Optional
 from .. import __version__
 from ..fmi.build import build_fmu, runtime_dir
 from .errors import SceneError
+from .stability import jacobi_hold_limit, stable_step
 
 
 @dataclass
@@ -65,12 +66,25 @@ class BuiltScene:
     out_dir: Path
     fmus: dict  # group -> FmuReport
     system: object  # CosimSystem
+    inputs: list = field(default_factory=list)  # inputs of the system ("inst.var"): undriven, not fixed
+    stale: list = field(default_factory=list)  # FMUs of an earlier build of this folder, removed
+    jacobi_limit: float = float("inf")  # first unstable held-input Jacobi step [s] (linearised at rest)
+    default_step: float = 0.0  # the FMUs' DefaultExperiment stepSize: stable for held-input Jacobi
 
     def summary(self) -> str:
         lines = [self.scene.initial.report()]
         for r in self.fmus.values():
             lines.append(r.line())
             lines += [f"    pruned: {x}" for x in r.removed]
+        lines.append("inputs of the system: " + (", ".join(self.inputs) if self.inputs else
+                                                 "none (undriven inputs are fixed; [scene] inputs keeps them)"))
+        if len(self.fmus) > 1:
+            lim = "no limit found" if self.jacobi_limit == float("inf") else \
+                f"stable below H = {self.jacobi_limit:.3g} s"
+            lines.append(f"held-input Jacobi (most importers' loop): {lim} (linearised at the initial state); "
+                         f"DefaultExperiment stepSize {self.default_step:g} s")
+        if self.stale:
+            lines.append(f"removed from an earlier build in {self.out_dir}: {', '.join(self.stale)}")
         return "\n".join(lines)
 
 
@@ -131,7 +145,7 @@ def _factory_digest(ref: str) -> str:
     return _file_digest(origin) if origin and Path(origin).is_file() else ref
 
 
-def _group_key(scene, group: str, prune: bool, x0: dict) -> str:
+def _group_key(scene, group: str, prune: bool, x0: dict, u0: dict) -> str:
     """Everything that shapes the group's FMU, files by their content (never by their names)."""
     g = scene.groups[group]
     members = set(g.members)
@@ -145,6 +159,8 @@ def _group_key(scene, group: str, prune: bool, x0: dict) -> str:
         "connections": [c for c in scene.connections if c[0] in members or c[2] in members],
         "record": [r for r in scene.spec.record if r.split(".", 1)[0] in members],
         "x0": {k: v for k, v in sorted(x0.items()) if k.split(".", 1)[0] in members},
+        "u0": {k: v for k, v in sorted(u0.items()) if k.split(".", 1)[0] in members},
+        "inputs": [i for i in scene.spec.inputs if i.split(".", 1)[0] in members],
         "run": [scene.spec.start, scene.spec.stop, scene.spec.step, scene.spec.tolerance],
         "default_set": _set_digest(scene.spec.parameter_set),
         # validity ranges the group's sources take from the inputs they drive (other instances' models)
@@ -191,9 +207,51 @@ def _total_ops(op_counts: dict) -> int:
     return n
 
 
-def build_scene(scene, out_dir, prune: bool = True, progress=None, use_cache: bool = True,
+#: the list of files a scene build wrote into its output folder (to remove them when a later build does not)
+MANIFEST = ".fmugen-build.json"
+
+
+def _runtime_start(scene, g) -> dict:
+    """The group's internal solver and tolerances as start values of the FMU (XML and binary alike)."""
+    from .file import SOLVERS
+
+    tol = g.tolerance or scene.spec.tolerance
+    return {"solver.method": SOLVERS[g.solver], "solver.rtol": tol, "solver.atol": tol}
+
+
+def _remove_stale(out: Path, written: list) -> list:
+    """Remove the FMUs an earlier build listed in ``out/MANIFEST`` that this build did not write.
+
+    Only names the manifest lists, only plain ``.fmu`` files directly in ``out``: a folder that
+    also holds the user's own files loses none of them.
+    """
+    removed = []
+    try:
+        old = json.loads((out / MANIFEST).read_text()).get("fmus", [])
+    except (OSError, ValueError, AttributeError):
+        old = []
+    for name in old:
+        if not isinstance(name, str) or name in written or "/" in name or "\\" in name \
+                or not name.endswith(".fmu"):
+            continue
+        p = out / name
+        if p.is_file() and not p.is_symlink():
+            p.unlink()
+            removed.append(name)
+    (out / MANIFEST).write_text(json.dumps({"generator": f"fmugen {__version__}", "fmus": written}) + "\n")
+    return removed
+
+
+def build_scene(scene, out_dir, prune: Optional[bool] = None, progress=None, use_cache: bool = True,
                 jobs: Optional[int] = None) -> BuiltScene:
     """Build every group of ``scene`` into ``out_dir/<group>.fmu`` and return what was built.
+
+    ``prune`` None: the scene's ``[scene] prune``.  Each FMU carries the
+    scene's state of rest as start values (states and inputs) and its
+    group's internal solver and tolerances (``solver.method``,
+    ``solver.rtol``, ``solver.atol``).  FMUs that an earlier build wrote
+    into ``out_dir`` and this one does not are removed (``.fmugen-build.json``
+    lists what a build wrote; nothing else is touched).
 
     Every group model is derived first, so an error in any of them stops the
     build before a file is written; the FMUs are then generated and compiled
@@ -201,18 +259,23 @@ def build_scene(scene, out_dir, prune: bool = True, progress=None, use_cache: bo
     staging folder and moved into ``out_dir`` together when all succeeded.
     """
     progress = progress or Progress()
+    prune = scene.spec.prune if prune is None else bool(prune)
     out = Path(out_dir)
     progress(f"scene {scene.name}: initial state ({scene.spec.initial})")
     x0 = scene.initial.values
+    u0 = scene.rest_inputs
     cdir = cache_dir() / "fmus"
+    keys = {gname: _group_key(scene, gname, prune, x0, u0) for gname in scene.groups}
+    limit = _jacobi_limit(scene, keys, use_cache)
+    default_step = stable_step(limit, scene.spec.step, STABLE_SAFETY)
     plan = {}  # group -> (key, model or None when cached, removed)
     for gname, g in scene.groups.items():
-        key = _group_key(scene, gname, prune, x0)
+        key = hashlib.sha256(f"{keys[gname]} {default_step!r}".encode()).hexdigest()[:32]
         if use_cache and _cached_entry(cdir, key) is not None:
             plan[gname] = (key, None, [])
         else:
             progress(f"{gname}: derive ({', '.join(g.members)})")
-            model, removed = scene.group_model(gname, prune=prune, x0=x0)
+            model, removed = scene.group_model(gname, prune=prune, x0=x0, u0=u0)
             plan[gname] = (key, model, removed)
 
     created = not out.exists()
@@ -238,15 +301,21 @@ def build_scene(scene, out_dir, prune: bool = True, progress=None, use_cache: bo
                     return r
                 progress(f"{gname}: cache entry {key} damaged or replaced: rebuilt")
                 with derive_lock:
-                    model, removed = scene.group_model(gname, prune=prune, x0=x0)
+                    model, removed = scene.group_model(gname, prune=prune, x0=x0, u0=u0)
             t0 = time.perf_counter()
             progress(f"{gname}: generate and compile ({model.nx} states)")
             tol = g.tolerance or scene.spec.tolerance
+            if len(scene.groups) > 1:
+                lim = "none found" if limit == float("inf") else f"{limit:.3g} s"
+                model = dataclasses.replace(model, description=(
+                    f"{model.description} [scene {scene.name}: held-input Jacobi stability limit {lim} "
+                    f"(linearised at rest); couple with the scene's connections]").strip())
             try:
                 res = build_fmu(model, target, fmi_type="both" if g.fmi_type == "me" else g.fmi_type,
                                 model_identifier=gname,
                                 default_experiment={"startTime": scene.spec.start, "stopTime": scene.spec.stop,
-                                                    "stepSize": scene.spec.step, "tolerance": tol})
+                                                    "stepSize": default_step, "tolerance": tol},
+                                runtime_start=_runtime_start(scene, g))
             except ValueError as exc:
                 raise SceneError(f"{scene.src}: [fmus.{gname}]: {exc}") from None
             r = FmuReport(group=gname, path=out / target.name, members=tuple(g.members), states=model.nx,
@@ -281,8 +350,35 @@ def build_scene(scene, out_dir, prune: bool = True, progress=None, use_cache: bo
                 out.rmdir()
             except OSError:
                 pass
+    stale = _remove_stale(out, [f"{g}.fmu" for g in plan])
     paths = {g: out / f"{g}.fmu" for g in plan}
-    return BuiltScene(scene, out, reports, scene.cosim_system(paths))
+    return BuiltScene(scene, out, reports, scene.cosim_system(paths), scene.system_inputs(prune), stale,
+                      limit, default_step)
+
+
+#: the DefaultExperiment step is at most this fraction of the held-input Jacobi limit (the
+#: linearisation holds at rest only), rounded down to 1-2-5 x 10^k
+STABLE_SAFETY = 0.8
+
+
+def _jacobi_limit(scene, keys: dict, use_cache: bool) -> float:
+    """:func:`fmugen.scene.stability.jacobi_hold_limit`, cached under the hash of every group's key."""
+    if len(keys) < 2:
+        return float("inf")
+    path = cache_dir() / "stability" / (hashlib.sha256(" ".join(sorted(keys.values())).encode()).hexdigest()[:32]
+                                        + ".json")
+    if use_cache and path.is_file():
+        try:
+            return float(json.loads(path.read_text())["jacobi_hold_limit"])
+        except (OSError, ValueError, KeyError, TypeError):
+            pass
+    limit = jacobi_hold_limit(scene)
+    if use_cache:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".{os.getpid()}.part")
+        tmp.write_text(json.dumps({"jacobi_hold_limit": limit if limit != float("inf") else "inf"}))
+        os.replace(tmp, path)
+    return limit
 
 
 def _library_size(fmu: Path) -> int:

@@ -19,7 +19,8 @@ from ..errors import read_text_file, toml_problem
 from .errors import SceneError, did_you_mean
 
 SCENE_KEYS = {"name", "description", "parameter_set", "start", "stop", "step", "tolerance", "record",
-              "initial", "prune", "connections", "monolithic", "connect", "record_bonds"}
+              "initial", "prune", "connections", "monolithic", "connect", "record_bonds",
+              "inputs"}
 COMMON_INSTANCE_KEYS = {"parameters", "fixed", "start", "hold"}
 ROBOT_KEYS = {"robot", "formulation", "locked", "outputs"}
 FACTORY_KEYS = {"factory", "options", "parameter_set"}
@@ -76,6 +77,7 @@ class SceneSpec:
     connect: tuple = ()  # of (end, end): bonds between connectors or signals, causality inferred (scene/connect.py)
     bonds: tuple = ()  # the expanded connect pairs (fmugen.scene.connect.Bond), set by Scene
     record_bonds: bool = False  # also record each bond's effort and flow (fmugen/scene/bonds.py)
+    inputs: tuple = ()  # undriven inputs kept as inputs of the FMUs (not fixed) when pruning
 
 
 def _number(v, where, positive=False, nonneg=False) -> float:
@@ -266,6 +268,7 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
         conns.append((s_, t_, f_))
 
     record = _str_list(sc.get("record", []), f"{src}: [scene] record")
+    exposed = _str_list(sc.get("inputs", []), f"{src}: [scene] inputs")
     connect = sc.get("connect", [])
     if not isinstance(connect, list) or not all(isinstance(c, list) and len(c) == 2 and all(
             isinstance(e, str) for e in c) for c in connect):
@@ -305,7 +308,8 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
                      step=step, tolerance=tolerance, record=record, initial=initial,
                      prune=sc.get("prune", True), connections=tuple(conns), instances=instances,
                      groups=groups, monolithic=bool(monolithic), cosim=dict(cosim),
-                     connect=tuple(tuple(c) for c in connect), record_bonds=bool(sc.get("record_bonds", False)))
+                     connect=tuple(tuple(c) for c in connect), record_bonds=bool(sc.get("record_bonds", False)),
+                     inputs=exposed)
 
 
 def _instance(iname: str, spec, path: Path) -> InstanceSpec:

@@ -72,6 +72,7 @@ class Scene:
         self._check_record()
         self._check_loops()
         self._check_undriven_inputs()
+        self._check_exposed_inputs()
 
     # ------------------------------------------------------------------ basics
     @property
@@ -146,6 +147,73 @@ class Scene:
                 if v.start is None:
                     raise SceneError(f"{self.src}: [instances.{inst}]: input {v.name} is not connected and has no "
                                      f"default; connect it or give start = {{ {v.name} = ... }}")
+
+    def _check_exposed_inputs(self) -> None:
+        """``[scene] inputs``: undriven inputs that stay inputs of their FMU (of the system)."""
+        seen = set()
+        driven = {(ti, tv) for _, _, ti, tv, _ in self.connections}
+        for name in self.spec.inputs:
+            where = f"{self.src}: [scene] inputs"
+            inst, var = self._endpoint(name, where)
+            kind, _ = self._var(inst, var, where)
+            if kind != "input":
+                raise SceneError(f"{where}: {name} is a {kind}, not an input")
+            if (inst, var) in driven:
+                raise SceneError(f"{where}: {name} is driven by a connection; only undriven inputs can be inputs "
+                                 f"of the system")
+            if name in seen:
+                raise SceneError(f"{where}: {name} is listed twice")
+            seen.add(name)
+
+    def system_inputs(self, prune: Optional[bool] = None) -> list:
+        """Undriven inputs that stay inputs of the built FMUs ("inst.var"): all of them without pruning,
+        else those ``[scene] inputs`` lists (the others are fixed at their start values)."""
+        prune = self.spec.prune if prune is None else prune
+        out = []
+        for inst in self.spec.instances:
+            for v in self.undriven_inputs(inst):
+                name = f"{inst}.{v.name}"
+                if not prune or name in self.spec.inputs:
+                    out.append(name)
+        return out
+
+    @cached_property
+    def rest_inputs(self) -> dict:
+        """Value of every connected input at the initial state ("inst.var" -> value): its source's value
+        (times the connection's factor), evaluated instance by instance in the order of the connections'
+        dependencies (the scene has no algebraic loop).  Baked into the FMUs as the inputs' start values,
+        so an FMU run alone or by another importer starts where the scene starts (the arm's torques at
+        the holding torques)."""
+        from ..codegen.evaluate import ModelEvaluator
+
+        x0 = self.initial.values
+        t0 = self.spec.start
+        known = {k: float(v) for k, v in x0.items()}
+        for inst in self.spec.instances:
+            for v in self.undriven_inputs(inst):
+                known[f"{inst}.{v.name}"] = float(v.start if v.start is not None else 0.0)
+        driver = {f"{ti}.{tv}": (f"{si}.{sv}", 1.0 if f is None else f) for si, sv, ti, tv, f in self.connections}
+
+        def value(name, depth=0):
+            # only the instances whose computed outputs feed a connection are evaluated (not the arm,
+            # whose connected outputs are its states)
+            if name in known:
+                return known[name]
+            if depth > 4 * len(driver) + 8:  # cannot happen without an algebraic loop (refused on reading)
+                raise SceneError(f"{self.src}: no value at rest for {name}")
+            if name in driver:
+                s_, f = driver[name]
+                known[name] = f * value(s_, depth + 1)
+                return known[name]
+            inst = name.split(".", 1)[0]
+            m = self.base_models[inst]
+            x = np.array([value(f"{inst}.{v.name}", depth + 1) for v in m.states])
+            u = np.array([value(f"{inst}.{v.name}", depth + 1) for v in m.inputs])
+            for v, y in zip(m.outputs, ModelEvaluator(m).g(t0, x, u)):
+                known[f"{inst}.{v.name}"] = float(y)
+            return known[name]
+
+        return {t: value(t) for t in driver}
 
     def _check_loops(self) -> None:
         """An algebraic loop: a cycle of outputs that depend directly on connected inputs."""
@@ -260,14 +328,19 @@ class Scene:
         if fold:
             m = m.with_parameters_folded(fold)
         if prune:
-            undriven = {v.name: v.start if v.start is not None else 0.0 for v in self.undriven_inputs(inst)}
+            undriven = {v.name: v.start if v.start is not None else 0.0 for v in self.undriven_inputs(inst)
+                        if f"{inst}.{v.name}" not in self.spec.inputs}
             if undriven:
                 m = m.with_inputs_fixed(undriven)
-                removed.append(f"{inst}: inputs {', '.join(undriven)} (nothing drives them; fixed at their values)")
+                removed.append(f"{inst}: inputs {', '.join(undriven)} (nothing drives them; fixed at their values; "
+                               f"list them in [scene] inputs to keep them)")
         return m, removed
 
-    def group_model(self, group: str, prune: bool = True, x0: Optional[dict] = None) -> tuple:
-        """(SymbolicModel of the FMU, [what pruning removed]).  ``x0``: scene name -> initial value."""
+    def group_model(self, group: str, prune: bool = True, x0: Optional[dict] = None,
+                    u0: Optional[dict] = None) -> tuple:
+        """(SymbolicModel of the FMU, [what pruning removed]).  ``x0``: scene state name -> initial value;
+        ``u0``: scene input name -> its value at rest (:attr:`rest_inputs`), the start values of the FMU's
+        inputs."""
         g = self.groups[group]
         members = list(g.members)
         models, removed = {}, []
@@ -310,6 +383,15 @@ class Scene:
                         starts[self.fmu_name(inst, v.name)] = x0[key]
             starts = {k: v for k, v in starts.items() if k in {s.name for s in m.states}}
             m = m.with_starts(starts)
+        if u0:
+            starts = {}
+            for inst in members:
+                for v in self.base_models[inst].inputs:
+                    if f"{inst}.{v.name}" in u0:
+                        starts[self.fmu_name(inst, v.name)] = u0[f"{inst}.{v.name}"]
+            starts = {k: v for k, v in starts.items() if k in {i.name for i in m.inputs}}
+            if starts:
+                m = m.with_starts(starts)
         return m, removed
 
     def _with_input_ranges(self, m: SymbolicModel, members) -> SymbolicModel:
@@ -379,8 +461,9 @@ class Scene:
         # this scene was accepted already (factories included), so its copy is too
         return Scene(replace(self.spec, instances=instances), self._sets, allow_factories=True)
 
-    def build(self, out_dir, prune: bool = True, progress=None, use_cache: bool = True):
-        """One FMU per group into ``out_dir`` (see :func:`fmugen.scene.build.build_scene`)."""
+    def build(self, out_dir, prune: Optional[bool] = None, progress=None, use_cache: bool = True):
+        """One FMU per group into ``out_dir`` (see :func:`fmugen.scene.build.build_scene`);
+        ``prune`` None: the scene's ``[scene] prune``."""
         from .build import build_scene
 
         return build_scene(self, out_dir, prune=prune, progress=progress, use_cache=use_cache)

@@ -1,0 +1,84 @@
+"""``fmugen ssp SCENE.toml -o scene.ssp``: a scene as a standard SSP 1.0 archive.
+
+    fmugen ssp SCENE.toml -o OUT.ssp [--set NAME=VALUE ...] [--scheme S] [--extrapolation E] [--fmus DIR]
+
+and the helpers that let ``fmugen cosim`` and ``fmugen report`` take an
+``.ssp`` where they take a scene.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def add_parser(subparsers) -> None:
+    p = subparsers.add_parser("ssp", help="write a scene as an SSP 1.0 archive (FMUs, connections, parameters, "
+                                          "units, default experiment) that other FMI masters run")
+    p.add_argument("scene", help="scene TOML file")
+    p.add_argument("-o", "--output", required=True, help="the archive to write (*.ssp)")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="set a parameter, start value or option (repeatable); bound in the archive")
+    p.add_argument("--scheme", default=None, help="fmugen's scheme recorded in the archive's annotation "
+                   "(default: the scene's [cosim], else gauss-seidel)")
+    p.add_argument("--extrapolation", default=None, help="likewise (default: the scene's, else linear)")
+    p.add_argument("--fmus", default=None, help="folder to build the FMUs in (default: a temporary one)")
+    p.add_argument("--allow-factories", action="store_true",
+                   help="allow instances made by a Python factory (runs code named in the file)")
+    p.set_defaults(func=cmd_ssp)
+
+
+def cmd_ssp(args) -> int:
+    from .. import arguments as a
+    from ..scene import load_scene
+    from .export import export_ssp
+
+    output = a.output_file(args.output, "-o", inputs=[args.scene])
+    if args.fmus:
+        a.output_folder(args.fmus, "--fmus", inputs=[args.scene])
+    scene = load_scene(args.scene, set=args.set, allow_factories=args.allow_factories)
+    r = export_ssp(scene, output, fmus_dir=args.fmus, scheme=args.scheme,
+                   extrapolation=args.extrapolation)
+    built = r["built"]
+    print(built.summary())
+    lim = r["jacobi_limit"]
+    print(f"wrote {r['path']}: {len(r['fmus'])} FMU(s) ({', '.join(r['fmus'])}); libcosim's fixed step "
+          f"{r['libcosim_step']:g} s (held-input Jacobi "
+          f"{'has no stability limit found' if lim == float('inf') else f'is stable below {lim:.3g} s'}); "
+          f"fmugen's run: {r['scheme']}/{r['extrapolation']} at {built.system.step:g} s")
+    return 0
+
+
+def scene_like(system):
+    """What the commands' argument checks read of a scene (start, stop, step), from an SSP's system."""
+    from types import SimpleNamespace
+
+    return SimpleNamespace(spec=SimpleNamespace(start=system.start_time, stop=system.stop_time, step=system.step,
+                                                cosim=dict(system.settings)))
+
+
+def system_from_args(args):
+    """The CosimSystem of ``args.scene`` (an .ssp) with ``--set component.variable=value`` applied."""
+    from dataclasses import replace
+
+    from ..errors import InputFileError
+    from ..scene import parse_sets
+    from .loader import load_system
+
+    system = load_system(args.scene)
+    sets = parse_sets(getattr(args, "set", None))
+    if not sets:
+        return system
+    units = {u.name: u for u in system.units}
+    for name, value in sets.items():
+        comp, _, var = name.partition(".")
+        if comp not in units or not var:
+            raise InputFileError(f"{args.scene}: --set {name}: name a component's variable, 'component.variable' "
+                                 f"(components: {', '.join(units)})")
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise InputFileError(f"{args.scene}: --set {name}={value!r}: a number is needed")
+        from fmpy import read_model_description
+
+        v = {x.name: x for x in read_model_description(str(units[comp].path)).modelVariables}.get(var)
+        if v is None or v.causality not in ("parameter", "input") and v.initial != "exact":
+            raise InputFileError(f"{args.scene}: --set {name}: {comp} has no parameter, input or state {var!r}")
+        units[comp] = replace(units[comp], start_values={**dict(units[comp].start_values), var: value})
+    return replace(system, units=tuple(units[u.name] for u in system.units))
