@@ -81,6 +81,21 @@ static void mv6(const double *A, const double *x, double *o)
 
 static const double ZERO6[6] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
 
+/* the joint's passive force b qd + F_c tanh(qd / v_c) (damping, smooth Coulomb friction); *slope
+ * receives its derivative by qd */
+static double joint_friction(const double *L, double qd, double *slope)
+{
+    double b = L[FMUGEN_CHAIN_DAMPING], fc = L[FMUGEN_CHAIN_FRICTION], f = b * qd;
+    double s = b;
+    if (fc != 0.0) {
+        double vc = L[FMUGEN_CHAIN_FRICTION_VELOCITY], t = tanh(qd / vc);
+        f += fc * t;
+        s += fc * (1.0 - t * t) / vc;
+    }
+    if (slope) *slope = s;
+    return f;
+}
+
 /* o = A B (3x3, row-major) */
 static void mul33(const double *A, const double *B, double *o)
 {
@@ -201,7 +216,7 @@ static int aba(int n, const int *jt, const double *lc, const double *g, const do
         mv6(Ii, Si, Ui);
         D[i] = dot6(Si, Ui) + L[FMUGEN_CHAIN_ROTOR];
         if (!(D[i] > 0.0) || !isfinite(D[i])) return FMUGEN_NOT_POSITIVE_DEFINITE;
-        u[i] = tau[i] - L[FMUGEN_CHAIN_DAMPING] * qd[i] - dot6(Si, pi);
+        u[i] = tau[i] - joint_friction(L, qd[i], NULL) - dot6(Si, pi);
         if (par >= 0) {
             double *Ip = IA + 36 * par, *pp = pA + 6 * par, Ic[6], Ud[6];
             double inv = 1.0 / D[i], uD = u[i] * inv;
@@ -507,7 +522,9 @@ int fmugen_chain_fd_jacobian(int n, const int *jt, const double *lc, const doubl
         }
         double *G = Gb + n15 * gb[j], *Ge = G + 12 * (size_t)n;
         const double *Mj = Mi + (size_t)j * n, *alj = al + 12 * j;
-        double Wq[12], Wd[12], b = -lc[FMUGEN_CHAIN_NC * j + FMUGEN_CHAIN_DAMPING];
+        double Wq[12], Wd[12], b;
+        joint_friction(lc + FMUGEN_CHAIN_NC * j, qd[j], &b);
+        b = -b; /* d(passive force)/dqd_j enters dID_j/dqd_j */
         for (int k = 0; k < 6; k++) {
             Wq[k] = w[6 * j + k];
             Wq[6 + k] = dv[6 * j + k];

@@ -41,7 +41,9 @@
 #define FMUGEN_CHAIN_INERTIA 19 /* 6: about the COM, F_i axes: xx yy zz xy xz yz, kg m^2 */
 #define FMUGEN_CHAIN_ROTOR 25   /* rotor inertia Ia (adds Ia qdd_i to tau_i), kg m^2 */
 #define FMUGEN_CHAIN_DAMPING 26 /* viscous damping b (adds b qd_i to tau_i) */
-#define FMUGEN_CHAIN_NC 27
+#define FMUGEN_CHAIN_FRICTION 27 /* Coulomb level F_c: adds the smooth F_c tanh(qd_i / v_c) to tau_i (0: none) */
+#define FMUGEN_CHAIN_FRICTION_VELOCITY 28 /* v_c, rad/s or m/s */
+#define FMUGEN_CHAIN_NC 29
 /* global constants: gravity (3, base frame, m/s^2), then the end effector's
  * position in the frame of body joint[2n] (3, m) */
 #define FMUGEN_CHAIN_NG 6

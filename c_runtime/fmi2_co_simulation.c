@@ -12,7 +12,7 @@
 
 #define INST ((fmugen_instance *)c)
 #define CS_CHECK(mask, fn)                                   \
-    if (!INST || !is_cs(INST, (fn))) return fmi2Error;       \
+    if (!fmugen_live(INST) || !is_cs(INST, (fn))) return fmi2Error;       \
     if (!fmugen_check_state(INST, (mask), (fn))) return fmi2Error
 #define MASK_STATUS (FMUGEN_STEP_COMPLETE | FMUGEN_STEP_FAILED | FMUGEN_TERMINATED)
 
@@ -188,6 +188,32 @@ static const char *solver_name(int solver)
  * none (t + H == t: time would not advance at all). */
 #define FMUGEN_STEP_REL_RESOLUTION 1e-6
 
+/* Back to the start of the communication step: states, inputs and input
+ * derivatives as fmi2DoStep found them (inst->step_start), time tc. */
+static void restore_step_start(fmugen_instance *inst, double tc)
+{
+    const fmugen_model_def *m = inst->model;
+    memcpy(inst->vec, inst->step_start, ((size_t)m->nx + 4 * (size_t)m->nu) * sizeof(double));
+    inst->s.time = tc;
+    inst->s.fsal_valid = 0;
+    fmugen_invalidate(inst);
+}
+
+/* 1 when the point a failed solver stopped at is good: finite states whose
+ * evaluation gives finite derivatives and outputs (cached for fmi2GetReal). */
+static int kept_point_is_good(fmugen_instance *inst)
+{
+    const fmugen_model_def *m = inst->model;
+    if (!fmugen_all_finite(inst->x, m->nx)) return 0;
+    fmugen_invalidate(inst);
+    int rc = m->evaluate(inst->p, inst->s.time, inst->x, inst->u, inst->dx_cache, inst->y_cache);
+    if (rc == FMUGEN_OK && !(fmugen_all_finite(inst->dx_cache, m->nx) && fmugen_all_finite(inst->y_cache, m->ny)))
+        rc = FMUGEN_NOT_FINITE;
+    inst->cache_status = rc;
+    inst->cache_valid = 1;
+    return rc == FMUGEN_OK;
+}
+
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
                       fmi2Boolean noSetFMUStatePriorToCurrentPoint)
 {
@@ -237,6 +263,8 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
         fmugen_invalidate(inst);
     }
 
+    /* the last good point, should the end point fail its checks */
+    memcpy(inst->step_start, inst->vec, ((size_t)m->nx + 4 * (size_t)m->nu) * sizeof(double));
     const size_t off = fmugen_solver_work_doubles(m->nx);
     double *u0 = inst->work + off, *u_work = u0 + m->nu;
     if (m->nu) memcpy(u0, inst->u, (size_t)m->nu * sizeof(double));
@@ -264,8 +292,11 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
         }
     }
     fmugen_invalidate(inst);
-    inst->s.last_successful_time = inst->s.time;
     if (rc != FMUGEN_SOLVER_OK) {
+        /* the solvers move x and time only on accepted internal steps; a
+         * point that does not evaluate cleanly is no good point either */
+        if (inst->s.time != tc && !kept_point_is_good(inst)) restore_step_start(inst, tc);
+        inst->s.last_successful_time = inst->s.time;
         inst->s.fmi_state = FMUGEN_STEP_FAILED;
         inst->s.last_do_step_status = fmi2Discard;
         inst->s.fsal_valid = 0;
@@ -280,12 +311,15 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
      * derivatives at the end point, finite; values inside their validity ranges */
     fmi2Status checked = fmugen_check_step_result(inst, "fmi2DoStep", msg, sizeof msg);
     if (checked == fmi2Discard) {
+        /* the state goes back to where the step started, so that fmi2GetReal
+         * gives what the message and fmi2LastSuccessfulTime say */
+        restore_step_start(inst, tc);
         inst->s.fmi_state = FMUGEN_STEP_FAILED;
         inst->s.last_do_step_status = fmi2Discard;
-        inst->s.fsal_valid = 0;
         inst->s.last_successful_time = tc;
         fmugen_log(inst, fmi2Discard, FMUGEN_LOG_STATUS_ERROR,
-                   "fmi2DoStep from t = %.17g to %.17g discarded: %s", tc, t_end, msg);
+                   "fmi2DoStep from t = %.17g to %.17g discarded: %s; the state is kept at the last good point "
+                   "t = %.17g (fmi2GetRealStatus(fmi2LastSuccessfulTime))", tc, t_end, msg, tc);
         return fmi2Discard;
     }
     inst->s.last_successful_time = t_end;
@@ -300,7 +334,7 @@ fmi2Status fmi2CancelStep(fmi2Component c)
 {
     /* fmi2DoStep is synchronous (never fmi2Pending): there is never a step in
      * progress to cancel */
-    if (!c) return fmi2Error;
+    if (!fmugen_live(INST)) return fmi2Error;
     fmugen_log(INST, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
                "fmi2CancelStep: not allowed in state %s (no asynchronous step in progress)",
                fmugen_state_name(INST->s.fmi_state));

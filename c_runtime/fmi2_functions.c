@@ -145,8 +145,13 @@ static void rt_free(const fmi2CallbackFunctions *cb, void *p)
 void fmi2FreeInstance(fmi2Component c)
 {
     fmugen_instance *inst = INST;
-    if (!inst) return;
+    /* NULL, or an instance already freed (its tag cleared below; if its
+     * memory has been reused since, the tag is most likely gone as well):
+     * nothing to free, and nothing safe to log to */
+    if (!fmugen_live(inst)) return;
+    inst->tag = 0;
     fmi2CallbackFunctions cb = inst->cb;
+    rt_free(&cb, inst->step_start);
     rt_free(&cb, inst->vec);
     rt_free(&cb, inst->dx_cache);
     rt_free(&cb, inst->y_cache);
@@ -173,6 +178,9 @@ static const char *model_problem(const fmugen_model_def *m)
     if (m->rt_start)
         for (int i = 0; i < FMUGEN_RT_COUNT; i++)
             if (!(m->rt_start[i] >= 0) || !isfinite(m->rt_start[i])) return "a runtime start value is negative";
+    for (int i = 0; i < m->np; i++)
+        if ((m->p_min && !(m->p_start[i] >= m->p_min[i])) || (m->p_max && !(m->p_start[i] <= m->p_max[i])))
+            return "a parameter's start value is outside its range";
     return NULL;
 }
 
@@ -216,6 +224,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         return NULL;
     }
     memset(inst, 0, sizeof *inst);
+    inst->tag = FMUGEN_INSTANCE_TAG;
     inst->model = m;
     inst->type = fmuType;
     inst->cb = *functions;
@@ -230,7 +239,9 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     inst->y_cache = rt_alloc(functions, (size_t)ny + 1, sizeof(double));
     inst->work = rt_alloc(functions, fmugen_workspace_doubles(nx, nu), sizeof(double));
     inst->ipiv = rt_alloc(functions, (size_t)nx + 1, sizeof(int));
-    if (!inst->instance_name || !inst->vec || !inst->dx_cache || !inst->y_cache || !inst->work || !inst->ipiv) {
+    inst->step_start = rt_alloc(functions, (size_t)nx + 4 * (size_t)nu + 1, sizeof(double));
+    if (!inst->instance_name || !inst->vec || !inst->dx_cache || !inst->y_cache || !inst->work || !inst->ipiv ||
+        !inst->step_start) {
         fmugen_log(&tmp, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "fmi2Instantiate: out of memory");
         fmi2FreeInstance(inst);
         return NULL;
@@ -427,6 +438,19 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
                        "fmi2SetReal: value %g for %s (value reference %u) is not finite; rejected", value[i],
                        fmugen_real_name(inst, vr[i], name, sizeof name), vr[i]);
             return fmi2Error;
+        }
+        if (vr[i] >= fmugen_vr_p(m) && vr[i] < fmugen_vr_rt(m)) {
+            /* the parameter's physical range (a mass > 0, a damping >= 0),
+             * the min/max that modelDescription.xml declares */
+            const int k = (int)(vr[i] - fmugen_vr_p(m));
+            const double lo = m->p_min ? m->p_min[k] : -HUGE_VAL, hi = m->p_max ? m->p_max[k] : HUGE_VAL;
+            if (value[i] < lo || value[i] > hi) {
+                fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                           "fmi2SetReal: value %.17g for parameter %s (value reference %u) rejected: outside its "
+                           "physical range [%.17g, %.17g] (min/max in modelDescription.xml); nothing was set",
+                           value[i], fmugen_real_name(inst, vr[i], name, sizeof name), vr[i], lo, hi);
+                return fmi2Error;
+            }
         }
         if (vr[i] >= fmugen_vr_rt(m)) {
             const char *bad = rt_refusal((int)(vr[i] - fmugen_vr_rt(m)), value[i]);

@@ -9,7 +9,7 @@
 
 #define INST ((fmugen_instance *)c)
 #define ME_CHECK(mask, fn)                                   \
-    if (!INST || !is_me(INST, (fn))) return fmi2Error;       \
+    if (!fmugen_live(INST) || !is_me(INST, (fn))) return fmi2Error;       \
     if (!fmugen_check_state(INST, (mask), (fn))) return fmi2Error
 
 static int is_me(fmugen_instance *inst, const char *fn)

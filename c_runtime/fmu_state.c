@@ -34,6 +34,7 @@ static const char blob_magic[8] = {'F', 'M', 'U', 'G', 'E', 'N', 'S', 'T'};
 
 typedef struct fmugen_snapshot {
     uint32_t magic;
+    uint64_t model_hash; /* FNV-1a of the model identifier and GUID of the FMU that took it */
     int type;
     size_t n_vec;
     fmugen_scalars s;
@@ -69,13 +70,41 @@ static void rt_free(fmugen_instance *inst, void *p)
     else free(p);
 }
 
-/* A snapshot of this instance's layout, or NULL. */
+static uint64_t fnv1a_more(uint64_t h, const unsigned char *p, size_t n)
+{
+    for (size_t i = 0; i < n; i++) { h ^= p[i]; h *= 1099511628211ULL; }
+    return h;
+}
+
+static uint64_t fnv1a(const unsigned char *p, size_t n) { return fnv1a_more(1469598103934665603ULL, p, n); }
+
+/* Identity of the model: another FMU (another GUID) with the same sizes
+ * must not pass its state off as this one's.  Instances of the same FMU,
+ * also loaded twice, share it. */
+static uint64_t model_hash(const fmugen_model_def *m)
+{
+    uint64_t h = fnv1a((const unsigned char *)m->model_identifier, strlen(m->model_identifier) + 1);
+    return fnv1a_more(h, (const unsigned char *)m->guid, strlen(m->guid));
+}
+
+/* Why state cannot be a state of this instance's FMU and type, or NULL
+ * when it can. */
+static const char *snapshot_problem(const fmugen_instance *inst, fmi2FMUstate state)
+{
+    const fmugen_snapshot *snap = (const fmugen_snapshot *)state;
+    if (!snap) return "it is NULL";
+    if (snap->magic != SNAPSHOT_MAGIC) return "it is not an fmugen FMU state (or was freed)";
+    if (snap->model_hash != model_hash(inst->model))
+        return "it was taken from another FMU (another model identifier or GUID)";
+    if (snap->type != (int)inst->type) return "it was taken from an instance of the other FMU type (ME/CS)";
+    if (snap->n_vec != inst->n_vec) return "its sizes differ from this model's";
+    return NULL;
+}
+
+/* A snapshot of this instance's FMU and type, or NULL. */
 static fmugen_snapshot *as_snapshot(const fmugen_instance *inst, fmi2FMUstate state)
 {
-    fmugen_snapshot *snap = (fmugen_snapshot *)state;
-    if (!snap || snap->magic != SNAPSHOT_MAGIC || snap->n_vec != inst->n_vec || snap->type != (int)inst->type)
-        return NULL;
-    return snap;
+    return snapshot_problem(inst, state) ? NULL : (fmugen_snapshot *)state;
 }
 
 static fmugen_snapshot *new_snapshot(fmugen_instance *inst)
@@ -83,6 +112,7 @@ static fmugen_snapshot *new_snapshot(fmugen_instance *inst)
     fmugen_snapshot *snap = rt_alloc(inst, snapshot_bytes(inst));
     if (snap) {
         snap->magic = SNAPSHOT_MAGIC;
+        snap->model_hash = model_hash(inst->model);
         snap->type = (int)inst->type;
         snap->n_vec = inst->n_vec;
     }
@@ -113,8 +143,14 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate)
 {
     CHECK_STATE("fmi2SetFMUstate");
     fmugen_instance *inst = INST;
-    const fmugen_snapshot *snap = as_snapshot(inst, FMUstate);
-    if (!snap) return fail(inst, "fmi2SetFMUstate", "FMUstate is NULL or not a state of this FMU and type");
+    const char *why = snapshot_problem(inst, FMUstate);
+    if (why) {
+        fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                   "fmi2SetFMUstate: the FMU state is refused, nothing changed: %s (this FMU: %s, GUID %s)", why,
+                   inst->model->model_identifier, inst->model->guid);
+        return fmi2Error;
+    }
+    const fmugen_snapshot *snap = (const fmugen_snapshot *)FMUstate;
     inst->s = snap->s;
     memcpy(inst->vec, snap->vec, inst->n_vec * sizeof(double));
     fmugen_invalidate(inst);
@@ -233,12 +269,6 @@ static void get_scalars(reader *r, fmugen_scalars *s)
     s->range_check = (int)get_i64(r);
 }
 
-static uint64_t fnv1a(const unsigned char *p, size_t n)
-{
-    uint64_t h = 1469598103934665603ULL;
-    for (size_t i = 0; i < n; i++) { h ^= p[i]; h *= 1099511628211ULL; }
-    return h;
-}
 
 static void serialize(const fmugen_instance *inst, const fmugen_snapshot *snap, writer *w)
 {
@@ -358,8 +388,14 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
         return fail(inst, fn, "invalid last fmi2DoStep status in blob");
     {
         reader v = r; /* the arrays x, u, du, ddu, dddu, p, fsal: finite, as fmi2SetReal would have them */
-        for (size_t i = 0; i < inst->n_vec; i++)
-            if (!isfinite(get_f64(&v))) return fail(inst, fn, "non-finite value (state, input, parameter) in blob");
+        const size_t p0 = (size_t)m->nx + 4 * (size_t)m->nu;
+        for (size_t i = 0; i < inst->n_vec; i++) {
+            const double d = get_f64(&v);
+            if (!isfinite(d)) return fail(inst, fn, "non-finite value (state, input, parameter) in blob");
+            if (i >= p0 && i < p0 + (size_t)m->np &&
+                ((m->p_min && d < m->p_min[i - p0]) || (m->p_max && d > m->p_max[i - p0])))
+                return fail(inst, fn, "a parameter in the blob is outside its physical range");
+        }
     }
     fmugen_snapshot *snap = *FMUstate ? as_snapshot(inst, *FMUstate) : new_snapshot(inst);
     if (!snap) return fail(inst, fn, *FMUstate ? "*FMUstate is not a state of this FMU" : "out of memory");

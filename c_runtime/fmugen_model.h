@@ -100,6 +100,12 @@ typedef struct fmugen_model_def {
      * same values as start. */
     const double *rt_start;
     int solver_start;
+
+    /* Physical ranges of the parameters (np), the min/max of modelDescription.xml
+     * (a mass or an inertia > 0 is written as min = DBL_MIN, the smallest
+     * positive normal double): fmi2SetReal refuses a value outside them and
+     * changes nothing.  NULL: no range. */
+    const double *p_min, *p_max;
 } fmugen_model_def;
 
 /* Symbols shared by the runtime and model.c but not part of the FMU's

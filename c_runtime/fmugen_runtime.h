@@ -10,6 +10,13 @@
 #ifndef FMUGEN_RUNTIME_H
 #define FMUGEN_RUNTIME_H
 
+/* The runtime is C99 (declarations in for loops, designated initialisers):
+ * say so, instead of hundreds of errors, under gcc's or clang's pre-C99
+ * dialects (-std=gnu89, the default of gcc before 5).  MSVC defines no
+ * __STDC_VERSION__ in its default mode and compiles the runtime. */
+#if defined(__GNUC__) && (!defined(__STDC_VERSION__) || __STDC_VERSION__ < 199901L)
+#error "fmugen's FMI runtime is C99: compile with -std=c99, -std=gnu99 or later (the default of gcc >= 5 and clang)"
+#endif
 #include <stddef.h>
 #include "fmi2Functions.h"
 #include "fmugen_model.h"
@@ -77,7 +84,14 @@ typedef struct fmugen_scalars {
     int range_check;           /* FMUGEN_RANGE_*: what leaving a validity range does */
 } fmugen_scalars;
 
+/* Tag of a live instance (fmugen_instance.tag), cleared by fmi2FreeInstance:
+ * a second free, or a call on a freed instance whose memory has not been
+ * reused yet, is recognised and refused instead of freeing twice.  A help,
+ * not a guarantee: freed memory may be reused by anything. */
+#define FMUGEN_INSTANCE_TAG 0x464D5547494E5354ULL /* "FMUGINST" */
+
 typedef struct fmugen_instance {
+    unsigned long long tag;    /* FMUGEN_INSTANCE_TAG while the instance lives */
     const fmugen_model_def *model;
     char *instance_name;
     fmi2Type type;
@@ -101,9 +115,19 @@ typedef struct fmugen_instance {
     /* solver workspace, sized for the largest method */
     double *work;
     int *ipiv;
+    /* x, u, du, ddu, dddu at the start of the current communication step
+     * (nx + 4 nu): fmi2DoStep puts them back when the end point fails its
+     * checks, so the state is the last good point the message names */
+    double *step_start;
 
     int range_messages;        /* validity-range warnings logged so far (bounded) */
 } fmugen_instance;
+
+/* 1 for a live instance of this runtime: non-NULL and tagged (see FMUGEN_INSTANCE_TAG) */
+static inline int fmugen_live(const struct fmugen_instance *inst)
+{
+    return inst != NULL && inst->tag == FMUGEN_INSTANCE_TAG;
+}
 
 /* ---- support (runtime_support.c) ---- */
 FMUGEN_INTERNAL void fmugen_log(fmugen_instance *inst, fmi2Status status, fmugen_log_category cat,

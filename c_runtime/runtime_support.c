@@ -56,7 +56,7 @@ void fmugen_log(fmugen_instance *inst, fmi2Status status, fmugen_log_category ca
 
 int fmugen_check_state(fmugen_instance *inst, int mask, const char *fn)
 {
-    if (!inst) return 0;
+    if (!fmugen_live(inst)) return 0; /* NULL or freed: nobody to log to */
     if (inst->s.fmi_state & mask) return 1;
     fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "%s: not allowed in state %s", fn,
                fmugen_state_name(inst->s.fmi_state));

@@ -112,6 +112,9 @@ static int initial_step(fmugen_ode *ode, double t, const double *x, const double
     double der12 = fmax(der2, sqrt(dnf));
     double h1 = der12 <= 1e-15 ? fmax(1e-6, h * 1e-3) : pow(0.01 / der12, 1.0 / 5.0);
     h = fmin(100 * h, h1);
+    /* derivatives near the overflow threshold make the norms infinite and h1
+     * zero: start small and let the step control sort it out */
+    if (!(h > 0)) h = 1e-6 * fmax(fabs(t), 1.0);
     *h_out = fmin(h, hmax);
     return FMUGEN_OK;
 }
@@ -188,7 +191,9 @@ int fmugen_solve_dopri5(fmugen_ode *ode, double t_end, char *msg, size_t msgn)
         if (rc == FMUGEN_OK) {
             for (int i = 0; i < n; i++)
                 ynew[i] = x[i] + h * (a71 * k1[i] + a73 * k3[i] + a74 * k4[i] + a75 * k5[i] + a76 * k6[i]);
-            rc = fmugen_ode_rhs(ode, last ? t_end : t + h, ynew, k7);
+            /* an overflowed state would pass the error test (its weight is
+             * infinite too) and be accepted: it is a failed trial instead */
+            rc = fmugen_all_finite(ynew, n) ? fmugen_ode_rhs(ode, last ? t_end : t + h, ynew, k7) : FMUGEN_NOT_FINITE;
         }
         if (rc != FMUGEN_OK) {
             /* a trial point outside the model's domain: retry with a smaller step */

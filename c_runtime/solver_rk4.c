@@ -18,12 +18,14 @@
  * r the distance from 0 to the boundary of RK4's stability region
  * |1 + z + z^2/2 + z^3/6 + z^4/24| = 1 along the ray of lambda (2.785 on the
  * negative real axis, 2.828 on the imaginary axis, 2.62 at 120 degrees).
- * A step above it is warned about once, and again when the limit moves by
- * more than 10 % -- with the numbers, e.g. "h = 60 us exceeds the RK4
- * stability limit ~ 55.7 us (largest |lambda| = 5e+04 1/s)" -- and the
- * failure message of a blow-up repeats them.  It is a warning, not a refusal:
- * a mode that is not excited, or a limit crossed briefly on a nonlinear
- * trajectory, may still give a usable result, and the importer decides.
+ * A communication step whose RK4 step is above it is refused before any
+ * step is taken (fmi2Discard, the state kept at the communication point)
+ * with the numbers, e.g. "h = 60 us exceeds the RK4 stability limit ~ 55.7 us
+ * (largest |lambda| = 5e+04 1/s)": its result would be finite for a while
+ * and wrong, and a method must not answer fmi2OK about a step its own
+ * estimate calls unstable.  Between two estimates a limit crossed on a
+ * nonlinear trajectory shows as a blow-up, whose failure message repeats the
+ * first estimate's numbers.
  *
  * The eigenvalue: power iteration on A = D^-1 J D (D = diag(x_nominal), so
  * that pressures and angles weigh alike), then a Rayleigh-Ritz fit on the
@@ -129,43 +131,45 @@ static void fmt_time(char *buf, size_t n, double h)
     else snprintf(buf, n, "%.3g s", h);
 }
 
-/* Estimates the stability limit at (t, x) with f(t, x) = fx, and warns when h
- * exceeds it (once, and again when the limit moves by more than 10 %). */
-static void check_stability_limit(fmugen_ode *ode, double t, const double *fx, double h, double *w)
+/* Estimates the stability limit at (t, x) with f(t, x) = fx.  Returns 1, with
+ * the numbers in msg, when h exceeds it: the step must not be taken (its
+ * result would be finite for a while but wrong, and grow without bound). */
+static int check_stability_limit(fmugen_ode *ode, double t, const double *fx, double h, double *w, char *msg,
+                                 size_t msgn)
 {
     fmugen_instance *inst = ode->inst;
     const fmugen_model_def *m = inst->model;
     const int n = m->nx;
     double *J = w, *v = w + (size_t)n * n, *wv = v + n, *z = wv + n, *tmp = z + n;
-    if (fmugen_ode_jacobian(ode, t, inst->x, fx, J, tmp) != FMUGEN_OK) return;
+    if (fmugen_ode_jacobian(ode, t, inst->x, fx, J, tmp) != FMUGEN_OK) return 0;
     double complex lam;
-    if (dominant_eigenvalue(m, J, v, wv, z, &lam)) return;
+    if (dominant_eigenvalue(m, J, v, wv, z, &lam)) return 0;
     const double mod = cabs(lam);
-    if (!(mod > 0) || !isfinite(mod)) { inst->s.rk4_h_limit = 0; inst->s.rk4_lambda = 0; return; }
+    if (!(mod > 0) || !isfinite(mod)) { inst->s.rk4_h_limit = 0; inst->s.rk4_lambda = 0; return 0; }
     const double complex d = lam / mod;
     double r;
     if (creal(d) < -0.05) r = rk4_boundary(d);
     else if (creal(d) < 0.05) r = 2.0 * sqrt(2.0); /* (nearly) undamped: the imaginary-axis limit */
-    else { inst->s.rk4_h_limit = 0; inst->s.rk4_lambda = mod; return; } /* a growing mode: no step is stable */
+    else { inst->s.rk4_h_limit = 0; inst->s.rk4_lambda = mod; return 0; } /* a growing mode: no step is stable */
     inst->s.rk4_h_limit = r / mod;
     inst->s.rk4_lambda = mod;
-    const double lim = inst->s.rk4_h_limit, prev = inst->s.rk4_warned_limit;
-    if (h > lim && (prev == 0 || fabs(lim - prev) > 0.1 * prev)) {
-        char hb[32], lb[32];
-        fmt_time(hb, sizeof hb, h);
-        fmt_time(lb, sizeof lb, lim);
-        inst->s.rk4_warned_limit = lim;
-        if (prev == 0) {
-            inst->s.rk4_first_limit = lim;
-            inst->s.rk4_first_lambda = mod;
-            inst->s.rk4_first_time = t;
-        }
-        fmugen_log(inst, fmi2Warning, FMUGEN_LOG_STATUS_WARNING,
-                   "RK4: h = %s exceeds the RK4 stability limit ~ %s (largest |lambda| = %.3g 1/s, "
-                   "lambda = %.4g%+.4gi, at t = %.6g): the result will grow without bound; use fixed_step < %.3g "
-                   "or the implicit solver (solver.method = 2)",
-                   hb, lb, mod, creal(lam), cimag(lam), t, lim);
+    const double lim = inst->s.rk4_h_limit;
+    if (!(h > lim)) return 0;
+    char hb[32], lb[32];
+    fmt_time(hb, sizeof hb, h);
+    fmt_time(lb, sizeof lb, lim);
+    if (inst->s.rk4_warned_limit == 0) {
+        inst->s.rk4_first_limit = lim;
+        inst->s.rk4_first_lambda = mod;
+        inst->s.rk4_first_time = t;
     }
+    inst->s.rk4_warned_limit = lim;
+    snprintf(msg, msgn,
+             "RK4: h = %s exceeds the RK4 stability limit ~ %s (largest |lambda| = %.3g 1/s, lambda = %.4g%+.4gi, "
+             "at t = %.6g): the step was not taken, its result would grow without bound; use fixed_step < %.3g "
+             "or the implicit solver (solver.method = 2)",
+             hb, lb, mod, creal(lam), cimag(lam), t, lim);
+    return 1;
 }
 
 /* "h = 60 us exceeds the RK4 stability limit ~ 55.7 us found at t = 0, ..." (the
@@ -215,8 +219,9 @@ int fmugen_solve_rk4(fmugen_ode *ode, double t_end, char *msg, size_t msgn)
         const double tn = (s + 1 == m) ? t_end : t_start + (double)(s + 1) * h;
         int rc = fmugen_ode_rhs(ode, t, x, k1);
         if (rc == FMUGEN_OK && s == 0 && inst->s.n_steps >= inst->s.rk4_next_estimate) {
-            check_stability_limit(ode, t, k1, h, w + 6 * n);
             inst->s.rk4_next_estimate = inst->s.n_steps + RK4_ESTIMATE_EVERY;
+            /* refused before any step: the state stays at the communication point */
+            if (check_stability_limit(ode, t, k1, h, w + 6 * n, msg, msgn)) return FMUGEN_SOLVER_FAILED;
         }
         if (rc == FMUGEN_OK) {
             for (int i = 0; i < n; i++) ys[i] = x[i] + 0.5 * h * k1[i];

@@ -12,9 +12,17 @@ so this measures the looped runtime alone, independent of any URDF reader of fmu
    Python with the call overhead of a 0-DoF model subtracted, as in bench_large_models.py) and prints
    the ratio (median of the per-round ratios; below 1 the runtime is faster).
 
+3. for the arms (default: UR5, 6 DoF, and the Panda, 9 DoF with its two fingers), read by fmugen's own
+   URDF reader, times the generated forward dynamics (the FMU's ``evaluate``; ``--strategy``,
+   default straight-line code) and inverse dynamics against ``aba`` and ``rnea`` on Pinocchio's
+   reading of the same file, the URDF's numbers folded into constants as Pinocchio has them
+   (``--settable``: kept as FMU parameters);
+4. with ``--build``, runs ``fmugen build`` of each large URDF in a fresh process (wall and CPU
+   time, peak memory).
+
 Run (needs ``pip install pin example-robot-data``):
 
-    python examples/bench_tree_dynamics.py
+    python examples/bench_tree_dynamics.py --build
     python examples/bench_tree_dynamics.py --robot talos_data/robots/talos_full_v2.urdf --repeat 9
 """
 from __future__ import annotations
@@ -33,6 +41,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOTS = ["talos_data/robots/talos_full_v2.urdf", "tiago_description/robots/tiago_dual.urdf"]
+ARMS = ["ur_description/urdf/ur5_robot.urdf", "panda_description/urdf/panda.urdf"]
 
 TIMER = r"""
 #define _POSIX_C_SOURCE 199309L
@@ -105,6 +114,29 @@ def tree_of(model):
     return revolute, parents, bodies, to_q
 
 
+def build(path: Path, tmp: Path) -> dict:
+    """``fmugen build`` of the URDF (ME + CS, Jacobian) in a fresh process: wall and CPU seconds (the
+    process and its compilers), peak resident memory of the largest of them, the stages it prints."""
+    import re
+    import resource
+
+    out = tmp / (path.stem + ".fmu")
+    c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    r = subprocess.run([sys.executable, "-W", "ignore", "-m", "fmugen.cli", "build", str(path), "-o", str(out)],
+                       capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    wall = time.perf_counter() - t0
+    c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if r.returncode != 0:
+        raise RuntimeError(f"fmugen build {path} failed:\n{r.stderr}")
+    m = re.search(r"derive ([\d.]+) s, generate\+compile\+zip ([\d.]+) s", r.stdout)
+    size = out.stat().st_size
+    out.unlink()
+    return {"wall": wall, "cpu": (c1.ru_utime - c0.ru_utime) + (c1.ru_stime - c0.ru_stime),
+            "peak": c1.ru_maxrss * 1024, "derive": float(m.group(1)) if m else float("nan"),
+            "rest": float(m.group(2)) if m else float("nan"), "size": size}
+
+
 def library(tmp: Path):
     (tmp / "timer.c").write_text(TIMER)
     lib = tmp / "timer.so"
@@ -171,10 +203,96 @@ def measure(path: Path, states: int, repeat: int, so) -> dict:
             "r_jac": statistics.median(np.array(r["jac"]) / np.array(r["abad"]))}
 
 
+def arm_speed(path: Path, repeat: int, strategy: str, fold: bool = True) -> dict:
+    """Generated FD (the FMU's evaluate, straight-line or looped) and ID (tau = ID(q, qd, qdd)) of the
+    robot fmugen reads from ``path`` (fmugen.robot.urdf), against Pinocchio's ``aba`` and ``rnea`` on
+    Pinocchio's reading of the same file (CPU µs per call)."""
+    import warnings
+
+    import pinocchio as pin
+    from fmugen.codegen.benchmarks import inverse_dynamics_model, pinocchio_urdf_map, to_pinocchio
+    from fmugen.codegen.c_code import generate_c
+    from fmugen.codegen.c_harness import CompiledModel
+    from fmugen.dynamics.manipulator import Manipulator
+    from fmugen.robot.urdf import load_urdf
+
+    model = pin.buildModelFromUrdf(str(path))
+    data = model.createData()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # mimic joints read as independent joints, as Pinocchio does
+        robot = load_urdf(path)
+    mp = pinocchio_urdf_map(model, robot)
+    iv = [m[1] for m in mp]
+    arm = Manipulator(robot)
+    n = robot.n
+    # Pinocchio models neither damping nor friction: those parameters at 0 (folded like every other)
+    zero = {p.name: 0.0 for p in robot.parameters if p.name.startswith(("b_", "fc_"))}
+    t0 = time.process_time()
+    fd_model = arm.state_space_model(outputs=(), strategy=strategy).without_jacobian()
+    id_model = inverse_dynamics_model(arm)
+
+    def folded(m):  # the URDF's numbers as constants (fmugen build --fold all), like Pinocchio's
+        m = m.with_starts({k: x for k, x in zero.items() if k in {p.name for p in m.parameters}})
+        return m.with_parameters_folded() if fold else m
+
+    fd_model, id_model = folded(fd_model), folded(id_model)
+    t_derive = time.process_time() - t0
+    rng = np.random.default_rng(1)
+    th, qd, qdd, tau = (rng.uniform(-1, 1, n), rng.uniform(-1, 1, n), rng.uniform(-1, 1, n),
+                        rng.uniform(-5, 5, n))
+    q, v = to_pinocchio(model, mp, th, qd)
+    a = to_pinocchio(model, mp, None, qdd)
+    taup = np.zeros(model.nv)
+    taup[iv] = tau
+    empty = pin.Model()
+    ed, z = empty.createData(), np.zeros(0)
+
+    def py(fn, args, k):
+        t = time.process_time()
+        for _ in range(k):
+            fn(*args)
+        return (time.process_time() - t) / k
+
+    p_fd = [] if fold else [v.start for v in fd_model.parameters]
+    p_id = [] if fold else [v.start for v in id_model.parameters]
+
+    def cloop(cm, p, x, u, k):  # CPU time of a C loop (the harness's own figure is wall time)
+        t = time.process_time()
+        cm.time_per_call(p, x, u, "evaluate", k)
+        return (time.process_time() - t) / k
+
+    with CompiledModel.build(generate_c(fd_model).source) as cf, \
+            CompiledModel.build(generate_c(id_model).source) as ci:
+        dx, _ = cf.evaluate(p_fd, 0.0, np.r_[th, qd], tau, want_y=False)
+        ref = pin.aba(model, data, q, v, taup)[iv]
+        err_fd = np.max(np.abs(dx[n:] - ref)) / np.max(np.abs(ref))
+        _, y = ci.evaluate(p_id, 0.0, [], np.r_[th, qd, qdd])
+        ref = pin.rnea(model, data, q, v, a)[iv]
+        err_id = np.max(np.abs(y - ref)) / np.max(np.abs(ref))
+        r = {"fd": [], "aba": [], "id": [], "rnea": []}
+        for _ in range(repeat):
+            r["fd"].append(cloop(cf, p_fd, np.r_[th, qd], tau, 100000))
+            r["aba"].append(py(pin.aba, (model, data, q, v, taup), 20000) - py(pin.aba, (empty, ed, z, z, z), 20000))
+            r["id"].append(cloop(ci, p_id, [], np.r_[th, qd, qdd], 100000))
+            r["rnea"].append(py(pin.rnea, (model, data, q, v, a), 20000) - py(pin.rnea, (empty, ed, z, z, z), 20000))
+    med = {k: statistics.median(v) for k, v in r.items()}
+    return {"n": n, "derive": t_derive, "err_fd": err_fd, "err_id": err_id, **med,
+            "r_fd": statistics.median(np.array(r["fd"]) / np.array(r["aba"])),
+            "r_id": statistics.median(np.array(r["id"]) / np.array(r["rnea"]))}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--robot", action="append", help=f"URDF path under example-robot-data's robots/ "
                                                       f"(default: {', '.join(ROBOTS)})")
+    ap.add_argument("--arm", action="append", help=f"URDF whose generated FD and ID are timed against aba and "
+                                                    f"rnea (default: {', '.join(ARMS)})")
+    ap.add_argument("--strategy", default="straight", choices=["straight", "auto", "loops"],
+                    help="code of the arms' forward dynamics (default: straight-line)")
+    ap.add_argument("--settable", action="store_true",
+                    help="arms: keep the URDF's numbers as FMU parameters (default: folded into constants)")
+    ap.add_argument("--build", action="store_true",
+                    help="also time `fmugen build` of each --robot (fresh process; wall, CPU, peak memory)")
     ap.add_argument("--states", type=int, default=3)
     ap.add_argument("--repeat", type=int, default=7)
     args = ap.parse_args(argv)
@@ -198,6 +316,26 @@ def main(argv=None) -> int:
             print(f"{rel:<44} {s['n']:4d} {s['branch points']:6d} {s['fd'] * 1e6:7.2f} {s['aba'] * 1e6:7.2f} "
                   f"{s['r_fd']:6.2f} {s['jac'] * 1e6:8.1f} {s['abad'] * 1e6:9.1f} {s['r_jac']:6.2f} "
                   f"{s['err_fd']:8.1e} {s['err_j']:8.1e}", flush=True)
+    print(f"\n== arms: generated forward dynamics ({args.strategy}) and inverse dynamics (straight-line), "
+          f"{'parameters settable' if args.settable else 'parameters folded'} ==")
+    print(f"{'robot':<44} {'DoF':>4} {'derive s':>8} {'FD µs':>7} {'aba µs':>7} {'ratio':>6} {'ID µs':>7} "
+          f"{'rnea µs':>7} {'ratio':>6} {'err FD':>8} {'err ID':>8}")
+    for rel in args.arm or ARMS:
+        a = arm_speed(base / rel, args.repeat, args.strategy, fold=not args.settable)
+        ok = ok and a["err_fd"] < 1e-9 and a["err_id"] < 1e-9
+        print(f"{rel:<44} {a['n']:4d} {a['derive']:8.2f} {a['fd'] * 1e6:7.2f} {a['aba'] * 1e6:7.2f} "
+              f"{a['r_fd']:6.2f} {a['id'] * 1e6:7.2f} {a['rnea'] * 1e6:7.2f} {a['r_id']:6.2f} "
+              f"{a['err_fd']:8.1e} {a['err_id']:8.1e}", flush=True)
+    if args.build:
+        print("\n== fmugen build of the URDF (ME + CS with the Jacobian; fresh process; peak: the largest "
+              "process) ==")
+        print(f"{'robot':<44} {'wall s':>7} {'CPU s':>6} {'derive s':>8} {'gen+cc+zip s':>12} {'peak MB':>8} "
+              f"{'FMU kB':>7}")
+        with tempfile.TemporaryDirectory(prefix="fmugen_bench_tree_build_") as tmp:
+            for rel in args.robot or ROBOTS:
+                b = build(base / rel, Path(tmp))
+                print(f"{rel:<44} {b['wall']:7.1f} {b['cpu']:6.1f} {b['derive']:8.2f} {b['rest']:12.2f} "
+                      f"{b['peak'] / 2**20:8.0f} {b['size'] / 1024:7.0f}", flush=True)
     print(f"check against Pinocchio (relative, 1e-9): {'ok' if ok else 'FAILED'}")
     return 0 if ok else 1
 

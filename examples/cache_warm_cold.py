@@ -6,9 +6,9 @@
 Each scene is copied, with the robot files it names, into a temporary
 folder; its parameter sets (the scene-level ``parameter_set`` and every
 instance's) are turned into files next to it.  Then, for each kind of input
-file -- the scene file itself (its description and run), the robot file (a
-link mass), the scene-level parameter-set file and an instance's
-parameter-set file -- one value is edited and the scene is built twice: with
+file -- the scene file itself (its description), the robot file (a link
+mass), a component file (a parameter value), the scene-level parameter-set
+file and an instance's parameter-set file -- one value is edited and the scene is built twice: with
 the cache of the previous builds (warm) and without any cache (cold).  FMU
 builds are deterministic (fixed zip dates), so the two must be byte-for-byte
 equal: the script compares sha256 hashes and exits 1 on any difference.
@@ -58,6 +58,8 @@ def prepare(name: str, tmp: Path) -> Path:
         shutil.copy(r, tmp / "robots" / r.name)
     sdir = tmp / "examples" / "scenes"
     sdir.mkdir(parents=True)
+    if (ROOT / "examples" / "components").is_dir():  # component files the scenes name
+        shutil.copytree(ROOT / "examples" / "components", tmp / "examples" / "components")
     text = (SCENES / f"{name}.toml").read_text()
     # every named (shipped) parameter set becomes a file beside the scene
     for set_name in sorted(set(re.findall(r'parameter_set\s*=\s*"([A-Za-z0-9_]+)"', text))):
@@ -89,12 +91,18 @@ def edits(scene: Path):
         rfile = (sdir / robots[0]).resolve()
         out.append((f"robot file {rfile.name} (a link mass)",
                     lambda: rfile.write_text(scale_first(rfile.read_text(), r"^mass"))))
+    comps = re.findall(r'type\s*=\s*"file:([^"]+)"', text)
+    if comps:
+        cfile = (sdir / comps[0]).resolve()
+        out.append((f"component file {cfile.name} (a parameter value)",
+                    lambda: cfile.write_text(scale_first(cfile.read_text(), r"value"))))
     top = re.search(r'^parameter_set\s*=\s*"([^"]+)"', text, flags=re.M)
     if top:
         p = sdir / top.group(1)
         out.append((f"scene-level parameter set {p.name}",
                     lambda: p.write_text(_scale_every_first(p.read_text()))))
-    inst = [s for s in re.findall(r'parameter_set\s*=\s*"([^"]+)"', text)[1 if top else 0:]]
+    inst = [s for s in re.findall(r'parameter_set\s*=\s*"([^"]+)"', text)[1 if top else 0:]
+            if s.endswith(".toml") and (sdir / s).is_file()]
     if inst:
         p2 = sdir / inst[0]
         out.append((f"instance parameter set {p2.name}",

@@ -25,6 +25,9 @@ __all__ = ["FmugenError", "InputFileError", "read_text_file", "toml_problem", "c
 #: 255-byte file-name limit of common file systems.
 IDENTIFIER_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
 MAX_IDENTIFIER_LENGTH = 64
+#: largest input text file read (robot, scene, parameter set, assembly): the biggest shipped file is
+#: a few kB; a larger one is refused with its size before it is read into memory
+MAX_INPUT_BYTES = 16 * 2**20
 
 
 class FmugenError(ValueError):
@@ -38,9 +41,23 @@ class InputFileError(FmugenError):
 def read_text_file(path, what: str = "file") -> str:
     """The UTF-8 text of ``path``; a missing, unreadable or binary file is an
     :class:`InputFileError` naming the file (never a bare ``UnicodeDecodeError``)."""
+    import stat
+
     p = Path(path)
     try:
-        data = p.read_bytes()
+        st = p.stat()
+        if stat.S_ISDIR(st.st_mode):
+            raise IsADirectoryError
+        if not stat.S_ISREG(st.st_mode):  # /dev/zero, a FIFO, a socket: reading could never end
+            raise InputFileError(f"{p}: not a regular file (a device, FIFO or socket); a {what} must be a file")
+        if st.st_size > MAX_INPUT_BYTES:
+            raise InputFileError(f"{p}: {st.st_size / 2**20:.0f} MiB; a {what} is text of at most "
+                                 f"{MAX_INPUT_BYTES // 2**20} MiB")
+        with open(p, "rb") as fh:
+            data = fh.read(MAX_INPUT_BYTES + 1)
+        if len(data) > MAX_INPUT_BYTES:  # it grew while being read
+            raise InputFileError(f"{p}: more than {MAX_INPUT_BYTES // 2**20} MiB; a {what} is text of at most "
+                                 f"{MAX_INPUT_BYTES // 2**20} MiB")
     except FileNotFoundError:
         raise InputFileError(f"{p}: no such {what}") from None
     except IsADirectoryError:

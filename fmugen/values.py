@@ -11,7 +11,8 @@ so an override can never make a model the file could not:
   for an integer beyond the double range);
 * :func:`variable_problem` -- the physical sign a parameter declares
   (:attr:`fmugen.codegen.model.Variable.sign`: a time constant, an inertia,
-  a volume is ``> 0``; a leakage or a friction ``>= 0``);
+  a volume is ``> 0``; a leakage or a friction ``>= 0``) and its declared
+  range (``min``/``max`` of a component file's parameter);
 * :func:`robot_value_problem` -- a robot's quantities re-evaluated with the
   new values, through the robot-file checks: every mass, length, inertia a
   finite number (``mass = "m1/k"`` with ``k = 0`` is a division by zero),
@@ -61,7 +62,15 @@ def variable_problem(var, value) -> Optional[str]:
         v = as_number(value, var.name)
     except FmugenError as exc:
         return str(exc).split(": ", 1)[1]
-    return sign_problem(getattr(var, "sign", "") or "", v)
+    problem = sign_problem(getattr(var, "sign", "") or "", v)
+    if problem:
+        return problem
+    lo, hi = getattr(var, "min", None), getattr(var, "max", None)  # a declared range (component files)
+    if lo is not None and v < lo:
+        return f"is below its minimum {lo!r}"
+    if hi is not None and v > hi:
+        return f"is above its maximum {hi!r}"
+    return None
 
 
 def check_model_values(model, values: Mapping[str, object], where_of) -> None:

@@ -536,3 +536,43 @@ def test_declarations_are_checked(tmp_path, old, new, message):
     p.write_text(p.read_text().replace(old, new).replace("der(w)", "der(w)"))
     with pytest.raises(InputFileError, match=message):
         read_component_file(p)
+
+
+def test_exact_kinks_on_parameters_in_an_fmu(tmp_path):
+    """if/abs/sign/min/max/sat/deadzone/step on parameters stay exact in C and follow a parameter set at run
+    time: x' = -k x/T + 8 x0/T (k = 2) or -x/T (k = 1/2), y = 2x or x -- closed forms."""
+    import fmpy
+
+    from fmugen.fmi.build import build_fmu
+
+    m = load_component(ROOT / "tests/data/exact_parameter_kinks.toml")
+    fmu = tmp_path / "pw.fmu"
+    build_fmu(m, fmu, fmi_type="cs")
+    for k, n_el, x, y in ((2.0, 1.0, 0.004 + 0.996 * math.exp(-2), 2), (0.5, -1.0, math.exp(-1), 1)):
+        r = fmpy.simulate_fmu(str(fmu), stop_time=0.1, start_values={"k": k, "n_el": n_el, "solver.method": 2,
+                                                                    "solver.rtol": 1e-10, "solver.atol": 1e-12},
+                              output=["x", "y"])
+        assert r["x"][-1] == pytest.approx(x, rel=1e-7) and r["y"][-1] == pytest.approx(y * x, rel=1e-7)
+
+
+def test_component_files_in_an_assembly_file(tmp_path):
+    (tmp_path / "asm.toml").write_text("""
+[assembly]
+name = "rig"
+inputs = ["ctl.r"]
+connections = [["load.phi", "ctl.y"], ["ctl.u", "load.tau", 1.0]]
+[components.ctl]
+type = "lib:pd"
+parameters = { K_p = 50.0 }
+[components.load]
+type = "lib:stribeck"
+parameter_set = "heavy"
+""")
+    m = fmugen.components.load_assembly(tmp_path / "asm.toml")
+    p = params(m)
+    assert p["ctl.K_p"] == 50.0 and p["load.J"] == 0.5 and [v.name for v in m.inputs] == ["ctl.r"]
+    ev = NumericModel(m)
+    x = {"ctl.x_d": 0.01, "load.phi": 0.1, "load.w": 0.0}
+    d = dict(zip([v.name for v in m.states], ev.f(0, [x[v.name] for v in m.states], [0.3])))
+    u = 50.0 * 0.2 + 5.0 * (0.2 - 0.01) / 2e-3
+    assert d["load.w"] == pytest.approx(u / 0.5, rel=1e-12)  # at rest: the smoothed sign is 0

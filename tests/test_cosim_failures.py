@@ -52,7 +52,7 @@ def test_bad_systems_are_refused_naming_the_fmu_and_variable():
     with pytest.raises(CosimError, match="'amp.theta' has causality input"):
         run(wrong_dir, "jacobi")
     missing = replace(s, units=(replace(s.units[0], path=s.units[0].path.with_name("nothing.fmu")), s.units[1]))
-    with pytest.raises(CosimError, match="FMU 'chain': file .*nothing.fmu does not exist"):
+    with pytest.raises(CosimError, match=r"FMU 'chain' \(.*nothing.fmu\): the file does not exist"):
         run(missing, "jacobi")
     unknown_start = replace(s, units=(s.units[0], replace(s.units[1], start_values={"JJ": 1.0})))
     with pytest.raises(CosimError, match="FMU 'joint': start value for unknown variable 'JJ'"):

@@ -84,31 +84,29 @@ def test_dopri5_silent_on_a_non_stiff_problem(tmp_path):
 
 
 def logged_limit(log):
-    said = [m for m in log.matching("exceeds the RK4 stability limit") if m.startswith("RK4: h =")]
+    said = [m for m in log.matching("exceeds the RK4 stability limit") if "RK4: h =" in m]
     assert said, log.messages
     m = re.search(r"limit ~ ([0-9.e+-]+) (us|ms|s) \(largest \|lambda\| = ([0-9.e+-]+) 1/s", said[0])
     unit = {"us": 1e-6, "ms": 1e-3, "s": 1.0}[m.group(2)]
     return float(m.group(1)) * unit, float(m.group(3)), said
 
 
-def test_rk4_warns_with_the_limit_then_fails_with_it(stiff_rig):
+def test_rk4_refuses_a_step_beyond_the_limit_with_it(stiff_rig):
     model, path = stiff_rig
     h_limit = stable_step(np.linalg.eigvals(jacobian_at_rest(model)), "rk4")
     assert h_limit == pytest.approx(55.7e-6, rel=1e-3)
     log = Log()
-    with pytest.raises(FMICallException):  # the blow-up ends in fmi2Discard
+    with pytest.raises(FMICallException):  # refused at once: fmi2Discard before any step (issue 19)
         run(path, {"solver.method": 3, "solver.fixed_step": 60e-6}, 0.05, 6e-5 * 10, log)
     limit, lam, said = logged_limit(log)
     assert limit == pytest.approx(h_limit, rel=5e-3)
     assert lam == pytest.approx(5e4, rel=1e-3)
     assert "h = 60 us" in said[0]
     assert "at t = 0)" in said[0]
-    # warned at the start, and again only when the limit moved (here as the
-    # blow-up drives the state far from the linearisation), not at each of
-    # the communication steps before the failure
-    assert len(said) <= 3
+    assert len(said) == 1  # one refusal, no step taken, no blow-up after it
     discard = log.matching("discarded")
     assert discard and "exceeds the RK4 stability limit ~ 55.7 us" in discard[0]
+    assert "was not taken" in discard[0] and "last good point t = 0 " in discard[0]
 
 
 def test_rk4_quiet_inside_the_limit(stiff_rig):

@@ -119,9 +119,10 @@ def test_failed_points_are_recorded_with_their_reason(client, tmp_path):
     r = sweep(SPLIT, grid=["joint.J=0,1e-3,2", "actuator.beta_e=7e8,1e12"], out=tmp_path, client=client,
               options=OPTS, metrics=["joint.theta:final"], progress=False)
     status = {(row["joint.J"], row["actuator.beta_e"]): row for row in r.rows}
-    for beta in (7e8, 1e12):  # J = 0: the FMU refuses to initialise
-        assert status[(0.0, beta)]["status"] == "error"
-        assert "fmi2ExitInitializationMode" in status[(0.0, beta)]["failure"]
+    for beta in (7e8, 1e12):  # J = 0: fails the check a file value gets (J > 0), refused and never run
+        assert status[(0.0, beta)]["status"] == "refused"
+        assert "joint.J = 0.0 is not > 0" in status[(0.0, beta)]["failure"]
+        assert status[(0.0, beta)]["worker"] == "client"
         assert np.isnan(status[(0.0, beta)]["joint.theta:final"])
     bad = status[(1e-3, 1e12)]  # the coupling of a light joint and a stiff fluid explodes
     assert bad["status"] == "failed" and "co-simulation stopped at t = " in bad["failure"]
@@ -130,7 +131,7 @@ def test_failed_points_are_recorded_with_their_reason(client, tmp_path):
         assert status[key]["status"] == "ok" and abs(status[key]["joint.theta:final"] - 0.1) < 2e-3
     with open(tmp_path / "results.csv", newline="") as fh:
         table = list(csv.DictReader(fh))
-    assert sorted(t["status"] for t in table) == ["error", "error", "failed", "ok", "ok", "ok"]
+    assert sorted(t["status"] for t in table) == ["failed", "ok", "ok", "ok", "refused", "refused"]
 
 
 def test_monte_carlo_points_are_the_seeded_samples(client, tmp_path):

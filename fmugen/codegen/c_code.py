@@ -50,14 +50,15 @@ import math
 import re
 import uuid
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Iterable, Optional, Sequence
 
 import sympy as sp
 from sympy.printing.c import C99CodePrinter
 from sympy.printing.precedence import precedence
 
-from .model import SymbolicModel, Variable
+from ..errors import FmugenError
+from .model import SymbolicModel, Variable, physical_range
 from .chain import ChainDynamics, chain_call_lines, chain_ops
 from .cse import common_subexpressions
 from .program import Assign, Program, SolveSPD
@@ -95,12 +96,56 @@ _C_MATH = {
     "tgamma", "lgamma", "round", "trunc", "isfinite", "isnan", "isinf", "signbit", "memset",
     "M_PI", "M_E", "INFINITY", "NAN", "HUGE_VAL",
 }
+#: keywords of every C standard (C89 to C23) and of the GNU dialects that
+#: ``gcc``/``clang`` compile by default (``fmpy compile`` passes no ``-std``):
+#: a parameter called ``asm`` or ``typeof`` is a syntax error there even
+#: though ``-std=c99`` accepts it
+_C_ALL_KEYWORDS = {
+    # C23 keywords without underscore
+    "alignas", "alignof", "bool", "constexpr", "false", "nullptr", "static_assert", "thread_local", "true",
+    "typeof", "typeof_unqual",
+    # GNU and common compiler extensions (gcc, clang, MSVC/MinGW spellings without leading underscores)
+    "asm", "fortran", "cdecl", "pascal", "far", "near", "huge", "stdcall", "fastcall", "thiscall", "vectorcall",
+    "declspec", "restrict", "complex", "imaginary", "noreturn", "atomic", "generic",
+    # C++ keywords: the headers are also read by C++ importers
+    "and", "and_eq", "bitand", "bitor", "catch", "char8_t", "char16_t", "char32_t", "class", "compl", "concept",
+    "consteval", "constinit", "const_cast", "co_await", "co_return", "co_yield", "decltype", "delete",
+    "dynamic_cast", "explicit", "export", "friend", "mutable", "namespace", "new", "noexcept", "not", "not_eq",
+    "operator", "or", "or_eq", "private", "protected", "public", "reflexpr", "reinterpret_cast", "requires",
+    "static_cast", "template", "this", "throw", "try", "typeid", "typename", "using", "virtual", "wchar_t",
+    "xor", "xor_eq",
+}
+#: object-like macros without a leading underscore that a compiler predefines
+#: in its GNU dialects (gcc's and clang's ``builtin_define_std``: ``linux`` is
+#: ``1`` under ``-std=gnu11``) on the platforms FMUs are built for, and that
+#: the headers the generated code includes define there (math.h, stddef.h,
+#: string.h, stdlib.h of glibc, musl, macOS and MinGW): a variable of that name
+#: would be replaced by the preprocessor
+_PREDEFINED_MACROS = {
+    "linux", "unix", "i386", "i486", "i586", "i686", "sun", "sparc", "mips", "mipsel", "MIPSEB", "MIPSEL",
+    "R3000", "R4000", "hppa", "hp9000", "hpux", "vax", "pdp11", "m68k", "mc68000", "mc68010", "mc68020",
+    "mc68030", "mc68040", "mc68060", "m88k", "ns32000", "pyr", "sequent", "sgi", "host_mips", "alpha", "arm",
+    "thumb", "powerpc", "ppc", "PPC", "POWERPC", "ibm", "aix", "AIX", "sh", "bfin", "BFIN", "cris", "CRIS",
+    "GNU_CRIS", "tune_i386", "amd64", "x86_64", "ia64", "WIN32", "WIN64", "WINNT", "MSDOS", "CYGWIN32",
+    "MINGW32", "OBJC_NEW_PROPERTIES", "APPLE", "MACH", "NeXT", "BSD", "SVR4", "svr4", "sysV", "osf", "OSF1",
+    "vms", "VMS", "embedded", "gnu_linux", "ELF", "elf",
+    # header macros (glibc in GNU mode, musl, macOS, MinGW)
+    "BIG_ENDIAN", "LITTLE_ENDIAN", "PDP_ENDIAN", "BYTE_ORDER", "EXIT_FAILURE", "EXIT_SUCCESS", "FD_SETSIZE",
+    "NFDBITS", "MB_CUR_MAX", "RAND_MAX", "WCONTINUED", "WEXITED", "WNOHANG", "WNOWAIT", "WSTOPPED",
+    "WUNTRACED", "WCOREFLAG", "HUGE", "MAXFLOAT", "DOMAIN", "SING", "OVERFLOW", "UNDERFLOW", "TLOSS", "PLOSS",
+    "X_TLOSS", "math_errhandling", "MATH_ERRNO", "MATH_ERREXCEPT", "offsetof", "errno", "alloca",
+    "EDOM", "ERANGE", "EILSEQ", "fpclassify", "isnormal", "isgreater", "isgreaterequal", "isless",
+    "islessequal", "islessgreater", "isunordered", "iscanonical", "issignaling", "issubnormal", "iszero",
+}
 # names the generated functions use for themselves
 _ARGS = {"p", "t", "x", "u", "dx", "y", "dfdx", "dfdu", "dgdx", "dgdu", "status",
          "evaluate", "jacobian", "x_start", "x_nominal", "u_start", "p_start",
          "x_names", "u_names", "y_names", "p_names", "fmugen_model",
-         "x_min", "x_max", "u_min", "u_max", "y_min", "y_max"}
+         "x_min", "x_max", "u_min", "u_max", "y_min", "y_max", "p_min", "p_max", "rt_start"}
 RESERVED_NAMES = frozenset(_C_KEYWORDS | _C_MATH | _ARGS)
+#: user-derived names that get :data:`SAFE_PREFIX` in front (``asm`` ->
+#: ``v_asm``): every keyword and predefined macro above
+PREFIXED_NAMES = frozenset(_C_KEYWORDS | _C_ALL_KEYWORDS | _PREDEFINED_MACROS)
 #: prefixes of names the runtime header, the FMI headers and the C library
 #: (math.h, stddef.h, string.h) may define as macros or identifiers: a model
 #: variable called ``FMUGEN_OK`` or ``M_PI2`` would otherwise be expanded by
@@ -398,6 +443,8 @@ def c_identifier(name: str) -> str:
     s = re.sub(r"_+", "_", s).strip("_") or "model"
     if s[0].isdigit():
         s = "m_" + s
+    # (the model identifier reaches C only inside a string literal and as a file name: a macro or GNU
+    # keyword name is harmless there, unlike a variable's)
     if s in _C_KEYWORDS or keyword.iskeyword(s):
         s += "_"
     return s
@@ -407,7 +454,7 @@ def _reserved(name: str) -> bool:
     """True for names in the runtime's or the C library's name space
     (:data:`RESERVED_PREFIXES`); single reserved names are kept apart by
     :data:`RESERVED_NAMES` in :class:`_Names`."""
-    return name.startswith("_") or name.startswith(RESERVED_PREFIXES)
+    return name.startswith("_") or name.startswith(RESERVED_PREFIXES) or name in PREFIXED_NAMES
 
 
 class _Names:
@@ -1050,7 +1097,14 @@ def generate_c(
         names_array("p_names", model.parameters),
     ]
     ranges = {}
-    for prefix, vars_ in (("x", model.states), ("u", model.inputs), ("y", model.outputs)):
+    params = [replace(v, min=physical_range(v)[0]) for v in model.parameters]  # the sign is a bound too
+    for v in params:  # a start value the FMU itself would refuse (fmi2SetReal) is no default
+        if v.start is not None and ((v.min is not None and float(v.start) < float(v.min))
+                                    or (v.max is not None and float(v.start) > float(v.max))):
+            raise FmugenError(f"model {model.name!r}{origin}: parameter {v.name!r} = {float(v.start)!r} is outside "
+                              f"its physical range [{v.min if v.min is not None else '-inf'}, "
+                              f"{v.max if v.max is not None else 'inf'}]")
+    for prefix, vars_ in (("x", model.states), ("u", model.inputs), ("y", model.outputs), ("p", params)):
         arrays, lo, hi = _range_arrays(prefix, vars_)
         decls += arrays
         ranges[prefix] = (lo, hi)

@@ -5,7 +5,7 @@ statements and its exact Jacobian O(N^2) to O(N^3): at N = 24 the generated
 ``model.c`` is 63,000 lines that gcc -O2 needs a quarter of an hour for.
 Past :data:`LOOP_MIN_LINKS` links the arm's model therefore holds no
 dynamics at all: one :class:`ChainDynamics` step evaluates the body
-constants (27 numbers per body, expressions of the parameters) and calls the
+constants (29 numbers per body, expressions of the parameters) and calls the
 hand-written loops of the runtime -- Featherstone's articulated-body algorithm
 for the forward dynamics (O(N)) and the analytical derivatives of recursive
 Newton-Euler with one Cholesky solve for its Jacobian.
@@ -13,7 +13,7 @@ Newton-Euler with one Cholesky solve for its Jacobian.
 The runtime works on the general joint model of a kinematic tree: per body a
 parent, a fixed placement (R, p) in the parent's frame, a unit joint axis, a
 joint type (revolute/prismatic), mass, centre of mass, inertia, rotor
-inertia and damping (:func:`tree_constants`).  A Denavit-Hartenberg chain
+inertia, damping and smooth Coulomb friction (:func:`tree_constants`).  A Denavit-Hartenberg chain
 is the special case :func:`link_constants` writes.  The generated file
 grows linearly with N (the constants, and one copy per Jacobian entry), so
 deriving, generating and compiling take seconds at N = 60.
@@ -60,8 +60,9 @@ __all__ = ["ChainDynamics", "LOOP_MIN_LINKS", "NC", "NG", "link_constants", "tre
 LOOP_MIN_LINKS = 7
 
 #: per-body constants (layout of c_runtime/chain_dynamics.h): placement R (9, row-major) and p (3),
-#: joint axis (3), mass, COM (3), inertia about the COM (xx yy zz xy xz yz), rotor inertia, damping
-NC = 27
+#: joint axis (3), mass, COM (3), inertia about the COM (xx yy zz xy xz yz), rotor inertia, damping,
+#: Coulomb friction F_c and its velocity scale v_c (smooth: F_c tanh(qd / v_c))
+NC = 29
 #: global constants: gravity (3), end-effector position in its body's frame (3)
 NG = 6
 
@@ -140,7 +141,7 @@ def link_constants(chain, gravity: Sequence) -> list:
         ca, sa, ct, st = sp.cos(L.alpha), sp.sin(L.alpha), sp.cos(L.theta0), sp.sin(L.theta0)
         R = [ct, -st, 0, ca * st, ca * ct, -sa, sa * st, sa * ct, ca]
         p = [L.a, -sa * L.d0, ca * L.d0]
-        out += _body(R, p, (0, 0, 1), L.mass, L.com, L.inertia_com, L.rotor_inertia, L.damping)
+        out += _body(R, p, (0, 0, 1), L.mass, L.com, L.inertia_com, L.rotor_inertia, L.damping, 0, 0)
     out += [sp.sympify(g) for g in gravity] + [chain[-1].end_a, sp.Integer(0), sp.Integer(0)]
     return [sp.sympify(e) for e in out]
 
@@ -151,16 +152,20 @@ def tree_constants(bodies, gravity: Sequence, ee_position: Sequence = (0, 0, 0))
     ``bodies``: per body a mapping or object with ``R`` (3x3 placement rotation in the
     parent frame), ``p`` (3), ``axis`` (3, unit, in the placed frame), ``mass``, ``com``
     (3, body frame), ``inertia`` (3x3 about the COM, body axes), ``rotor_inertia`` and
-    ``damping``; ``ee_position`` the end effector in its body's frame.
+    ``damping`` (and optionally ``friction``, ``friction_velocity``: the smooth Coulomb term
+    F_c tanh(qd / v_c)); ``ee_position`` the end effector in its body's frame.
     """
-    def get(b, k):
-        return b[k] if isinstance(b, dict) else getattr(b, k)
+    def get(b, k, default=None):
+        if isinstance(b, dict):
+            return b[k] if default is None else b.get(k, default)
+        return getattr(b, k) if default is None else getattr(b, k, default)
 
     out = []
     for b in bodies:
         R = sp.Matrix(get(b, "R"))
         out += _body(list(R), list(get(b, "p")), list(get(b, "axis")), get(b, "mass"), list(get(b, "com")),
-                     sp.Matrix(get(b, "inertia")), get(b, "rotor_inertia"), get(b, "damping"))
+                     sp.Matrix(get(b, "inertia")), get(b, "rotor_inertia"), get(b, "damping"),
+                     get(b, "friction", 0), get(b, "friction_velocity", 0))
     out += [sp.sympify(g) for g in gravity] + [sp.sympify(e) for e in ee_position]
     return [sp.sympify(e) for e in out]
 
@@ -187,23 +192,24 @@ def robot_tree(robot) -> tuple:
                 kx = sp.Matrix([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
                 R = R * (c * sp.eye(3) + s * kx + (1 - c) * k * k.T)
         bodies.append(dict(R=R, p=list(p), axis=list(k), mass=b.mass, com=list(b.com),
-                           inertia=sp.Matrix(b.inertia_com), rotor_inertia=b.rotor_inertia, damping=b.damping))
-    frames = {f.name: f for f in getattr(robot, "frames", ())}
-    end = frames.get(getattr(robot, "end_frame", ""))
-    if end is None:
+                           inertia=sp.Matrix(b.inertia_com), rotor_inertia=b.rotor_inertia, damping=b.damping,
+                           friction=getattr(b, "friction", 0), friction_velocity=getattr(b, "friction_velocity", 0)))
+    end = getattr(robot, "end_frame", "")
+    if not end:
         ee, ee_pos = len(bodies) - 1, (0, 0, 0)
-    elif end.parent < 0:
-        raise ValueError(f"{robot.name}: the end-effector frame {end.name!r} is fixed to the base")
     else:
-        ee, ee_pos = end.parent, tuple(end.translation)
+        ee, _, ee_pos = robot.locate(end)  # a body (its origin) or a frame fixed to one
+        if ee < 0:
+            raise ValueError(f"{robot.name}: the end-effector frame {end!r} is fixed to the base")
     revolute = tuple(b.joint != "prismatic" for b in robot.bodies)
     parents = tuple(int(b.parent) for b in robot.bodies)
     return revolute, parents, ee, tree_constants(bodies, robot.gravity, ee_pos)
 
 
-def _body(R, p, axis, mass, com, I, rotor, damping) -> list:
+def _body(R, p, axis, mass, com, I, rotor, damping, friction, friction_velocity) -> list:
     I = sp.Matrix(I)
-    return [*R, *p, *axis, mass, *com, I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2], rotor, damping]
+    return [*R, *p, *axis, mass, *com, I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2], rotor, damping,
+            friction, friction_velocity]
 
 
 def chain_call_lines(st: ChainDynamics, index: int, b_code: list, ind: str) -> tuple:

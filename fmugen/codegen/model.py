@@ -17,6 +17,7 @@ q and qd for co-simulation without direct feedthrough.
 """
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, replace
 from typing import Optional, Sequence
 
@@ -25,6 +26,11 @@ import sympy as sp
 from .chain import ChainDynamics, chain_ops
 from .program import Assign, Program
 from ..errors import FmugenError
+
+
+#: ``min`` of a quantity that must be > 0 (a mass, a time constant): the smallest
+#: positive normal double, since FMI's min is inclusive
+POSITIVE_MIN = sys.float_info.min
 
 
 @dataclass(frozen=True)
@@ -43,6 +49,16 @@ class Variable:
     # parameters: their physical sign, ">0" (an inertia, a time constant) or ">=0" (a leakage); every
     # value given later (with_starts: --set, start tables, sweep points) is checked against it
     sign: str = ""
+
+
+def physical_range(v: Variable) -> tuple:
+    """``(min, max)`` of a parameter with its physical sign applied (``">0"``: at least
+    :data:`POSITIVE_MIN`, ``">=0"``: at least 0): the range its FMU declares and enforces."""
+    lo = v.min
+    floor = POSITIVE_MIN if v.sign == ">0" else 0.0 if v.sign == ">=0" else None
+    if floor is not None and (lo is None or float(lo) < floor):
+        lo = floor
+    return lo, v.max
 
 
 @dataclass(frozen=True)

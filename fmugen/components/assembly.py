@@ -126,6 +126,9 @@ def load_assembly(path: Union[str, Path]) -> SymbolicModel:
         if not isinstance(spec, dict):
             raise InputFileError(f"{src}: {where} must be a table")
         typ = spec.get("type")
+        if isinstance(typ, str) and typ.startswith(("file:", "lib:")):  # a component file (equations/)
+            components[inst] = _file_component(typ, spec, inst, path, where, src)
+            continue
         if not isinstance(typ, str) or typ not in COMPONENT_TYPES:
             raise InputFileError(f"{src}: {where} type = {typ!r} is not a component type; "
                              f"known: {', '.join(COMPONENT_TYPES)}")
@@ -174,6 +177,28 @@ def load_assembly(path: Union[str, Path]) -> SymbolicModel:
     model = assemble(name, components, pairs, inputs=inputs, outputs=outputs,
                      description=asm.get("description", ""), where=src)
     return carry_input_ranges(model, components, pairs)
+
+
+def _file_component(typ, spec, inst, path: Path, where, src) -> SymbolicModel:
+    """``type = "file:x.toml"`` (relative to the assembly) or ``"lib:<name>"``, with parameter_set and parameters."""
+    from .equations import load_component
+
+    bad = sorted(set(spec) - {"type", "parameter_set", "parameters"})
+    if bad:
+        raise InputFileError(f"{src}: {where} has unknown key(s) {', '.join(bad)} for a component file")
+    ref = typ if typ.startswith("lib:") else (Path(typ[5:]) if Path(typ[5:]).is_absolute() else path.parent / typ[5:])
+    pset = spec.get("parameter_set")
+    if pset is not None and (not isinstance(pset, str) or not pset):
+        raise InputFileError(f"{src}: {where} parameter_set must be a string")
+    if pset is not None and pset.endswith(".toml") and not Path(pset).is_absolute():
+        pset = str(path.parent / pset)
+    over = spec.get("parameters", {})
+    if not isinstance(over, dict):
+        raise InputFileError(f"{src}: {where}.parameters must be a table of numbers")
+    try:
+        return load_component(ref, name=inst, parameter_set=pset, overrides=over)
+    except ValueError as exc:
+        raise InputFileError(f"{src}: {where} type = {typ!r}: {exc}") from None
 
 
 def carry_input_ranges(model: SymbolicModel, components: dict, connections) -> SymbolicModel:

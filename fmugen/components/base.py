@@ -21,7 +21,7 @@ from typing import Mapping, Optional, Sequence
 
 import sympy as sp
 
-from ..codegen.model import Variable
+from ..codegen.model import POSITIVE_MIN, Variable
 from ..errors import FmugenError
 from .parameters import SIGNS, ParameterSet, load_parameter_set, value_problem
 
@@ -70,7 +70,11 @@ def parameters(family: str, specs: Sequence[tuple], used: Sequence[str], paramet
         if name not in used:
             continue
         value = overrides[name] if name in overrides else pset.value(family, name)
-        out[name] = replace(var(name, unit, description, start=float(value)), sign=SIGNS.get(family, {}).get(name, ""))
+        # the sign the equations need is also the parameter's min in the FMU: its
+        # fmi2SetReal refuses what a parameter file would have been refused for
+        sign = SIGNS.get(family, {}).get(name, "")
+        low = POSITIVE_MIN if sign == ">0" else 0.0 if sign == ">=0" else None
+        out[name] = replace(var(name, unit, description, start=float(value), min=low), sign=sign)
     return out
 
 

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import CosimError
+from .loading import load_failure, read_description
 
 LOG_KEEP = 20
 STATUS = ("fmi2OK", "fmi2Warning", "fmi2Discard", "fmi2Error", "fmi2Fatal", "fmi2Pending")
@@ -43,7 +44,10 @@ def _extract(path: Path) -> str:
         if not _tmp_root:
             _tmp_root.append(tempfile.mkdtemp(prefix="fmugen_cosim_"))
             atexit.register(shutil.rmtree, _tmp_root[0], True)
-        _extracted[key] = fmpy.extract(str(path), unzipdir=tempfile.mkdtemp(dir=_tmp_root[0]))
+        # the binaries, the model description and the resources; not the sources (5x less to unzip:
+        # part of every command's start-up)
+        _extracted[key] = fmpy.extract(str(path), unzipdir=tempfile.mkdtemp(dir=_tmp_root[0]),
+                                       include=lambda name: not name.startswith(("sources/", "documentation/")))
     return _extracted[key]
 
 
@@ -62,19 +66,16 @@ class _Unit:
     kind = ""
 
     def __init__(self, unit, start_time: float, stop_time: float):
-        from fmpy import read_model_description
         from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
                                fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
         from fmpy import calloc, free
 
         self.name = unit.name
         self.unit = unit
+        self.c = None
         path = Path(unit.path)
-        if not path.is_file():
-            raise CosimError(f"FMU {unit.name!r}: file {path} does not exist")
-        self.md = read_model_description(str(path))
-        if self.md.fmiVersion != "2.0":
-            raise CosimError(f"FMU {unit.name!r} ({path}): FMI {self.md.fmiVersion}, the master needs FMI 2.0")
+        # a broken or foreign FMU: one line naming it (not the zip/XML/fmpy exception)
+        self.md = read_description(unit.name, path, self.kind)
         self.variables = {v.name: v for v in self.md.modelVariables}
         self.log = deque(maxlen=LOG_KEEP)
         log = self.log
@@ -88,9 +89,20 @@ class _Unit:
         cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
         cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
         self._callbacks = cb  # keep the CFUNCTYPE alive as long as the instance
-        self._unzip = _extract(path)
-        self.fmu = self._make_fmu()
-        self.fmu.instantiate(callbacks=cb, loggingOn=False)
+        try:
+            self._unzip = _extract(path)
+        except Exception as e:
+            raise load_failure(unit.name, path, "unzipping", e) from None
+        try:
+            self.fmu = self._make_fmu()
+        except CosimError:
+            raise
+        except Exception as e:  # the shared library does not load (another architecture, missing symbols)
+            raise load_failure(unit.name, path, "loading its binary", e) from None
+        try:
+            self.fmu.instantiate(callbacks=cb, loggingOn=False)
+        except Exception as e:  # fmi2Instantiate returned NULL (e.g. the GUID is not the binary's)
+            raise load_failure(unit.name, path, "fmi2Instantiate", e, list(self.log)) from None
         self.c = self.fmu.component
         f = self.fmu._functions
         self._getReal = f["fmi2GetReal"]
@@ -180,7 +192,7 @@ class _Unit:
         return out[0]
 
     def close(self) -> None:
-        if self.c is None:
+        if getattr(self, "c", None) is None:
             return
         try:
             self.fmu.fmi2Terminate(self.c)
@@ -239,6 +251,7 @@ class ModelUnit(_Unit):
         me = self.md.modelExchange
         if me is None:
             raise CosimError(f"FMU {self.name!r} ({self.unit.path}) has no Model-Exchange interface")
+        self.can_save_state = bool(me.canGetAndSetFMUstate)
         fmu = FMU2Model(guid=self.md.guid, unzipDirectory=self._unzip, modelIdentifier=me.modelIdentifier,
                         instanceName=self.name)
         return fmu

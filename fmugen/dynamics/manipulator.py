@@ -28,17 +28,25 @@ from typing import Mapping, Optional, Sequence
 import numpy as np
 import sympy as sp
 
-from ..codegen.chain import LOOP_MIN_LINKS, ChainDynamics, link_constants
+from ..codegen.chain import LOOP_MIN_LINKS, ChainDynamics, robot_tree
 from ..codegen.differentiate import differentiate
 from ..codegen.model import SymbolicModel, Variable
 from ..codegen.program import Program
 from ..codegen.python_code import compile_program
+from ..robot.bounds import parameter_bounds
 from ..robot.description import REVOLUTE, Robot
 from . import crba, kinematics
-from .joint_frames import joint_frame_chain
 from .lagrange import RecursiveLagrange
 from .newton_euler import NestedBodyInverseDynamics
 from .trig import TrigCache
+
+
+def robot_parameters(robot: Robot) -> tuple:
+    """The robot's parameters as model Variables, with the physical ranges of
+    those that are a link's quantity themselves (:func:`fmugen.robot.bounds.parameter_bounds`)."""
+    lows = parameter_bounds(robot)
+    return tuple(Variable(p.name, p.symbol, p.unit, p.description, start=p.value, min=lows.get(p.name))
+                 for p in robot.parameters)
 
 FORMULATIONS = ("newton_euler", "lagrange")
 
@@ -225,11 +233,10 @@ class Manipulator:
         locked = dict(locked or {})
         if strategy not in ("auto", "straight", "loops"):
             raise ValueError(f"strategy must be 'auto', 'straight' or 'loops', not {strategy!r}")
-        # the runtime loops have no Coulomb friction term
-        loopable = not locked and bool(robot.links) and not kin_outputs and not any(b.friction != 0 for b in robot.bodies)
+        # the runtime's loops take any tree of the general joint model (damping and Coulomb friction too)
+        loopable = not locked and not kin_outputs
         if strategy == "loops" and not loopable:
-            why = ("locked joints" if locked else "frame outputs" if kin_outputs
-                   else "robots written as joints (URDF), only DH chains")
+            why = "locked joints" if locked else "frame outputs"
             raise ValueError(f"{robot.name}: strategy='loops' does not handle {why}; "
                              f"use strategy='straight'")
         if strategy == "loops" or (strategy == "auto" and loopable and n >= LOOP_MIN_LINKS):
@@ -335,9 +342,7 @@ class Manipulator:
 
         states, inputs = self._joint_variables(free)
         inputs += self._wrench_inputs()
-        params = tuple(
-            Variable(p.name, p.symbol, p.unit, p.description, start=p.value) for p in robot.parameters
-        )
+        params = robot_parameters(robot)
         model = SymbolicModel(
             name=name or robot.name,
             description=robot.description or f"{robot.name}: {n}-link manipulator",
@@ -368,28 +373,27 @@ class Manipulator:
         program another.
         """
         n, robot = self.n, self.robot
-        rev = tuple(L.joint == REVOLUTE for L in robot.bodies)
+        # the general joint model of every robot (a DH file's chain included): a tree of bodies
+        rev, parents, ee_body, constants = robot_tree(robot)
         ext, ne = self.ext_symbols, len(self.external_links)
-        B = sp.Matrix(self.q + self.qd + self.tau
-                      + link_constants(joint_frame_chain(robot), robot.gravity) + ext)
+        B = sp.Matrix(self.q + self.qd + self.tau + constants + ext)
+        tree = dict(revolute=rev, external=tuple(self.external_links), parent=parents, ee_body=ee_body)
         P = Program("_w")
         X = sp.Matrix([P.fresh("qdd") for _ in range(n)] + [P.fresh("pee") for _ in range(3)])
-        P.steps.append(ChainDynamics(X, sp.zeros(0, 0), B, kind="fd", revolute=rev,
-                                     external=tuple(self.external_links)))
+        P.steps.append(ChainDynamics(X, sp.zeros(0, 0), B, kind="fd", **tree))
         qdd, pee = list(X[:n]), list(X[n:])
         Jp = Program("_j")
         nu = n + 6 * ne
         nj = n + n * (2 * n + nu) + 3 * n
         XJ = sp.Matrix([Jp.fresh("jd") for _ in range(nj)])
-        Jp.steps.append(ChainDynamics(XJ, sp.zeros(0, 0), B, kind="jacobian", revolute=rev,
-                                      external=tuple(self.external_links)))
+        Jp.steps.append(ChainDynamics(XJ, sp.zeros(0, 0), B, kind="jacobian", **tree))
         Y = sp.Matrix(n, 2 * n + nu, list(XJ[n:n + n * (2 * n + nu)]))
         dpee = sp.Matrix(3, n, list(XJ[n + n * (2 * n + nu):]))
         out_vars, out_exprs = [], []
         if "p_ee" in outputs:
             for r in range(3):
                 out_vars.append(Variable(f"p_ee[{r + 1}]", _real(f"p_ee_{r + 1}"), "m",
-                                         f"end-effector position (origin of frame {n}), base {'xyz'[r]}"))
+                                         f"end-effector position (origin of {_ee_label(robot)}), base {'xyz'[r]}"))
                 out_exprs.append(pee[r])
         if "qdd" in outputs:
             for i in range(n):
@@ -413,8 +417,7 @@ class Manipulator:
             dgdu[row:row + n, :] = Y[:, 2 * n:]
         states, inputs = self._joint_variables(range(n))
         inputs += self._wrench_inputs()
-        params = tuple(Variable(p.name, p.symbol, p.unit, p.description, start=p.value)
-                       for p in robot.parameters)
+        params = robot_parameters(robot)
         return SymbolicModel(
             name=name or robot.name,
             description=robot.description or f"{robot.name}: {n}-link manipulator",
@@ -511,7 +514,7 @@ class Manipulator:
             for i, L in enumerate(robot.bodies))
         Jp = Program("_j")
         D = differentiate([P], tau, [v.symbol for v in inputs], Jp)
-        params = tuple(Variable(p.name, p.symbol, p.unit, p.description, start=p.value) for p in robot.parameters)
+        params = robot_parameters(robot)
         return SymbolicModel(
             name=name or f"{robot.name}_inverse_dynamics",
             description=f"{robot.name}: tau = M(q) qdd + h(q, qd), inverse dynamics",

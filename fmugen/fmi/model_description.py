@@ -36,7 +36,7 @@ import sympy as sp
 
 from .. import __version__
 from ..errors import FmugenError
-from ..codegen.model import SymbolicModel
+from ..codegen.model import SymbolicModel, physical_range
 from ..codegen.program import Assign
 from .units import base_units
 
@@ -236,7 +236,7 @@ def variable_layout(model: SymbolicModel) -> VariableLayout:
                               f"a value in the file's [parameters] (or fmugen build --set {v.name}=...)")
         add(name=v.name, value_reference=2 * nx + nu + ny + i, type="Real", causality="parameter",
             variability="fixed", initial="exact", start=v.start, unit=v.unit, description=v.description,
-            nominal=v.nominal, min=v.min, max=v.max, kind="parameter", symbol=v.symbol)
+            nominal=v.nominal, min=physical_range(v)[0], max=v.max, kind="parameter", symbol=v.symbol)
     first_rt = 2 * nx + nu + ny + np_
     for r in runtime_parameters():
         add(name=r.name, value_reference=(first_rt + r.offset) if r.type == "Real" else r.offset, type=r.type,

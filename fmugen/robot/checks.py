@@ -229,3 +229,99 @@ def singular_joint(links: list, modified: bool, payload=None, rtol: float = 1e-1
         if lam[0] <= rtol * lam[-1]:
             return int(np.argmax(np.abs(vec[:, 0]))), q
     return None
+
+
+# --------------------------------------------------------------------------
+# declared units against use: a [parameters] entry with a unit must fit the field
+# --------------------------------------------------------------------------
+class _UnitClash(Exception):
+    pass
+
+
+def _dimension(expr, declared: dict):
+    """The BaseUnit (angles taken as plain numbers) of ``expr`` from the declared units of its
+    symbols, None where it cannot be known -- a symbol without a declared unit, or a number other
+    than +-1 (``2*l**2``: the 2 may be a mass in kg) --; :class:`_UnitClash` for a sum of unlike
+    quantities or a function of a quantity with a unit."""
+    from dataclasses import replace
+
+    from ..fmi.units import BaseUnit
+
+    e = sp.sympify(expr)
+    if e in (sp.S.One, sp.S.NegativeOne) or isinstance(e, sp.NumberSymbol):
+        return BaseUnit()
+    if e.is_Number:  # a number in a robot file is an SI value of whatever unit it needs: unknown
+        return None
+    if e.is_Symbol:
+        return declared.get(e)
+    if e.is_Mul:
+        out = BaseUnit()
+        for a in e.args:
+            d = _dimension(a, declared)
+            if d is None:
+                return None
+            out = out * d
+        return out
+    if e.is_Pow:
+        base, k = e.args
+        d = _dimension(base, declared)
+        if d is None or not k.is_Rational:
+            return None
+        if k.is_Integer:
+            return d ** int(k)
+        exps = {b: getattr(d, b) * k for b in ("kg", "m", "s", "A", "K", "mol", "cd")}
+        if not all(v.is_Integer for v in exps.values()):
+            raise _UnitClash(f"{base} ** {k} has no whole unit ([{_unit_text(d)}] to the power {k})")
+        return replace(BaseUnit(**{b: int(v) for b, v in exps.items()}), factor=float(d.factor) ** float(k))
+    if e.is_Add:
+        dims = [_dimension(a, declared) for a in e.args]
+        known = [(a, d) for a, d in zip(e.args, dims) if d is not None]
+        for (a, d) in known[1:]:
+            if not _same(d, known[0][1]):
+                raise _UnitClash(f"it adds {known[0][0]} [{_unit_text(known[0][1])}] and {a} [{_unit_text(d)}]")
+        return known[0][1] if len(known) == len(dims) else None
+    if isinstance(e, sp.Function):
+        for a in e.args:
+            d = _dimension(a, declared)
+            if d is not None and not _same(d, BaseUnit()):
+                raise _UnitClash(f"the argument of {e.func} is in [{_unit_text(d)}], not a plain number")
+        return BaseUnit()
+    return None
+
+
+def _same(a, b) -> bool:
+    return all(getattr(a, k) == getattr(b, k) for k in ("kg", "m", "s", "A", "K", "mol", "cd")) \
+        and abs(a.factor - b.factor) <= 1e-12 * max(abs(a.factor), abs(b.factor))
+
+
+def _unit_text(d) -> str:
+    parts = [f"{k}{'' if v == 1 else v}" for k in ("kg", "m", "s", "A", "K", "mol", "cd") if (v := getattr(d, k))]
+    text = ".".join(parts) or "1"
+    return text if d.factor == 1 else f"{d.factor:g} {text}"
+
+
+def unit_problem(expr, unit: str, declared_units: dict) -> str | None:
+    """Why ``expr`` (a field in ``unit``) does not fit the units its symbols were declared with
+    (``declared_units``: symbol -> unit text), or None (also when a symbol has no declared unit).
+    Angles count as plain numbers (rad = 1); a declared scale (g, mm, deg) must cancel out, as
+    robot files hold SI values."""
+    from dataclasses import replace
+
+    from ..fmi.units import base_units
+
+    declared = {}
+    for s in sp.sympify(expr).free_symbols:
+        if declared_units.get(s):
+            declared[s] = replace(base_units(declared_units[s]), rad=0)
+    if not declared:
+        return None
+    try:
+        got = _dimension(expr, declared)
+    except _UnitClash as exc:
+        return f"{expr}: the declared units do not fit: {exc}"
+    want = replace(base_units(unit), rad=0)
+    if got is None or _same(got, want):
+        return None
+    names = ", ".join(f"{s} [{declared_units[s]}]" for s in sorted(declared, key=str))
+    return (f"{expr} is in [{_unit_text(got)}] by the declared units ({names}), but this field is in [{unit}]"
+            + (" (robot files hold SI values)" if got.factor != 1 and _same(replace(got, factor=1.0), want) else ""))

@@ -39,6 +39,7 @@ import sympy as sp
 from .checks import (
     RobotFileError,
     singular_joint,
+    unit_problem,
     UnrealisableInertiaWarning,
     check_nonnegative,
     check_symmetric,
@@ -265,6 +266,7 @@ class _Reader:
 
         def number(field, auto, unit, what, angle=False, nonnegative=False):
             expr = self._parse(table[field], loc(field)) if field in table else sp.Integer(0)
+            self._check_unit(expr, unit, loc(field))
             if angle:
                 return snap_angle(expr)
             if nonnegative:
@@ -347,6 +349,9 @@ class _Reader:
             )
         check_symmetric(rows, loc, self.values)
         for r in range(3):
+            for c in range(3):
+                self._check_unit(rows[r][c], "kg.m2", f"{loc}[{r}][{c}]")
+        for r in range(3):
             check_nonnegative(rows[r][r], self.values, f"{loc}[{r}][{r}]", "moment of inertia", "kg m^2")
         J = sp.zeros(3, 3)
         for r, c, axes in PAIRS:
@@ -420,6 +425,7 @@ class _Reader:
         table = self._table(table, "[payload]")
         self._keys(table, PAYLOAD_KEYS, loc)
         mass = self._parse(table["mass"], loc + ": mass")
+        self._check_unit(mass, "kg", loc + ": mass")
         check_nonnegative(mass, self.values, loc + ": mass", "payload mass", "kg")
         mass = self._auto_parameter(mass, "m_L", "kg", "payload mass (point mass on the last link)", loc + ": mass")
         com = self._vector(table["com"], loc + ": com", "rc_L_{}", "m", "payload position, {} in the last link frame")
@@ -460,10 +466,20 @@ class _Reader:
         for k, v in enumerate(value):
             axis = AXES[k]
             expr = self._parse(v, f"{loc}[{k}]")
+            self._check_unit(expr, unit, f"{loc}[{k}]")
             if nonnegative:
                 check_nonnegative(expr, self.values, f"{loc}[{k}]", nonnegative, unit)
             out.append(self._auto_parameter(expr, auto.format(axis), unit, what.format(axis), f"{loc}[{k}]"))
         return tuple(out)
+
+    def _check_unit(self, expr, unit: str, loc: str) -> None:
+        """A field written with declared [parameters] must come out in the field's unit (a mass
+        declared unit = "m" used as a mass is refused)."""
+        declared = {p.symbol: p.unit for p in self.declared.values() if p.unit}
+        if declared and sp.sympify(expr).free_symbols & set(declared):
+            problem = unit_problem(expr, unit, declared)
+            if problem:
+                raise RobotFileError(f"{loc}: {problem}")
 
     def _keys(self, table: dict, spec: dict, loc: str) -> None:
         unknown = [k for k in table if k not in spec]

@@ -373,10 +373,49 @@ class _Reader:
                 used |= sp.sympify(e).free_symbols
         used |= gravity[2].free_symbols
         params = tuple(p for p in self.params.values() if p.symbol in used)
+        self._check_moves_something(out, {p.symbol: p.value for p in params})
         return Robot(
             name=name, convention=JOINTS, links=(), gravity=gravity, parameters=params,
             description=f"{name}: read from a URDF file",  # the file's own text never reaches C or XML
             source=self.file, bodies=tuple(out), frames=tuple(frames), end_frame=out[-1].name)
+
+    def _check_moves_something(self, bodies, values) -> None:
+        """Refuse a joint whose subtree has no mass and no inertia about its axis (M_ii = 0: M singular).
+
+        The diagonal of M by composite rigid bodies at q = 0, numerically: a
+        joint that moves only massless links (a URDF without <inertial> on
+        them) would make the FMU's forward dynamics fail at its first call.
+        """
+        n = len(bodies)
+        num = lambda e: float(sp.sympify(e).xreplace(values))  # noqa: E731
+        comp = [None] * n  # (m, first moment h, inertia about the body origin) of the subtree, body frame
+        for i in range(n - 1, -1, -1):
+            b = bodies[i]
+            m = num(b.mass)
+            c = np.array([num(x) for x in b.com])
+            Ic = np.array([[num(x) for x in row] for row in b.inertia_com])
+            h = m * c
+            I = Ic + m * (c @ c * np.eye(3) - np.outer(c, c))
+            for k in range(i + 1, n):
+                if bodies[k].parent != i:
+                    continue
+                mk, hk, Ik = comp[k]
+                R = np.array([[num(x) for x in row] for row in bodies[k].rotation])
+                p = np.array([num(x) for x in bodies[k].translation])
+                hr = R @ hk
+                m, h = m + mk, h + mk * p + hr
+                I = I + R @ Ik @ R.T + mk * (p @ p * np.eye(3) - np.outer(p, p)) \
+                    + 2 * (p @ hr) * np.eye(3) - np.outer(p, hr) - np.outer(hr, p)
+            comp[i] = (m, h, I)
+        scale = max([abs(c[0]) for c in comp] + [np.abs(c[2]).max() for c in comp] + [1e-300])
+        for i, b in enumerate(bodies):
+            k = np.array([num(x) for x in b.axis])
+            m, h, I = comp[i]
+            mii = k @ I @ k if b.joint == REVOLUTE else m
+            if mii <= 1e-12 * scale:
+                raise self._err(f"joint {b.joint_name!r}", "moves no mass and no inertia about its axis (the links "
+                                "it carries have no <inertial>): the mass matrix is singular; give them inertials "
+                                "or make the joint fixed")
 
     def _joint(self, el, links) -> dict:
         name = self._name(el, "<joint>")
@@ -477,17 +516,26 @@ def _rows(M: sp.Matrix) -> tuple:
 
 
 def _combine(parts) -> tuple:
-    """(mass, com, inertia about the COM) of rigid parts given in one frame (exact, symbolic)."""
-    parts = [(sp.sympify(m), sp.Matrix(c), sp.Matrix(I)) for m, c, I in parts if sp.sympify(m) != 0]
-    if not parts:
-        return _Z, (_Z, _Z, _Z), tuple(tuple(_Z for _ in range(3)) for _ in range(3))
-    if len(parts) == 1:
-        m, c, I = parts[0]
-        return m, tuple(c), tuple(tuple(I.row(r)) for r in range(3))
-    M = sum(m for m, _, _ in parts)
-    com = sum((m * c for m, c, _ in parts), sp.zeros(3, 1)) / M
-    I_tot = sp.zeros(3, 3)
-    for m, c, I in parts:
+    """(mass, com, inertia about the COM) of rigid parts given in one frame (exact, symbolic).
+
+    A part without mass but with inertia (URDF allows it; Pinocchio adds it)
+    adds its inertia and nothing else.
+    """
+    parts = [(sp.sympify(m), sp.Matrix(c), sp.Matrix(I)) for m, c, I in parts]
+    massive = [(m, c, I) for m, c, I in parts if m != 0]
+    extra = sp.zeros(3, 3)
+    for m, _, I in parts:
+        if m == 0:
+            extra += I
+    if not massive:
+        return _Z, (_Z, _Z, _Z), _rows(extra)
+    if len(massive) == 1:
+        m, c, I = massive[0]
+        return m, tuple(c), _rows(I + extra)
+    M = sum(m for m, _, _ in massive)
+    com = sum((m * c for m, c, _ in massive), sp.zeros(3, 1)) / M
+    I_tot = extra
+    for m, c, I in massive:
         d = c - com
         I_tot += I + m * ((d.T * d)[0, 0] * sp.eye(3) - d * d.T)
-    return M, tuple(com), tuple(tuple(I_tot.row(r)) for r in range(3))
+    return M, tuple(com), _rows(I_tot)

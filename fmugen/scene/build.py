@@ -31,7 +31,6 @@ from pathlib import Path
 from typing import Optional
 
 from .. import __version__
-from ..fmi.build import build_fmu, runtime_dir
 from .errors import SceneError
 from .stability import jacobi_hold_limit, stable_step
 
@@ -108,7 +107,9 @@ def cache_dir() -> Path:
 def generator_fingerprint() -> str:
     """Hash of every source file of fmugen and of its C runtime: any change invalidates the cache."""
     h = hashlib.sha256(__version__.encode())
-    roots = [Path(__file__).resolve().parents[1], runtime_dir()]
+    # c_runtime/ next to the package (fmugen.fmi.build.runtime_dir, which is not imported: it loads sympy,
+    # and a run from cached FMUs must start in well under a second)
+    roots = [Path(__file__).resolve().parents[1], Path(__file__).resolve().parents[2] / "c_runtime"]
     for root in roots:
         for p in sorted(root.rglob("*")):
             if p.suffix in (".py", ".c", ".h", ".toml") and "__pycache__" not in p.parts:
@@ -145,8 +146,9 @@ def _factory_digest(ref: str) -> str:
     return _file_digest(origin) if origin and Path(origin).is_file() else ref
 
 
-def _group_key(scene, group: str, prune: bool, x0: dict, u0: dict) -> str:
+def _group_key(scene, group: str, prune: bool, x0: dict, u0: Optional[dict] = None) -> str:
     """Everything that shapes the group's FMU, files by their content (never by their names)."""
+    u0 = u0 or {}
     g = scene.groups[group]
     members = set(g.members)
     parts = {
@@ -258,6 +260,8 @@ def build_scene(scene, out_dir, prune: Optional[bool] = None, progress=None, use
     ``jobs`` at a time (default: the number of cores, at most 4) into a
     staging folder and moved into ``out_dir`` together when all succeeded.
     """
+    from ..fmi.build import build_fmu
+
     progress = progress or Progress()
     prune = scene.spec.prune if prune is None else bool(prune)
     out = Path(out_dir)

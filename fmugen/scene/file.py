@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Optional
 
 from ..components.assembly import COMPONENT_TYPES
+from ..cosim.settings import KEYS as COSIM_SETTING_KEYS, check_table
 from ..errors import read_text_file, toml_problem
 from .errors import SceneError, did_you_mean
 
@@ -26,8 +27,7 @@ ROBOT_KEYS = {"robot", "formulation", "locked", "outputs"}
 FACTORY_KEYS = {"factory", "options", "parameter_set"}
 GROUP_KEYS = {"members", "fmi_type", "solver", "tolerance", "jacobian"}
 SOLVERS = {"dopri5": 1, "rodas3": 2, "rk4": 3}
-COSIM_KEYS = {"scheme", "extrapolation", "step", "adaptive", "tol", "min_step", "max_step", "order",
-              "iterations", "iteration_tol", "input_derivatives"}
+COSIM_KEYS = set(COSIM_SETTING_KEYS)  # one list for every command and the API: fmugen.cosim.settings
 INITIAL_MODES = ("given", "equilibrium")
 
 
@@ -164,8 +164,9 @@ def apply_sets(data: dict, sets: dict, src: str) -> dict:
                              f"'cosim.key' or 'fmus.group.key'")
         if head in ("scene", "cosim"):
             if rest not in (SCENE_KEYS if head == "scene" else COSIM_KEYS):
-                known = SCENE_KEYS if head == "scene" else COSIM_KEYS
-                raise SceneError(f"{src}: --set {name}: no key {rest!r} in [{head}]{did_you_mean(rest, known)}")
+                known = SCENE_KEYS if head == "scene" else COSIM_SETTING_KEYS
+                raise SceneError(f"{src}: --set {name}: no key {rest!r} in [{head}]{did_you_mean(rest, known)}; "
+                                 f"valid keys: {', '.join(known if head == 'cosim' else sorted(known))}")
             data.setdefault(head, {})[rest] = value
         elif head == "fmus":
             group, _, key = rest.partition(".")
@@ -268,6 +269,9 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
         conns.append((s_, t_, f_))
 
     record = _str_list(sc.get("record", []), f"{src}: [scene] record")
+    twice = sorted({r for r in record if record.count(r) > 1})
+    if twice:  # a result table has one column per name: refused here, not after the run
+        raise SceneError(f"{src}: [scene] record lists {', '.join(twice)} more than once")
     exposed = _str_list(sc.get("inputs", []), f"{src}: [scene] inputs")
     connect = sc.get("connect", [])
     if not isinstance(connect, list) or not all(isinstance(c, list) and len(c) == 2 and all(
@@ -300,10 +304,12 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
     if not isinstance(cosim, dict):
         raise SceneError(f"{src}: [cosim] must be a table")
     for k in cosim:
-        if k not in COSIM_KEYS:
-            raise SceneError(f"{src}: [cosim] has unknown key {k!r}{did_you_mean(k, COSIM_KEYS)}")
-        if isinstance(cosim[k], float) and not math.isfinite(cosim[k]):
-            raise SceneError(f"{src}: [cosim] {k} must be finite")
+        if isinstance(cosim[k], (int, float)) and not isinstance(cosim[k], bool):
+            _number(cosim[k], f"{src}: [cosim] {k}")  # finite, and an int within the double range
+    try:  # every key and value checked as every command and the API will read it (unknown keys listed)
+        check_table(cosim, f"{src}: [cosim]")
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
     return SceneSpec(path=path, name=name, description=desc, parameter_set=pset, start=start, stop=stop,
                      step=step, tolerance=tolerance, record=record, initial=initial,
                      prune=sc.get("prune", True), connections=tuple(conns), instances=instances,
@@ -429,7 +435,7 @@ def _group(gname, g, instances, src) -> GroupSpec:
     if fmi_type not in ("cs", "me"):
         raise SceneError(f"{where} fmi_type must be \"cs\" or \"me\", got {fmi_type!r}")
     solver = g.get("solver", "rodas3")
-    if solver not in SOLVERS:
+    if not isinstance(solver, str) or solver not in SOLVERS:  # a table or array is no key (unhashable)
         raise SceneError(f"{where} solver = {solver!r}; choose one of {', '.join(SOLVERS)}")
     tol = g.get("tolerance")
     if tol is not None:

@@ -94,6 +94,10 @@ def add_parser(sub) -> None:
 def command(args) -> int:
     from .run import run_suite
 
+    from .. import arguments
+
+    arguments.output_folder(args.out, "--out", inputs=[args.file])  # before any case runs
+    arguments.count(args.repeat, "--repeat", 1, 1000)
     sets = parse_sets(args.set)
     if sets and not args.file:
         raise ValueError("fmugen suite --set applies to a FILE.toml run; the named cases fix their own values")

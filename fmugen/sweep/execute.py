@@ -155,6 +155,70 @@ def start_client(scheduler: Optional[str] = None, workers: Optional[int] = None,
     return Client(cluster), cluster
 
 
+#: how long a sweep waits for a Dask scheduler to answer, at most [s]
+SCHEDULER_TIMEOUT = 10.0
+
+
+def probe_scheduler(address: str, timeout: float = SCHEDULER_TIMEOUT) -> None:
+    """Refuse (before anything is written) a scheduler address that does not answer as a Dask
+    scheduler within ``timeout``: nothing listening, a host that drops packets, a server that
+    says nothing (an HTTP server waits for a request) or sends what is not a Dask handshake
+    (whose first 8 bytes are its length, a few hundred bytes).  ``tcp://`` addresses (and bare
+    ``host:port``) are probed; other transports are left to Dask, with its own timeout."""
+    import socket
+    import struct
+
+    text = str(address).strip()
+    proto, _, rest = text.rpartition("://")
+    if proto not in ("", "tcp"):
+        return
+    host, _, port = rest.rpartition(":")
+    host = host.strip("[]")
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise SweepError(f"--scheduler {address!r}: expected tcp://HOST:PORT, e.g. tcp://10.0.0.5:8786")
+    try:
+        with socket.create_connection((host, int(port)), timeout=timeout) as sock:
+            sock.settimeout(timeout)
+            head = b""
+            while len(head) < 8:
+                chunk = sock.recv(8 - len(head))
+                if not chunk:
+                    break
+                head += chunk
+    except socket.timeout:
+        raise SweepError(f"--scheduler {address}: no answer within {timeout:g} s (not a Dask scheduler, or "
+                         f"unreachable)") from None
+    except OSError as exc:
+        raise SweepError(f"--scheduler {address}: cannot reach the Dask scheduler "
+                         f"({exc.strerror or exc})") from None
+    size = struct.unpack("<Q", head)[0] if len(head) == 8 else 0
+    if not 0 < size <= 2**20:
+        raise SweepError(f"--scheduler {address}: answered, but not as a Dask scheduler (its first message "
+                         f"announces {size} bytes)")
+
+
+def _check_run_options(opts: dict, scene=None) -> None:
+    """The co-simulation settings a sweep runs every point with, checked once before any build or run."""
+    from ..cosim.errors import CosimError
+    from ..cosim.master import check_choices
+
+    try:
+        if "scheme" in opts or "extrapolation" in opts or scene is not None:
+            check_choices(opts.get("scheme", "gauss-seidel"), opts.get("extrapolation", "hold"))
+    except CosimError as exc:
+        raise SweepError(f"--scheme/--extrapolation: {exc}") from None
+    step = opts.get("step")
+    if step is not None:
+        from .. import arguments
+
+        h = arguments.positive(step, "--step", "a positive macro step [s]")
+        if scene is not None:
+            from ..scene.file import check_time_grid
+
+            check_time_grid(scene.spec.start, scene.spec.stop, min(h, scene.spec.stop - scene.spec.start),
+                            "--step:")
+
+
 def _manifest(scene_path, sets, names, points_spec, options, wanted, band) -> dict:
     import hashlib
 
@@ -203,8 +267,16 @@ def sweep(scene, grid=None, sample=None, n: Optional[int] = None, seed: Optional
     names = tuple(g) + tuple(s)
     if not (isinstance(band, (int, float)) and 0 < band < 1):
         raise SweepError(f"--band: {band!r} must lie between 0 and 1")
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    # every argument before anything is written: workers, scheme, the scheduler's answer
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise SweepError(f"--workers {workers!r}: a number of worker processes >= 1 (leave it out for one "
+                         f"per core)")
+    _check_run_options(options or {})
+    if scheduler and client is None:
+        probe_scheduler(scheduler)
+    from .. import arguments
+
+    out = arguments.output_folder(out, "--out", inputs=[scene])
     show = sys.stderr.isatty() if progress is None else bool(progress)
     say = (lambda t: print(t, file=sys.stderr, flush=True)) if show else (lambda t: None)
     try:
@@ -213,10 +285,12 @@ def sweep(scene, grid=None, sample=None, n: Optional[int] = None, seed: Optional
         raise SweepError(str(exc)) from None
     # everything that can be refused is refused before the build
     opts = run_options(plan.scene.spec.cosim, options)
+    _check_run_options(opts, plan.scene)
     wanted = _metrics.parse_metrics(metrics, plan.columns)
     mnames = tuple(_metrics.metric_names(wanted))
     spec = {"grid": {k: list(v) for k, v in g.items()}, "sample": {k: str(d) for k, d in s.items()},
             "n": n, "seed": seed}
+    out.mkdir(parents=True, exist_ok=True)  # the first thing written, after every check
     _check_manifest(out / "sweep.json", _manifest(scene, sets, names, spec, opts, wanted, band))
     say(f"sweep: {len(points)} point{'s' if len(points) != 1 else ''} over {', '.join(names)}; "
         f"building the FMUs once")

@@ -43,6 +43,9 @@ DISTRIBUTIONS = {
     "triangular": (("low", "mode", "high"), lambda rng, a, n: rng.triangular(a[0], a[1], a[2], n)),
 }
 
+#: most points one sweep may have (each is a co-simulation run and a row of the table)
+MAX_POINTS = 1_000_000
+
 # a parameter name as the scene writes it: instance.parameter (an element index allowed, arm.q[2])
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*\.[A-Za-z_][A-Za-z0-9_]*(\[[0-9]+\])?$")
 _DIST = re.compile(r"^([a-z]+)\((.*)\)$")
@@ -204,6 +207,13 @@ def make_points(grid: Optional[dict] = None, samples: Optional[dict] = None, n: 
     both = set(grid) & set(samples)
     if both:
         raise SweepError(f"{', '.join(sorted(both))}: given both as --grid and --sample")
+    total = math.prod(len(v) for v in grid.values()) if grid else 1
+    if samples and n is not None and not isinstance(n, bool) and isinstance(n, (int, float)) and n >= 1:
+        total *= int(n)
+    if total > MAX_POINTS:  # estimated before a single point is made: the product would not fit in memory
+        sizes = " x ".join([str(len(v)) for v in grid.values()] + ([f"{int(n)} samples"] if samples else []))
+        raise SweepError(f"--grid/--sample: {sizes} = {total:.3g} points, more than {MAX_POINTS:.0e}; "
+                         f"split the study or use fewer values")
     rows = [dict(zip(grid, combo)) for combo in itertools.product(*grid.values())] if grid else [{}]
     if samples:
         if n is None or isinstance(n, bool) or int(n) != n or n < 1:

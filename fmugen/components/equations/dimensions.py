@@ -75,6 +75,27 @@ def scale(a: Dim, k: Fraction) -> Dim:
     return ANY if a is ANY else tuple(x * k for x in a)
 
 
+class _Unparser(ast._Unparser):
+    """ast.unparse, with a conditional written the way the file writes it (``if C then A else B``)."""
+
+    def visit_IfExp(self, node):
+        with self.require_parens(ast._Precedence.TEST, node):
+            self.write("if ")
+            self.traverse(node.test)
+            self.write(" then ")
+            self.traverse(node.body)
+            self.write(" else ")
+            self.traverse(node.orelse)
+
+
+def unparse(node) -> str:
+    """A sub-expression as text for messages (from the tree: the file's spacing is not kept)."""
+    try:
+        return _Unparser().visit(node)
+    except Exception:  # a private helper of the standard library: never let a message fail
+        return ast.unparse(node)
+
+
 class Checker:
     """Dimensions of the nodes of one equation's tree.
 
@@ -88,7 +109,7 @@ class Checker:
         self.constant_value = constant_value
 
     def src(self, node) -> str:
-        return ast.get_source_segment(self.text, node) or ast.unparse(node)
+        return unparse(node)
 
     def fail(self, node, msg) -> None:
         raise DimensionError(f"{msg} (in {self.src(node)!r})")
