@@ -12,16 +12,42 @@ from __future__ import annotations
 
 __version__ = "0.1.0"
 
-from .dynamics.manipulator import FORMULATIONS, Manipulator  # noqa: E402
+# Nothing heavy is imported here: ``fmugen --help`` and a run from cached FMUs must
+# start in well under a second, and sympy, scipy and python-control take seconds.
+# The names below are loaded on first use (PEP 562 module ``__getattr__``).
+_LAZY = {
+    "Manipulator": ("fmugen.dynamics.manipulator", "Manipulator"),
+    "FORMULATIONS": ("fmugen.dynamics.manipulator", "FORMULATIONS"),
+    "ModelEvaluator": ("fmugen.codegen.evaluate", "ModelEvaluator"),
+    "linearize": ("fmugen.control", "linearize"),  # operating points and A, B, C, D for python-control
+    "trim": ("fmugen.control", "trim"),
+    "load_component": ("fmugen.components.equations", "load_component"),  # a component file -> SymbolicModel
+}
 
 
-def load_robot(path, formulation: str = "newton_euler") -> Manipulator:
+def __getattr__(name):
+    if name in _LAZY:
+        import importlib
+
+        module, attr = _LAZY[name]
+        value = getattr(importlib.import_module(module), attr)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'fmugen' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(list(globals()) + list(_LAZY))
+
+
+def load_robot(path, formulation: str = "newton_euler") -> "Manipulator":
     """Read a robot file (TOML) and return its :class:`Manipulator`.
 
     ``formulation`` chooses the default derivation: "newton_euler" (DYNAMAN's
     nested bodies) or "lagrange" (the thesis's recursive Lagrange); every
     numeric evaluator also takes ``formulation=`` per call.
     """
+    from .dynamics.manipulator import Manipulator
     from .robot.loader import load_robot_description
 
     return Manipulator(load_robot_description(path), formulation)
@@ -54,8 +80,5 @@ def build_fmu(model, output_path, fmi_type: str = "both", **options):
 
     return _build(model, output_path, fmi_type=fmi_type, **options)
 
-
-from .codegen.evaluate import ModelEvaluator  # noqa: E402
-from .control import linearize, trim  # noqa: E402  (operating points and A, B, C, D for python-control)
 
 __all__ = ["load_robot", "load_scene", "load_system", "build_fmu", "linearize", "trim", "ModelEvaluator", "Manipulator", "FORMULATIONS", "__version__"]

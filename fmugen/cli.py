@@ -99,12 +99,12 @@ def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler", mo
         from .values import as_number, check_model_values, robot_value_problem
 
         sets = {k: as_number(v, f"{path}: --set {k}") for k, v in sets.items()}
-        check_model_values(m, sets, lambda k: f"{path}: --set {k}")  # the checks file values get
-        if kind == "robot":
+        if kind == "robot":  # the robot file's checks, with the link and quantity named
             params = {p.name for p in m.parameters}
             problem = robot_value_problem(arm.robot, {k: v for k, v in sets.items() if k in params})
             if problem:
                 raise SceneError(f"{path}: --set: {problem}")
+        check_model_values(m, sets, lambda k: f"{path}: --set {k}")  # the checks file values get
         m = m.with_starts(sets)
     return m
 
@@ -123,8 +123,17 @@ def _cmd_export_urdf(args) -> int:
     from .robot.urdf_export import robot_to_urdf
     from .scene import parse_sets
 
+    from .arguments import output_file
+    from .values import robot_value_problem
+
+    output_file(args.output, "-o", inputs=[args.robot])  # never over its own input
     robot = load_robot_description(args.robot)
-    text = robot_to_urdf(robot, parse_sets(args.set) or None)
+    sets = parse_sets(args.set)
+    problem = robot_value_problem(robot, {k: v for k, v in sets.items()
+                                          if k in {p.name for p in robot.parameters}})
+    if problem:
+        raise ValueError(f"{args.robot}: --set: {problem}")
+    text = robot_to_urdf(robot, sets or None)
     Path(args.output).write_text(text)
     print(f"wrote {args.output}: {robot.n} joints, {len(robot.frames)} frames")
     return 0
@@ -227,10 +236,34 @@ def _cmd_info(args) -> int:
     return 0
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="fmugen", description=__doc__.split("\n")[0])
-    sub = parser.add_subparsers(dest="command", required=True)
+#: subcommand -> (its line in ``fmugen --help``, "module:function" that registers its full parser).
+#: Only the command being run is registered in full: its module (and what that imports: sympy,
+#: numpy, fmpy, dask) is loaded only then, so ``fmugen --help`` starts in well under a second.
+COMMANDS = {
+    "equations": ("print the final equations of motion of a robot", "fmugen.cli:_add_own_commands"),
+    "build": ("derive, generate, compile and zip an FMI 2.0 FMU", "fmugen.cli:_add_own_commands"),
+    "info": ("list the variables a file's model will have", "fmugen.cli:_add_own_commands"),
+    "export-urdf": ("write a robot (TOML or URDF) as a URDF file, parameters at their values",
+                    "fmugen.cli:_add_own_commands"),
+    "suite": ("stiff and extreme cases through every CS solver: accurate / detected / silent failure, "
+              "table + CSV + plots", "fmugen.suite.cli:add_parser"),
+    "linearize": ("trim and linearise a robot, assembly or scene (A, B, C, D into .npz)",
+                  "fmugen.control.cli:add_parser"),
+    "sweep": ("run a scene over a parameter grid or Monte-Carlo sample (Dask)", "fmugen.sweep.cli:add_parser"),
+    "ssp": ("write a scene as an SSP 1.0 archive (FMUs, connections, parameters, units, default experiment) that "
+            "other FMI masters run", "fmugen.ssp.cli:add_parser"),
+    "cosim": ("co-simulate a scene's FMUs (results.csv, .npz, plot, summary)",
+              "fmugen.cosim.commands:add_cosim_commands"),
+    "reference": ("solve a scene as one model with Radau at 1e-12 (reference.csv, plot)",
+                  "fmugen.cosim.commands:add_cosim_commands"),
+    "report": ("error against wall time over schemes and macro steps", "fmugen.cosim.commands:add_cosim_commands"),
+    "size": ("propose an actuator parameter set per joint of an arm (hydraulic or electric)",
+             "fmugen.components.arm_sizing:add_parser"),
+}
 
+
+def _add_own_commands(sub) -> None:
+    """``equations``, ``build`` and ``info``: defined in this module."""
     p = sub.add_parser("equations", help="print the final equations of motion of a robot")
     p.add_argument("robot")
     p.add_argument("--latex", action="store_true", help="LaTeX instead of plain text")
@@ -279,30 +312,26 @@ def main(argv=None) -> int:
                    help="scenes: allow instances made by a Python factory (runs code named in the file)")
     p.set_defaults(func=_cmd_info)
 
-    from .suite.cli import add_parser as add_suite_parser  # fmugen suite: stiff and extreme cases
 
-    add_suite_parser(sub)
+def _parser(argv) -> argparse.ArgumentParser:
+    """The ``fmugen`` parser: the command named in ``argv`` in full, the others as one-line stubs."""
+    import importlib
 
-    from .control.cli import add_parser as add_linearize_parser  # fmugen linearize: trim, A B C D
+    parser = argparse.ArgumentParser(prog="fmugen", description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    chosen = next((a for a in argv if not a.startswith("-")), None)
+    if chosen in COMMANDS:
+        module, _, func = COMMANDS[chosen][1].partition(":")
+        getattr(importlib.import_module(module), func)(sub)
+    for name, (text, _) in COMMANDS.items():
+        if name not in sub.choices:
+            sub.add_parser(name, help=text, add_help=False)
+    return parser
 
-    add_linearize_parser(sub)
 
-    from .sweep.cli import add_parser as add_sweep_parser  # fmugen sweep: parameter studies on Dask
-
-    add_sweep_parser(sub)
-
-    from .ssp.cli import add_parser as add_ssp_parser  # fmugen ssp: a scene as an SSP archive (fmugen/ssp)
-
-    add_ssp_parser(sub)
-
-    from .cosim.commands import add_cosim_commands  # fmugen cosim | reference | report: fmugen/cosim
-
-    add_cosim_commands(sub)
-
-    from .components.arm_sizing import add_parser as add_size_parser  # fmugen size: actuator sets per joint
-
-    add_size_parser(sub)
-
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = _parser(argv)
     args = parser.parse_args(argv)
     try:
         return args.func(args)

@@ -58,6 +58,7 @@ def test_an_output_path_is_never_an_input_a_folder_for_a_file_or_a_file_for_a_fo
     assert "names a folder" in _refused(capsys, "build", SPLIT, "-o", robot)
     assert "input file" in _refused(capsys, "linearize", robot, "--out", robot, *sets)
     assert "names a folder" in _refused(capsys, "cosim", SPLIT, "--out", robot)
+    assert "input file" in _refused(capsys, "export-urdf", robot, "-o", robot)
     assert robot.read_bytes() == HORN.read_bytes()
 
 

@@ -45,13 +45,17 @@ def add_cosim_commands(subparsers) -> None:
                    "(default: the scene's [cosim] scheme, else gauss-seidel)")
     p.add_argument("--extrapolation", default=None, help="hold | linear | quadratic | cubic (cubic: iterative and "
                    "newton only; default: the scene's, else linear)")
-    p.add_argument("--step", type=float, default=None, help="macro step H [s] (default: the scene's step)")
-    p.add_argument("--adaptive", action="store_true", help="control H by the interface defect (with --tol)")
-    p.add_argument("--tol", type=float, default=1e-4, help="adaptive: tolerance relative to each coupled signal")
-    p.add_argument("--workers", type=int, default=1, help=WORKERS_HELP)
+    p.add_argument("--step", type=float, default=None, help="macro step H [s] (default: the scene's [cosim] "
+                   "step, else its [scene] step)")
+    p.add_argument("--adaptive", action="store_true", default=None,
+                   help="control H by the interface defect (with --tol)")
+    p.add_argument("--tol", type=float, default=None, help="adaptive: tolerance relative to each coupled signal "
+                   "(default: the scene's, else 1e-4)")
+    _run_flags(p)
     p.set_defaults(func=cmd_cosim)
 
-    p = subparsers.add_parser("reference", help="solve a scene as one model with Radau at 1e-12 (reference.csv)")
+    p = subparsers.add_parser("reference", help="solve a scene as one model with Radau at 1e-12 (reference.csv, "
+                              "plot)")
     _common(p)
     p.add_argument("--points", default=2001, help="points of the uniform output grid (>= 1001; at most 1e7)")
     p.set_defaults(func=cmd_reference)
@@ -65,14 +69,26 @@ def add_cosim_commands(subparsers) -> None:
     p.add_argument("--repeats", type=int, default=5, help="timed runs per setting after a warm-up (median)")
     p.add_argument("--target", type=float, default=1e-4, help="error target for the coarsest-setting summary")
     p.add_argument("--no-monolithic", action="store_true", help="leave out the monolithic FMU row")
-    p.add_argument("--workers", type=int, default=1, help=WORKERS_HELP)
+    _run_flags(p)
     p.add_argument("--internal", default=None, help="comma-separated internal solver:tolerance pairs to sweep "
                    "as well, e.g. rodas3:1e-10,dopri5:1e-8 (default: the scene's)")
     p.set_defaults(func=cmd_report)
 
 
 WORKERS_HELP = ("threads that step the FMUs side by side under jacobi, iterative and newton, when a sweep of "
-                "them costs more than 0.5 ms (default 1; results are identical)")
+                "them costs more than 0.5 ms (default: the scene's [cosim] workers, else 1; results are identical)")
+
+
+def _run_flags(p) -> None:
+    """Flags of run settings shared by ``cosim`` and ``report`` (fmugen.cosim.settings: file < --set < flag)."""
+    p.add_argument("--workers", type=int, default=None, help=WORKERS_HELP)
+    p.add_argument("--coupling-tol", type=float, default=None, help="iterative, newton: the coupled values "
+                   "converge to this, relative to each signal (default: the scene's [cosim] coupling_tol, else "
+                   "the master's)")
+    p.add_argument("--iterations", type=int, default=None, help="iterative, newton: most iterations per macro "
+                   "step (default: the scene's [cosim] iterations, else the master's)")
+    p.add_argument("--no-divergence-check", dest="detect_divergence", action="store_false", default=None,
+                   help="do not stop a run whose coupling the master judges divergent")
 
 
 def _check_args(args, scene) -> None:
@@ -106,34 +122,50 @@ def _check_args(args, scene) -> None:
         args.repeats = a.count(args.repeats, "--repeats", 1, 1000)
 
 
-def _check_workers(n) -> None:
-    if n < 1:
-        from .errors import CosimError
+def _flags(args) -> dict:
+    """The run settings given on the command line (None: not given)."""
+    return {"scheme": getattr(args, "scheme", None), "extrapolation": getattr(args, "extrapolation", None),
+            "step": getattr(args, "step", None), "stop": args.stop, "adaptive": getattr(args, "adaptive", None),
+            "tol": getattr(args, "tol", None), "workers": args.workers, "coupling_tol": args.coupling_tol,
+            "iterations": args.iterations, "detect_divergence": args.detect_divergence}
 
-        raise CosimError(f"--workers must be >= 1, not {n}")
 
+def _plot(result, path, title, units=None) -> None:
+    """One panel per physical unit (every column in it, labelled), or per column when units are unknown.
 
-def _plot(result, path, title) -> None:
+    A dozen panels of their own took seconds to draw; a panel per unit shows the same curves and
+    compares like with like (the six joint angles together)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    n = len(result.columns)
-    fig, axes = plt.subplots(n, 1, figsize=(8, 1.8 * n + 1), sharex=True, squeeze=False)
-    for ax, c in zip(axes[:, 0], result.columns):
-        ax.plot(result.time, result[c], lw=1)
-        ax.set_ylabel(c, fontsize=8)
+    panels = {}
+    for c in result.columns:
+        panels.setdefault((units or {}).get(c) or c if units else c, []).append(c)
+    n = len(panels)
+    height = 2.6 * n + 1 if units else 1.8 * n + 1
+    fig, axes = plt.subplots(n, 1, figsize=(8, height), sharex=True, squeeze=False)
+    for ax, (unit, cols) in zip(axes[:, 0], panels.items()):
+        for c in cols:
+            ax.plot(result.time, result[c], lw=1, label=c)
+        ax.set_ylabel(f"[{unit}]" if units and unit not in cols else cols[0], fontsize=8)
+        if units and len(cols) > 1:
+            ax.legend(fontsize=7, ncol=min(len(cols), 6), loc="best")
+        ax.tick_params(labelsize=7)
         ax.grid(True, alpha=0.3)
     axes[-1, 0].set_xlabel("time [s]")
     axes[0, 0].set_title(title, fontsize=9)
-    fig.tight_layout()
+    # fixed margins: tight_layout measures every tick label of every axis (seconds for a dozen panels)
+    fig.subplots_adjust(left=0.14, right=0.98, top=1 - 0.45 / height, bottom=0.55 / height, hspace=0.15)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
-def write_results(result, out_dir) -> dict:
-    """results.csv, results.npz, results.png and summary.txt (also after a failure)."""
+def write_results(result, out_dir, units=None) -> dict:
+    """results.csv, results.npz, results.png and summary.txt (also after a failure).
+
+    ``units``: column -> physical unit (the plot draws one panel per unit)."""
     import numpy as np
 
     out = Path(out_dir)
@@ -146,34 +178,43 @@ def write_results(result, out_dir) -> dict:
     paths["summary"].write_text(str(result.summary) + "\n")
     if len(result.time) > 1:
         s = result.summary
-        _plot(result, paths["plot"], f"{s.system}: {s.scheme}/{s.extrapolation}, {s.status}")
+        _plot(result, paths["plot"], f"{s.system}: {s.scheme}/{s.extrapolation}, {s.status}", units)
     return paths
 
 
 def cmd_cosim(args) -> int:
     from ..ssp import is_ssp
-    from .master import check_choices, run
+    from .master import run
+    from .settings import resolve, resolve_file
 
+    cached = None
     if is_ssp(args.scene):  # an SSP archive: its system as written (fmugen/ssp)
         from ..ssp.cli import scene_like, system_from_args
 
         scene, system = None, system_from_args(args)
         _check_args(args, scene_like(system))
-        st = dict(system.settings)
+        resolve(system.settings, **_flags(args))
     else:
-        scene = _load(args)
+        from ..scene.analysis_cache import cached_analysis
+
+        # the scene's analysis from its cache when nothing changed (nothing derived: simulating starts
+        # within a second), else the scene analysed now
+        cached = cached_analysis(args.scene, args.set, getattr(args, "allow_factories", False))
+        scene = cached.scene if cached is not None else _load(args)
         _check_args(args, scene)
-        st = dict(scene.spec.cosim or {})
-    # the choices are checked before anything is built or written
-    scheme, ext = check_choices(args.scheme or st.get("scheme", "gauss-seidel"),
-                                args.extrapolation or st.get("extrapolation", "linear"))
-    _check_workers(args.workers)
+        # every run setting checked before anything is built or written: the file's [cosim], --set, the flags
+        resolve_file(args.scene, args.set, **_flags(args))
     out = Path(args.out)
     if scene is not None:
-        system = scene.build(out / "fmus").system
-    result = run(system, scheme, ext, step=args.step, adaptive=args.adaptive, tol=args.tol, stop=args.stop,
-                 workers=args.workers)
-    paths = write_results(result, out)
+        from ..scene.analysis_cache import build_scene_cached
+
+        built = cached.materialise(out / "fmus") if cached is not None else None
+        if built is None:
+            built = build_scene_cached(args.scene, out / "fmus", sets=args.set, scene=scene,
+                                       allow_factories=getattr(args, "allow_factories", False))
+        system = built.system
+    result = run(system, **_flags(args))  # the scene's [cosim] (with --set), then the flags
+    paths = write_results(result, out, {r.column: r.physical_unit for r in system.recorded})
     print(result.summary)
     if scene is not None and scene.spec.bonds:  # power and energy per bond of the scene's connect (those recorded)
         from ..scene.bonds import bond_lines
@@ -212,6 +253,10 @@ def cmd_reference(args) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     write_reference_csv(ref, out / "reference.csv")
+    m = p.model
+    units = {v.name: v.unit for v in (*m.states, *m.outputs)}
+    _plot(ref, out / "reference.png", f"{scene.name}: reference ({ref.settings['method']} rtol "
+          f"{ref.settings['rtol']:g}; error estimate {max(ref.error):.2g})", units)
     lines = [f"{scene.name}: reference, {ref.settings['method']} rtol {ref.settings['rtol']:g}, "
              f"atol {ref.settings['atol']}, {ref.settings['steps']} steps" + (" (cached)" if ref.cached else ""),
              "confirmed by: " + "; ".join(ref.settings["confirm"]),
@@ -223,7 +268,7 @@ def cmd_reference(args) -> int:
         lines += bond_lines(scene.spec.bonds, ref.time, ref.__getitem__)
     (out / "reference.txt").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
-    print(f"wrote {out / 'reference.csv'}")
+    print(f"wrote {out / 'reference.csv'}, {out / 'reference.txt'}, {out / 'reference.png'}")
     return 0
 
 
@@ -232,9 +277,9 @@ def cmd_report(args) -> int:
 
     from .master import check_choices
     from .report import DEFAULT_SCHEMES, make_report, write_report
-    from .system import CosimSystem, Recorded, Unit
-
     from ..ssp import is_ssp
+    from .settings import resolve_file
+    from .system import CosimSystem, Recorded, Unit
 
     if is_ssp(args.scene):  # no symbolic model: a self-convergence reference (fmugen/ssp/report.py)
         from ..ssp.report import cmd_report_ssp
@@ -245,7 +290,8 @@ def cmd_report(args) -> int:
     schemes = [tuple(s.split("/", 1)) if "/" in s else (s, "hold") for s in args.schemes.split(",")] \
         if args.schemes else DEFAULT_SCHEMES
     schemes = [check_choices(*sc) for sc in schemes]  # before anything is built or written
-    _check_workers(args.workers)
+    # the other run settings: the scene's [cosim] (with --set), then the flags; schemes and steps are the grid
+    settings = resolve_file(args.scene, args.set, **_flags(args))
     internal = []
     for item in (args.internal.split(",") if args.internal else []):
         meth, _, tl = item.partition(":")
@@ -255,7 +301,7 @@ def cmd_report(args) -> int:
     out = Path(args.out)
     built = scene.build(out / "fmus")
     system = built.system
-    H = float(system.step)
+    H = float(settings.step or system.step)  # the scene's [cosim] step, else its [scene] step
     steps = [float(h) for h in args.steps.split(",")] if args.steps else [8 * H, 4 * H, 2 * H, H, H / 2]  # checked
     problem = scene.reference_problem()
     extra = []
@@ -273,8 +319,7 @@ def cmd_report(args) -> int:
         extra.append(("monolithic FMU", CosimSystem(system.name + "_monolithic", (unit,), (), rec,
                                                      system.start_time, system.stop_time, system.step)))
     rep = make_report(system, problem, steps, schemes, repeats=args.repeats, target=args.target, extra_rows=extra,
-                      workers=args.workers,
-                      stop=args.stop, progress=lambda s: print("  " + s, file=sys.stderr, flush=True),
+                      settings=settings, stop=args.stop, progress=lambda s: print("  " + s, file=sys.stderr, flush=True),
                       internal=internal)
     paths = write_report(rep, out)
     print(rep.table())

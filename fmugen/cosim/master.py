@@ -92,11 +92,12 @@ def _land(t, H, stop):
 class _Recording:
     """The recorded columns at every accepted communication point (grown by doubling)."""
 
-    def __init__(self, cap, Y, idx):
+    def __init__(self, cap, Y, idx, slopes=None):
         self.T = np.empty(cap)
         self.V = np.empty((cap, len(idx)))
         self.n = 0
         self.Y, self.idx = Y, idx
+        self.slopes = slopes  # dense output: fmugen.cosim.dense.SlopeRecorder, or None
 
     def append(self, t) -> None:
         if self.n == len(self.T):
@@ -105,6 +106,8 @@ class _Recording:
         self.T[self.n] = t
         self.Y.take(self.idx, out=self.V[self.n])  # the method: np.take's wrapper costs as much
         self.n += 1
+        if self.slopes is not None:
+            self.slopes.append()
 
 
 class Master:
@@ -354,7 +357,8 @@ class Master:
     # -- the run ----------------------------------------------------------------
     def run(self, step: Optional[float] = None, stop: Optional[float] = None, adaptive: bool = False,
             tol: float = 1e-4, min_step: Optional[float] = None, max_step: Optional[float] = None,
-            coupling_tol: float = 1e-8, max_iterations: int = 30, detect_divergence: bool = True) -> CosimResult:
+            coupling_tol: float = 1e-8, max_iterations: int = 30, detect_divergence: bool = True,
+            dense: bool = False) -> CosimResult:
         sysm = self.system
         t0 = float(sysm.start_time)
         stop = float(sysm.stop_time if stop is None else stop)
@@ -379,7 +383,12 @@ class Master:
         Unew, d, scale = np.zeros(max(nu, 1)), np.zeros(max(nu, 1)), np.zeros(max(nu, 1))
         Unew_v, d_v, Uset_v = Unew[:nu], d[:nu], self.Uset[:nu]
         cap = int(min(max((stop - t0) / Hmin, 16), 1_000_000)) + 2 if not adaptive else 1024
-        rec = _Recording(cap, self.Y, self.rec_idx)
+        slopes = None
+        if dense:  # the recorded columns' slopes too, for dense output (fmugen.cosim.dense)
+            from .dense import SlopeRecorder
+
+            slopes = SlopeRecorder(self.units, sysm.recorded)
+        rec = _Recording(cap, self.Y, self.rec_idx, slopes)
         wall0 = _time.perf_counter()
         if adaptive or implicit:  # both repeat macro steps from saved FMU states
             self._check_states(adaptive)
@@ -505,7 +514,8 @@ class Master:
             summ.failure = failure
         if summ.macro_steps == 0:
             summ.step_min = summ.step_max = 0.0
-        return CosimResult(rec.T[: rec.n].copy(), rec.V[: rec.n].copy(), self.columns, summ)
+        return CosimResult(rec.T[: rec.n].copy(), rec.V[: rec.n].copy(), self.columns, summ,
+                           slopes.slopes() if slopes is not None else None)
 
     # -- the pieces of a run ------------------------------------------------------
     def _prepare(self, adaptive, coupling_tol, max_iterations):
@@ -627,11 +637,14 @@ class Master:
 
 
 
-def run(system, scheme: str = "gauss-seidel", extrapolation: str = "hold", step: Optional[float] = None,
-        adaptive: bool = False, tol: float = 1e-4, stop: Optional[float] = None,
-        order: Optional[Sequence[str]] = None, workers: int = 1, **options) -> CosimResult:
-    """Co-simulate ``system`` (a :class:`CosimSystem`, or a scene: it is built into a temporary folder).
+def run(system, scheme: Optional[str] = None, extrapolation: Optional[str] = None, step: Optional[float] = None,
+        adaptive: Optional[bool] = None, tol: Optional[float] = None, stop: Optional[float] = None,
+        order: Optional[Sequence[str]] = None, workers: Optional[int] = None, **options) -> CosimResult:
+    """Co-simulate ``system``: a :class:`CosimSystem`, a built scene (``scene.build(...)``) or a scene
+    (built into a temporary folder).
 
+    Every setting not given here is the scene's (its ``[cosim]`` table, ``system.settings``), else the
+    default (:mod:`fmugen.cosim.settings`: gauss-seidel, linear): the same resolution as ``fmugen cosim``.
     scheme: ``jacobi`` | ``gauss-seidel`` | ``iterative`` | ``newton``;
     extrapolation: ``hold`` | ``linear`` | ``quadratic`` | ``cubic`` (iterated
     schemes only); step: macro step H [s] (default ``system.step``); adaptive:
@@ -642,15 +655,21 @@ def run(system, scheme: str = "gauss-seidel", extrapolation: str = "hold", step:
     to one thread; worth it when a macro step costs well above the ~50 us a
     thread hand-over costs).  Further options: ``min_step``, ``max_step``,
     ``coupling_tol`` (iterative, newton), ``max_iterations``,
-    ``detect_divergence``.
+    ``detect_divergence``, ``dense`` (slopes for dense output, :mod:`fmugen.cosim.dense`).
 
     Returns a :class:`CosimResult` (``time``, ``values`` per column,
     ``summary``); a run that fails returns its values up to the failure and
     ``summary.failure``.
     """
-    if not isinstance(system, CosimSystem) and hasattr(system, "build"):
+    from .settings import resolve
+
+    if not isinstance(system, CosimSystem) and isinstance(getattr(system, "system", None), CosimSystem):
+        system = system.system  # a built scene
+    elif not isinstance(system, CosimSystem) and hasattr(system, "build"):
         import tempfile
 
         system = system.build(tempfile.mkdtemp(prefix="fmugen_scene_")).system
-    with Master(system, scheme, extrapolation, order=order, workers=workers) as m:
-        return m.run(step=step, stop=stop, adaptive=adaptive, tol=tol, **options)
+    settings = resolve(getattr(system, "settings", None), scheme=scheme, extrapolation=extrapolation, step=step,
+                       adaptive=adaptive, tol=tol, stop=stop, order=order, workers=workers, **options)
+    with Master(system, **settings.master_keywords()) as m:
+        return m.run(**settings.run_keywords())

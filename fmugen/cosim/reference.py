@@ -18,11 +18,18 @@ quote co-simulation errors closer than 100x to it.
 
 Values are those of the solvers' dense output at the requested times
 (Radau's collocation polynomial), so the estimate covers the interpolation
-as well.  Solutions are cached on disk (``~/.cache/fmugen/reference`` or
-``$FMUGEN_CACHE``), keyed by a hash of the model's equations, parameter values,
-x0, u, times and settings; an entry holds its key and a sha256 of its arrays,
-and is served only when both match (a truncated, swapped or edited file is
-solved again).
+as well: it is the largest difference over every step point of the main
+solve, their midpoints and the requested times.
+
+Solutions are cached on disk (``~/.cache/fmugen/reference`` or
+``$FMUGEN_CACHE``) **independently of the output grid**: what is stored is the
+main solve's dense output (per Radau step: its start, length, start value and
+collocation coefficients) with the error estimate, keyed by a hash of the
+model's equations, parameter values, x0, u, the time span and the settings.
+Another grid over the same problem is evaluated from it (states from the
+polynomials, computed outputs through the model's output function) without
+solving again.  An entry holds its key and a sha256 of its arrays, and is served
+only when both match (a truncated, swapped or edited file is solved again).
 """
 from __future__ import annotations
 
@@ -41,7 +48,8 @@ from .system import ReferenceProblem
 
 RTOL = 1e-12
 DOP853_MAX_STEPS = 300_000
-CACHE_VERSION = 2  # 2: entries carry their key and a digest, checked before use
+CACHE_VERSION = 3  # 2: entries carry their key and a digest; 3: the dense output, not one grid's values
+MAX_ERROR_POINTS = 200_001  # evaluation points of the error estimate (step points, midpoints)
 
 
 @dataclass
@@ -90,7 +98,7 @@ def _column_map(problem: ReferenceProblem) -> list:
     return out
 
 
-def _key(problem: ReferenceProblem, times: np.ndarray, rtol: float, param_values: dict) -> str:
+def _key(problem: ReferenceProblem, rtol: float, param_values: dict) -> str:
     m = problem.model
     h = hashlib.sha256()
     h.update(f"v{CACHE_VERSION}|{m.name}|{rtol!r}".encode())
@@ -100,17 +108,44 @@ def _key(problem: ReferenceProblem, times: np.ndarray, rtol: float, param_values
     h.update(repr([str(e) for e in m.derivatives]).encode())
     h.update(repr([str(e) for e in m.output_exprs]).encode())
     h.update(repr([(str(getattr(s, "lhs", s)), str(getattr(s, "rhs", ""))) for s in m.program.steps]).encode())
-    for a in (np.asarray(problem.x0, float), np.asarray(problem.u, float), times,
+    h.update(repr((float(problem.start_time), float(problem.stop_time))).encode())
+    for a in (np.asarray(problem.x0, float), np.asarray(problem.u, float),
               np.asarray(problem.nominals if problem.nominals is not None else [], float)):
         h.update(np.ascontiguousarray(a).tobytes())
     h.update(repr(tuple(problem.columns)).encode())
     return h.hexdigest()[:32]
 
 
-def _digest(times, values, error, settings: str) -> str:
+class DenseOutput:
+    """x(t) of a Radau solve from its stored steps: on step k, x = y_old[k] + Q[k] @ (s, s^2, s^3) with
+    s = (t - t_old[k]) / h[k] -- scipy's RadauDenseOutput, evaluated for many points at once."""
+
+    def __init__(self, ts: np.ndarray, y_old: np.ndarray, Q: np.ndarray):
+        self.ts, self.y_old, self.Q = np.asarray(ts, float), np.asarray(y_old, float), np.asarray(Q, float)
+
+    @classmethod
+    def of(cls, sol) -> "DenseOutput":
+        """From scipy's ``solve_ivp(..., method="Radau", dense_output=True)`` result."""
+        ip = sol.sol.interpolants
+        return cls(np.asarray(sol.sol.ts), np.array([d.y_old for d in ip]), np.array([d.Q for d in ip]))
+
+    def __call__(self, times: np.ndarray) -> np.ndarray:
+        """(nx, len(times))"""
+        times = np.asarray(times, float)
+        seg = np.clip(np.searchsorted(self.ts, times, side="left") - 1, 0, len(self.ts) - 2)
+        out = np.empty((self.y_old.shape[1], len(times)))
+        for a in range(0, len(times), 20_000):  # bounded memory: Q[seg] is (points, nx, order)
+            k = seg[a:a + 20_000]
+            x = (times[a:a + 20_000] - self.ts[k]) / (self.ts[k + 1] - self.ts[k])
+            P = np.cumprod(np.repeat(x[:, None], self.Q.shape[2], axis=1), axis=1)
+            out[:, a:a + 20_000] = (np.einsum("nij,nj->ni", self.Q[k], P) + self.y_old[k]).T
+        return out
+
+
+def _digest(arrays, settings: str) -> str:
     """sha256 of a stored solution's arrays and settings: an entry is served only when it still matches."""
     h = hashlib.sha256()
-    for a in (times, values, error):
+    for a in arrays:
         a = np.ascontiguousarray(np.asarray(a, dtype=float))
         h.update(repr(a.shape).encode())
         h.update(a.tobytes())
@@ -144,22 +179,38 @@ def solve_reference(problem: ReferenceProblem, times: Optional[Sequence[float]] 
     pv = {v.name: v.start for v in m.parameters}
     pv.update(parameter_values or {})
     cols = _column_map(problem)
-    key = _key(problem, times, rtol, pv)
+    key = _key(problem, rtol, pv)
     path = cache_dir() / f"{key}.npz"
+    x0 = np.asarray(problem.x0, dtype=float).ravel()
+    u = np.asarray(problem.u, dtype=float).ravel()
+    evaluator = []  # the model's evaluator, made when first needed (outputs, or a solve)
+
+    def ev():
+        if not evaluator:
+            evaluator.append(ModelEvaluator(m, parameter_values))
+        return evaluator[0]
+
+    def values_at(X):
+        """The columns from the states X (nx, n) at ``times``."""
+        out = np.empty((len(times), len(cols)))
+        Ys = np.array([ev().g(t, X[:, i], u) for i, t in enumerate(times)]) if any(k == "y" for k, _ in cols) \
+            else None
+        for j, (k, i) in enumerate(cols):
+            out[:, j] = X[i] if k == "x" else Ys[:, i]
+        return out
+
     if cache and path.is_file():
         try:
             with np.load(path, allow_pickle=False) as z:
-                t_, v_, e_, s_ = z["time"], z["values"], z["error"], str(z["settings"])
-                whole = (str(z["key"]) == key and str(z["digest"]) == _digest(t_, v_, e_, s_)
-                         and t_.shape == times.shape and np.array_equal(t_, times)
-                         and v_.shape == (len(times), len(cols)) and e_.shape == (len(cols),))
+                ts, y_old, Q, error, text = z["ts"], z["y_old"], z["Q"], z["error"], str(z["settings"])
+                whole = (str(z["key"]) == key and str(z["digest"]) == _digest((ts, y_old, Q, error), text)
+                         and error.shape == (len(cols),) and Q.ndim == 3 and Q.shape[:2] == y_old.shape
+                         and y_old.shape[1] == m.nx and len(ts) == len(y_old) + 1)
             if whole:  # this entry, as written: a truncated, swapped or edited file is recomputed
-                return ReferenceSolution(t_, v_, tuple(problem.columns), e_, json.loads(s_), cached=True)
+                return ReferenceSolution(times, values_at(DenseOutput(ts, y_old, Q)(times)), tuple(problem.columns),
+                                         error, json.loads(text), cached=True)
         except Exception:  # a damaged cache file is recomputed
             pass
-    ev = ModelEvaluator(m, parameter_values)
-    x0 = np.asarray(problem.x0, dtype=float).ravel()
-    u = np.asarray(problem.u, dtype=float).ravel()
     if x0.shape != (m.nx,) or u.shape != (m.nu,):
         raise CosimError(f"reference problem {m.name}: x0 has {x0.size} values for {m.nx} states, "
                          f"u {u.size} for {m.nu} inputs")
@@ -169,20 +220,13 @@ def solve_reference(problem: ReferenceProblem, times: Optional[Sequence[float]] 
         nom = np.array([abs(v.nominal) if v.nominal else max(1.0, abs(x)) for v, x in zip(m.states, x0)])
     nom = np.where(nom > 0, nom, 1.0)
 
+    model_ev = ev()
+
     def f(t, x):
-        return ev.f(t, x, u)
+        return model_ev.f(t, x, u)
 
     def jac(t, x):
-        return ev.jacobians(t, x, u)[0]
-
-    def values(sol):
-        X = sol.sol(times)  # (nx, n)
-        out = np.empty((len(times), len(cols)))
-        need_y = any(k == "y" for k, _ in cols)
-        Ys = np.array([ev.g(t, X[:, i], u) for i, t in enumerate(times)]) if need_y else None
-        for j, (k, i) in enumerate(cols):
-            out[:, j] = X[i] if k == "x" else Ys[:, i]
-        return out
+        return model_ev.jacobians(t, x, u)[0]
 
     def solve(method, rt, at, use_jac=True):
         w = _time.perf_counter()
@@ -193,10 +237,19 @@ def solve_reference(problem: ReferenceProblem, times: Optional[Sequence[float]] 
         return sol, _time.perf_counter() - w
 
     sol1, w1 = solve("Radau", rtol, rtol)
-    v1 = values(sol1)
+    dense = DenseOutput.of(sol1)
+    # the error estimate over every step point of the main solve, their midpoints and the requested times:
+    # it holds for any later grid evaluated from the cached dense output
+    ts = dense.ts
+    probe = np.concatenate([ts, 0.5 * (ts[1:] + ts[:-1])])
+    if len(probe) > MAX_ERROR_POINTS:
+        probe = probe[np.linspace(0, len(probe) - 1, MAX_ERROR_POINTS).astype(int)]
+    grid = times
+    times = np.unique(np.concatenate([probe, grid]))
+    v1 = values_at(dense(times))
     tight = max(rtol / 10, 2.3e-14)  # scipy's floor is 100 eps
     sol2, w2 = solve("Radau", tight, rtol / 10)
-    v2 = values(sol2)
+    v2 = values_at(sol2.sol(times))
     err = np.max(np.abs(v1 - v2), axis=0)
     settings = {"method": "Radau", "rtol": rtol, "atol": f"{rtol:g} x nominal", "steps": int(sol1.t.size - 1),
                 "wall_time": w1, "confirm": [f"Radau rtol {tight:g}: {sol2.t.size - 1} steps, {w2:.3g} s"]}
@@ -206,19 +259,21 @@ def solve_reference(problem: ReferenceProblem, times: Optional[Sequence[float]] 
         lam = float(np.max(np.abs(np.linalg.eigvals(jac(t0, x0))))) if m.nx else 0.0
     if lam * (t1 - t0) / 3.0 < DOP853_MAX_STEPS:
         sol3, w3 = solve("DOP853", tight, rtol / 10, use_jac=False)
-        v3 = values(sol3)
+        v3 = values_at(sol3.sol(times))
         err = np.maximum(err, np.max(np.abs(v1 - v3), axis=0))
         settings["confirm"].append(f"DOP853 rtol {tight:g}: {sol3.t.size - 1} steps, {w3:.3g} s")
     else:
         settings["confirm"].append(f"DOP853 skipped: stiff (|lambda|max = {lam:.3g} 1/s over {t1 - t0:g} s)")
-    ref = ReferenceSolution(times, v1, tuple(problem.columns), err, settings)
+    settings["error_points"] = int(len(times))
+    pick = np.searchsorted(times, grid)  # the requested grid inside the evaluation points
+    ref = ReferenceSolution(grid, v1[pick], tuple(problem.columns), err, settings)
     if cache:
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")  # one per writer
             text = json.dumps(settings)
-            np.savez(tmp, time=times, values=v1, error=err, settings=text, key=key,
-                     digest=_digest(times, v1, err, text))
+            np.savez(tmp, ts=dense.ts, y_old=dense.y_old, Q=dense.Q, error=err, settings=text, key=key,
+                     digest=_digest((dense.ts, dense.y_old, dense.Q, err), text))
             os.replace(tmp, path)
         except OSError:
             pass  # a read-only home: no cache

@@ -11,8 +11,10 @@ point):
 * ``err_linf``, ``err_rms``: max and RMS |error| at the communication points
   (the coupling error; the reference is solved at every one of them);
 * ``err_dense``: max |error| on a dense grid of >= 1000 points with the run
-  interpolated linearly between its communication points -- what a user of
-  the result sees, interpolation included;
+  interpolated between its communication points by cubic Hermite from the
+  FMUs' own output slopes (:mod:`fmugen.cosim.dense`; linearly for an FMU
+  that gives none) -- what a user of the result sees, interpolation included,
+  and at fourth order the interpolation does not hide the coupling error;
 * ``digits``: correct digits, -log10 max |err| / (atol + |y_ref|) with
   atol = 1e-3 max |y_ref|;
 * ``order``: observed order over the halving H -> H/2 of the same scheme.
@@ -36,6 +38,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from .dense import hermite
 from .errors import CosimError
 from .master import Master, check_choices
 from .reference import ReferenceSolution, solve_reference
@@ -69,6 +72,7 @@ class Row:
     threads: int = 1  # threads that stepped the FMUs (workers > 1 and sweeps costly enough)
     below_reference: bool = False
     failure: str = ""
+    wall_first: float = math.nan  # the untimed first run's wall time (a failed run's only one: up to its failure)
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -89,7 +93,7 @@ class Report:
     def table(self) -> str:
         head = (f"{'setting':<24} {'H [s]':>9} {'status':>8} {'err_final':>10} {'err_Linf':>10} {'err_RMS':>10} {'err_dense':>10} "
                 f"{'digits':>6} {'order':>6} {'wall [s]':>9} {'x real':>7} {'steps':>7} {'rollb':>5} "
-                f"{'iters':>6} {'FMU calls':>9} {'thr':>3}")
+                f"{'iters':>6} {'FMU calls':>9} {'thr':>3}  reason (runs that did not end ok)")
         lines = [f"{self.system}: error on {self.measure} against the reference "
                  f"(its own error estimate {self.reference_error:.2g}; errors below "
                  f"{REFUSE_FACTOR * self.reference_error:.2g} are not reported)", head, "-" * len(head)]
@@ -102,7 +106,8 @@ class Report:
             lines.append(f"{r.label:<24} {r.step:>9.3g} {r.status:>8} {g(r.err_final, '10.3g')} {g(r.err_linf, '10.3g')} "
                          f"{g(r.err_rms, '10.3g')} {g(r.err_dense, '10.3g')} {g(r.digits, '6.2f')} {g(r.order, '6.2f')} "
                          f"{g(r.wall_median, '9.4f')} {g(r.real_time_factor, '7.1f')} {r.macro_steps:>7d} "
-                         f"{r.rollbacks:>5d} {r.iterations:>6d} {r.fmu_calls:>9d} {r.threads:>3d}")
+                         f"{r.rollbacks:>5d} {r.iterations:>6d} {r.fmu_calls:>9d} {r.threads:>3d}"
+                         + (f"  {_reason(r.failure)}" if r.failure else ""))
         lines.append("")
         lines.append(f"coarsest macro step meeting {self.target:g} ({self.measure}, L-inf):")
         for lab, r in self.coarsest.items():
@@ -115,6 +120,12 @@ class Report:
             for lab, e in self.equal_time.items():
                 lines.append(f"  {lab:<24} " + (f"{e:.3g}" if e == e else "outside the measured range"))
         return "\n".join(lines)
+
+
+def _reason(failure: str) -> str:
+    """The first line of a failure report, without its fixed opening: ``t = 0.05 s (diverged) [...]: ...``."""
+    text = str(failure).splitlines()[0] if failure else ""
+    return text[len("co-simulation stopped at "):] if text.startswith("co-simulation stopped at ") else text
 
 
 def _measure_columns(system: CosimSystem, columns: Optional[Sequence[str]]):
@@ -130,7 +141,7 @@ def _measure_columns(system: CosimSystem, columns: Optional[Sequence[str]]):
     return names, "all columns (relative to each column's range)"
 
 
-def _errors(time, values, ref: ReferenceSolution, cols):
+def _errors(time, values, ref: ReferenceSolution, cols, slopes=None):
     """(final, L-inf and RMS at the communication points, L-inf on the dense grid, digits), max over columns."""
     h = ref.time[1] - ref.time[0]
     idx = np.rint((time - ref.time[0]) / h).astype(int)
@@ -141,12 +152,14 @@ def _errors(time, values, ref: ReferenceSolution, cols):
     didx = np.rint((dense - ref.time[0]) / h).astype(int)
     fin = linf = rms2 = dense_inf = 0.0
     digits = math.inf
+    td = ref.time[didx]
+    Yd = hermite(time, values, slopes, td) if len(time) > 1 else np.repeat(values[:1], len(td), axis=0)
     for c, j, s in cols:
         yref = ref.values[:, j]
         y = values[:, c]
         ref_cp = yref[idx] if exact else np.interp(time, ref.time, yref)
         e_cp = np.abs(y - ref_cp)
-        e_d = np.abs(np.interp(ref.time[didx], time, y) - yref[didx])
+        e_d = np.abs(Yd[:, c] - yref[didx])
         fin = max(fin, e_cp[-1] / s)
         linf = max(linf, e_cp.max() / s)
         rms2 = max(rms2, float(np.mean(e_cp ** 2)) / s ** 2)
@@ -176,15 +189,23 @@ def with_internal_solver(system: CosimSystem, method: str, tol: float) -> CosimS
 def make_report(system: CosimSystem, problem: ReferenceProblem, steps: Sequence[float],
                 schemes: Sequence[tuple] = DEFAULT_SCHEMES, repeats: int = 5, target: float = 1e-4,
                 columns: Optional[Sequence[str]] = None, extra_rows: Sequence = (), stop: Optional[float] = None,
-                progress=None, internal: Sequence[tuple] = (), workers: int = 1) -> Report:
+                progress=None, internal: Sequence[tuple] = (), workers: int = 1, settings=None) -> Report:
     """Sweep ``schemes`` x ``steps`` (each a multiple of the smallest by a power of 2 is best: exact
     comparison points) and measure every run against the reference of ``problem``.
 
     ``extra_rows``: (label, system) pairs run like the schemes at each step with Jacobi (e.g. the
     monolithic FMU as a one-unit system).  ``internal``: (solver, tolerance) pairs -- the sweep is then
     repeated with every CS FMU's internal solver set to each (``dopri5``, ``rodas3``, ``rk4``).
-    ``workers``: threads per run (see :class:`fmugen.cosim.master.Master`).
+    ``workers``: threads per run (see :class:`fmugen.cosim.master.Master`).  ``settings``: a
+    :class:`fmugen.cosim.settings.RunSettings` whose other settings every run takes (iterations, coupling
+    tolerance, workers, ...: the scene's ``[cosim]`` as ``fmugen report`` resolves it); scheme,
+    extrapolation and step are the sweep's.
     """
+    if settings is not None:
+        workers = settings.workers
+    order = settings.order if settings is not None else None
+    options = {k: v for k, v in (settings.run_keywords() if settings is not None else {}).items()
+               if k not in ("step", "stop")}
     if repeats < 1:
         raise CosimError("repeats must be >= 1")
     steps = sorted({float(h) for h in steps}, reverse=True)
@@ -222,21 +243,27 @@ def make_report(system: CosimSystem, problem: ReferenceProblem, steps: Sequence[
                 progress(f"{label} H = {H:.4g}")
             walls = []
             result = None
-            with Master(sysm, scheme, ext, workers=workers) as m:  # warm-up: loads and instantiates; not timed
-                result = m.run(step=H, stop=t1)
-            if result.ok:
-                for _ in range(repeats):
-                    with Master(sysm, scheme, ext, workers=workers) as m:
-                        r2 = m.run(step=H, stop=t1)
-                    walls.append(r2.summary.wall_time)
+            # the scene's Gauss-Seidel order, for the systems of its FMUs (not the monolithic one)
+            same = order and sorted(order) == sorted(u.name for u in sysm.units)
+            mkw = {"workers": workers, "order": order if same else None}
+            with Master(sysm, scheme, ext, **mkw) as m:  # warm-up: loads and instantiates; not timed
+                result = m.run(step=H, stop=t1, dense=True, **options)  # with the slopes for the dense error
             s = result.summary
+            # ok, or ended with a verdict other than a failure (unreliable): it reached the stop time and is measured
+            finished = result.ok or (s.failure is None and len(result.time) > 0
+                                     and result.time[-1] >= t1 - 1e-9 * max(1.0, abs(t1)))
+            if finished:
+                for _ in range(repeats):
+                    with Master(sysm, scheme, ext, **mkw) as m:
+                        r2 = m.run(step=H, stop=t1, **options)
+                    walls.append(r2.summary.wall_time)
             row = Row(label, scheme, ext, H, s.status, macro_steps=s.macro_steps, rollbacks=s.rollbacks,
                       iterations=s.iterations, fmu_calls=s.fmu_calls, threads=s.threads,
-                      failure=str(s.failure).splitlines()[0] if s.failure else "")
-            if result.ok:
+                      failure=str(s.failure).splitlines()[0] if s.failure else "", wall_first=s.wall_time)
+            if finished:
                 row.wall_median = statistics.median(walls)
                 row.real_time_factor = (t1 - t0) / row.wall_median if row.wall_median > 0 else math.inf
-                fin, linf, rms, dense, dig = _errors(result.time, result.values, ref, cols)
+                fin, linf, rms, dense, dig = _errors(result.time, result.values, ref, cols, result.slopes)
                 row.err_final, row.err_linf, row.err_rms, row.err_dense, row.digits = fin, linf, rms, dense, dig
                 if linf < REFUSE_FACTOR * ref_err:
                     row.below_reference = True
@@ -267,6 +294,10 @@ def make_report(system: CosimSystem, problem: ReferenceProblem, steps: Sequence[
     return rep
 
 
+def _h_label(h: float) -> str:
+    return f"H {h * 1e3:.3g} ms" if h < 1 else f"H {h:.3g} s"
+
+
 def write_report(rep: Report, out_dir) -> dict:
     """report.txt, report.csv and work_precision.png in ``out_dir``; returns their paths."""
     out = Path(out_dir)
@@ -285,12 +316,38 @@ def write_report(rep: Report, out_dir) -> dict:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7.5, 5.5))
+    fig, ax = plt.subplots(figsize=(8.5, 6.0))
+    measured = [r.err_linf for r in rep.rows if r.err_linf == r.err_linf and r.err_linf > 0]
+    # runs that did not end ok get a band of their own above every measured error, at the wall time
+    # they ran (up to their failure): they are settings tried, and where each scheme stops working
+    top = max(measured + [rep.target, REFUSE_FACTOR * rep.reference_error])
+    band = top * 30.0
+    any_failed = False
     for lab in dict.fromkeys(r.label for r in rep.rows):
-        pts = [(r.wall_median, r.err_linf, r.step) for r in rep.rows
-               if r.label == lab and r.status == "ok" and r.err_linf == r.err_linf and r.err_linf > 0]
-        if pts:
-            ax.loglog([p[0] for p in pts], [p[1] for p in pts], "o-", label=lab)
+        rows = [r for r in rep.rows if r.label == lab]
+        pts = [(r.wall_median, r.err_linf, r.step) for r in rows
+               if r.status == "ok" and r.err_linf == r.err_linf and r.err_linf > 0]
+        (line,) = ax.loglog([p[0] for p in pts], [p[1] for p in pts], "o-", label=lab, ms=4)
+        colour = line.get_color()
+        for w, e, h in pts:
+            ax.annotate(_h_label(h), (w, e), textcoords="offset points", xytext=(3, 3), fontsize=6, color=colour)
+        for r in rows:
+            if r.status == "ok":
+                continue
+            if r.err_linf == r.err_linf and r.err_linf > 0 and r.wall_median == r.wall_median:
+                # measured but not ok (unreliable): where it landed, hollow
+                ax.loglog([r.wall_median], [r.err_linf], "o", mfc="none", mec=colour, ms=8)
+                ax.annotate(f"{_h_label(r.step)} {r.status}", (r.wall_median, r.err_linf), textcoords="offset points",
+                            xytext=(3, -9), fontsize=6, color=colour)
+            elif r.wall_first == r.wall_first and r.wall_first > 0:
+                any_failed = True
+                ax.loglog([r.wall_first], [band], "x", color=colour, ms=7, mew=1.5)
+                ax.annotate(_h_label(r.step), (r.wall_first, band), textcoords="offset points", xytext=(3, 3),
+                            fontsize=6, color=colour, rotation=45)
+    if any_failed:
+        ax.axhline(band / 3.0, color="grey", lw=0.6)
+        ax.annotate("failed (x, at the wall time to the failure)", (0.01, band / 2.2), xycoords=("axes fraction", "data"),
+                    fontsize=7, color="grey")
     ax.axhline(REFUSE_FACTOR * rep.reference_error, color="grey", ls=":",
                label=f"100 x reference error estimate ({rep.reference_error:.1g})")
     ax.axhline(rep.target, color="k", ls="--", lw=0.8, label=f"target {rep.target:g}")

@@ -87,6 +87,7 @@ class CosimResult:
     values: np.ndarray  # (n, len(columns))
     columns: tuple
     summary: Summary
+    slopes: Optional[np.ndarray] = None  # (n, len(columns)) d/dt at each point (run(dense=True)), NaN: none
 
     @property
     def ok(self) -> bool:

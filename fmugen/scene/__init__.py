@@ -9,7 +9,14 @@
 The file format is documented in ``examples/scenes/README.md``.
 """
 from .errors import SceneError
-from .scene import Scene, load_scene
 from .settings import parse_sets
+
+
+def __getattr__(name):  # Scene and load_scene import sympy and numpy: only when used (start-up time)
+    if name in ("Scene", "load_scene"):
+        from . import scene
+
+        return getattr(scene, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 __all__ = ["Scene", "SceneError", "load_scene", "parse_sets"]

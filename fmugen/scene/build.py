@@ -31,7 +31,6 @@ from pathlib import Path
 from typing import Optional
 
 from .. import __version__
-from ..fmi.build import build_fmu, runtime_dir
 from .errors import SceneError
 from .stability import jacobi_hold_limit, stable_step
 
@@ -108,7 +107,9 @@ def cache_dir() -> Path:
 def generator_fingerprint() -> str:
     """Hash of every source file of fmugen and of its C runtime: any change invalidates the cache."""
     h = hashlib.sha256(__version__.encode())
-    roots = [Path(__file__).resolve().parents[1], runtime_dir()]
+    # c_runtime/ next to the package (fmugen.fmi.build.runtime_dir, which is not imported: it loads sympy,
+    # and a run from cached FMUs must start in well under a second)
+    roots = [Path(__file__).resolve().parents[1], Path(__file__).resolve().parents[2] / "c_runtime"]
     for root in roots:
         for p in sorted(root.rglob("*")):
             if p.suffix in (".py", ".c", ".h", ".toml") and "__pycache__" not in p.parts:
@@ -162,6 +163,7 @@ def _group_key(scene, group: str, prune: bool, x0: dict, u0: Optional[dict] = No
         "x0": {k: v for k, v in sorted(x0.items()) if k.split(".", 1)[0] in members},
         "u0": {k: v for k, v in sorted(u0.items()) if k.split(".", 1)[0] in members},
         "inputs": [i for i in scene.spec.inputs if i.split(".", 1)[0] in members],
+        "external": scene.external_links(members),
         "run": [scene.spec.start, scene.spec.stop, scene.spec.step, scene.spec.tolerance],
         "default_set": _set_digest(scene.spec.parameter_set),
         # validity ranges the group's sources take from the inputs they drive (other instances' models)
@@ -259,6 +261,8 @@ def build_scene(scene, out_dir, prune: Optional[bool] = None, progress=None, use
     ``jobs`` at a time (default: the number of cores, at most 4) into a
     staging folder and moved into ``out_dir`` together when all succeeded.
     """
+    from ..fmi.build import build_fmu
+
     progress = progress or Progress()
     prune = scene.spec.prune if prune is None else bool(prune)
     out = Path(out_dir)

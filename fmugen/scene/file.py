@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Optional
 
 from ..components.assembly import COMPONENT_TYPES
+from ..cosim.settings import KEYS as COSIM_SETTING_KEYS, check_table
 from ..errors import read_text_file, toml_problem
 from .errors import SceneError, did_you_mean
 
@@ -26,8 +27,7 @@ ROBOT_KEYS = {"robot", "formulation", "locked", "outputs"}
 FACTORY_KEYS = {"factory", "options", "parameter_set"}
 GROUP_KEYS = {"members", "fmi_type", "solver", "tolerance", "jacobian"}
 SOLVERS = {"dopri5": 1, "rodas3": 2, "rk4": 3}
-COSIM_KEYS = {"scheme", "extrapolation", "step", "adaptive", "tol", "min_step", "max_step", "order",
-              "iterations", "iteration_tol", "input_derivatives"}
+COSIM_KEYS = set(COSIM_SETTING_KEYS)  # one list for every command and the API: fmugen.cosim.settings
 INITIAL_MODES = ("given", "equilibrium")
 
 
@@ -78,6 +78,7 @@ class SceneSpec:
     bonds: tuple = ()  # the expanded connect pairs (fmugen.scene.connect.Bond), set by Scene
     record_bonds: bool = False  # also record each bond's effort and flow (fmugen/scene/bonds.py)
     inputs: tuple = ()  # undriven inputs kept as inputs of the FMUs (not fixed) when pruning
+    external: Optional[dict] = None  # [external]: an SSP's components beside the instances (scene/external.py)
 
 
 def _number(v, where, positive=False, nonneg=False) -> float:
@@ -164,8 +165,9 @@ def apply_sets(data: dict, sets: dict, src: str) -> dict:
                              f"'cosim.key' or 'fmus.group.key'")
         if head in ("scene", "cosim"):
             if rest not in (SCENE_KEYS if head == "scene" else COSIM_KEYS):
-                known = SCENE_KEYS if head == "scene" else COSIM_KEYS
-                raise SceneError(f"{src}: --set {name}: no key {rest!r} in [{head}]{did_you_mean(rest, known)}")
+                known = SCENE_KEYS if head == "scene" else COSIM_SETTING_KEYS
+                raise SceneError(f"{src}: --set {name}: no key {rest!r} in [{head}]{did_you_mean(rest, known)}; "
+                                 f"valid keys: {', '.join(known if head == 'cosim' else sorted(known))}")
             data.setdefault(head, {})[rest] = value
         elif head == "fmus":
             group, _, key = rest.partition(".")
@@ -199,10 +201,10 @@ def _instance_keys(spec: dict) -> set:
 
 def parse_scene(data: dict, path: Path) -> SceneSpec:
     src = str(path)
-    extra = sorted(set(data) - {"scene", "instances", "fmus", "cosim"})
+    extra = sorted(set(data) - {"scene", "instances", "fmus", "cosim", "external"})
     if extra:
         raise SceneError(f"{src}: unknown top-level key(s) {', '.join(extra)}; a scene has [scene], "
-                         f"[instances.*], [fmus.*] and [cosim]")
+                         f"[instances.*], [fmus.*], [cosim] and [external]")
     sc = data.get("scene")
     if not isinstance(sc, dict):
         raise SceneError(f"{src}: missing [scene] table")
@@ -303,16 +305,18 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
     if not isinstance(cosim, dict):
         raise SceneError(f"{src}: [cosim] must be a table")
     for k in cosim:
-        if k not in COSIM_KEYS:
-            raise SceneError(f"{src}: [cosim] has unknown key {k!r}{did_you_mean(k, COSIM_KEYS)}")
         if isinstance(cosim[k], (int, float)) and not isinstance(cosim[k], bool):
             _number(cosim[k], f"{src}: [cosim] {k}")  # finite, and an int within the double range
+    try:  # every key and value checked as every command and the API will read it (unknown keys listed)
+        check_table(cosim, f"{src}: [cosim]")
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
     return SceneSpec(path=path, name=name, description=desc, parameter_set=pset, start=start, stop=stop,
                      step=step, tolerance=tolerance, record=record, initial=initial,
                      prune=sc.get("prune", True), connections=tuple(conns), instances=instances,
                      groups=groups, monolithic=bool(monolithic), cosim=dict(cosim),
                      connect=tuple(tuple(c) for c in connect), record_bonds=bool(sc.get("record_bonds", False)),
-                     inputs=exposed)
+                     inputs=exposed, external=data.get("external"))
 
 
 def _instance(iname: str, spec, path: Path) -> InstanceSpec:

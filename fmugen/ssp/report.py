@@ -130,16 +130,18 @@ def cmd_report_ssp(args) -> int:
     schemes = [tuple(s.split("/", 1)) if "/" in s else (s, "hold") for s in args.schemes.split(",")] \
         if args.schemes else DEFAULT_SCHEMES
     schemes = [check_choices(*sc) for sc in schemes]
-    if args.workers < 1:
-        raise CosimError(f"--workers must be >= 1, not {args.workers}")
     system = system_from_args(args)
+    from ..cosim.commands import _flags
+    from ..cosim.settings import resolve
+
+    workers = resolve(system.settings, **_flags(args)).workers  # its settings, then the flags (checked)
     from ..cosim.commands import _check_args
     from .cli import scene_like
 
     _check_args(args, scene_like(system))
     H = float(system.step)
     steps = [float(h) for h in args.steps.split(",")] if args.steps else [8 * H, 4 * H, 2 * H, H, H / 2]
-    rep = report_ssp(system, steps, schemes, repeats=args.repeats, stop=args.stop, workers=args.workers,
+    rep = report_ssp(system, steps, schemes, repeats=args.repeats, stop=args.stop, workers=workers,
                      progress=lambda s: print("  " + s, file=sys.stderr, flush=True))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -3,7 +3,8 @@
     fmugen sweep SCENE.toml --grid NAME=v1,v2,... [--grid ...] | --sample NAME=dist(...) -n N --seed S
                  [--metrics final,peak,settling,error | COLUMN:METRIC] --out DIR
                  [--scheduler ADDRESS] [--workers K] [--threads] [--set NAME=VALUE ...]
-                 [--scheme S] [--extrapolation E] [--step H] [--no-divergence-check] [--save-runs]
+                 [--scheme S] [--extrapolation E] [--step H] [--coupling-tol E] [--iterations N]
+                 [--no-divergence-check] [--save-runs]
 
 Builds the scene's FMUs once (swept parameters kept settable), runs every
 point on a Dask local cluster (one worker process per core) or on the
@@ -42,6 +43,10 @@ def add_parser(sub) -> None:
     p.add_argument("--scheme", default=None, help="co-simulation scheme (default: the scene's [cosim])")
     p.add_argument("--extrapolation", default=None, help="input extrapolation (default: the scene's [cosim])")
     p.add_argument("--step", type=float, default=None, help="macro step [s] (default: the scene's)")
+    p.add_argument("--coupling-tol", type=float, default=None,
+                   help="iterated schemes: convergence of the coupled values (default: the scene's [cosim])")
+    p.add_argument("--iterations", type=int, default=None,
+                   help="iterated schemes: most iterations per macro step (default: the scene's [cosim])")
     p.add_argument("--no-divergence-check", action="store_true",
                    help="do not stop a run whose coupling the master judges divergent")
     p.add_argument("--save-runs", action="store_true", help="also write each point's series to DIR/runs/KEY.npz")
@@ -65,7 +70,8 @@ def run(args) -> int:
 
         raise SweepError("fmugen sweep: give --grid NAME=v1,v2,... or --sample NAME=dist(...) -n N --seed S")
     options = {k: v for k, v in (("scheme", args.scheme), ("extrapolation", args.extrapolation),
-                                 ("step", args.step)) if v is not None}
+                                 ("step", args.step), ("coupling_tol", args.coupling_tol),
+                                 ("max_iterations", args.iterations)) if v is not None}
     if args.no_divergence_check:
         options["detect_divergence"] = False
     try:

@@ -31,17 +31,12 @@ import numpy as np
 from ..scene import SceneError, load_scene
 from .errors import PointRefused, SweepError
 
-#: [cosim] keys of a scene file -> keywords of fmugen.cosim.master.run
-COSIM_KEYWORDS = {"scheme": "scheme", "extrapolation": "extrapolation", "step": "step", "adaptive": "adaptive",
-                  "tol": "tol", "min_step": "min_step", "max_step": "max_step", "order": "order",
-                  "iterations": "max_iterations", "iteration_tol": "coupling_tol"}
-
-
 def run_options(settings: Mapping[str, object], overrides: Optional[Mapping[str, object]] = None) -> dict:
-    """Keywords of :func:`fmugen.cosim.master.run` from a scene's ``[cosim]`` table, then ``overrides``."""
-    out = {COSIM_KEYWORDS[k]: v for k, v in dict(settings).items() if k in COSIM_KEYWORDS}
-    out.update(overrides or {})
-    return out
+    """Keywords of :func:`fmugen.cosim.master.run` from a scene's ``[cosim]`` table, then ``overrides``:
+    resolved and checked as by every other command (:func:`fmugen.cosim.settings.resolve`)."""
+    from ..cosim.settings import resolve
+
+    return resolve(settings, **dict(overrides or {})).keywords()
 
 
 @dataclass(frozen=True)
