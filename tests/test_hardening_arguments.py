@@ -117,6 +117,12 @@ def test_a_compiler_failure_is_one_line_and_leaves_no_output_folder(tmp_path):
     assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
     assert "C compiler failed" in proc.stderr and "the compiler refuses" in proc.stderr
     assert not (tmp_path / "o").exists()
+    # a single FMU into a folder that does not exist yet: the folder is not left behind either
+    proc = subprocess.run([sys.executable, "-m", "fmugen.cli", "build", str(HORN), "--set", "m=1", "--set", "l=1",
+                           "--set", "g=9.81", "-o", str(tmp_path / "new" / "h.fmu")],
+                          capture_output=True, text=True, env=env, timeout=300)
+    assert proc.returncode == 1 and proc.stderr.count("\n") == 1 and "C compiler failed" in proc.stderr
+    assert not (tmp_path / "new").exists()
 
 
 # ----------------------------------------------------------------- bounded work, network waits
