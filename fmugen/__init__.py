@@ -21,6 +21,7 @@ _LAZY = {
     "ModelEvaluator": ("fmugen.codegen.evaluate", "ModelEvaluator"),
     "linearize": ("fmugen.control", "linearize"),  # operating points and A, B, C, D for python-control
     "trim": ("fmugen.control", "trim"),
+    "load_component": ("fmugen.components.equations", "load_component"),  # a component file -> SymbolicModel
 }
 
 
