@@ -295,6 +295,8 @@ def test_frame_outputs_their_jacobians_and_locked_branches():
     names = [v.name for v in m.outputs]
     assert names[:3] == ["p_panda_hand_tcp[1]", "p_panda_hand_tcp[2]", "p_panda_hand_tcp[3]"]
     assert "R_panda_hand[2,3]" in names and "J_panda_leftfinger[6,9]" in names and len(names) == 3 + 9 + 54
+    q4 = m.states[3]  # the elbow's range [-3.0718, -0.0698] excludes 0: it starts mid-range
+    assert (q4.name, q4.min, q4.max, q4.start) == ("q[4]", -3.0718, -0.0698, pytest.approx(-1.5708))
     ev = ModelEvaluator(m)
     rng = np.random.default_rng(3)
     q = rng.uniform(-1, 1, 9)

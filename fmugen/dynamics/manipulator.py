@@ -485,8 +485,10 @@ class Manipulator:
             lim = L.limits
             lo = None if lim is None else lim.lower
             hi = None if lim is None else lim.upper
-            start = min(max(0.0, lo if lo is not None else 0.0), hi if hi is not None else 0.0) \
-                if (lo is not None and lo > 0) or (hi is not None and hi < 0) else 0.0
+            # start at 0, or mid-range when 0 is outside the joint's range (the Panda's elbow: [-3.07, -0.07])
+            start = 0.0
+            if (lo is not None and lo > 0) or (hi is not None and hi < 0):
+                start = 0.5 * (lo + hi) if lo is not None and hi is not None else (lo if lo is not None else hi)
             name = _joint_label(L)
             states.append(Variable(f"q[{i + 1}]", self.q[i], "rad" if rev else "m",
                                    f"position of joint {i + 1} ({name}, {L.joint})", start=start, output=True,

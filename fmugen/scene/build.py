@@ -30,6 +30,8 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Optional
 
+import numpy as np
+
 from .. import __version__
 from .errors import SceneError
 from .stability import jacobi_hold_limit, stable_step
@@ -79,6 +81,7 @@ class BuiltScene:
                                                  "none (undriven inputs are fixed; [scene] inputs keeps them)"))
         if len(self.fmus) > 1:
             lim = "no limit found" if self.jacobi_limit == float("inf") else \
+                "limit not computed" if self.jacobi_limit != self.jacobi_limit else \
                 f"stable below H = {self.jacobi_limit:.3g} s"
             lines.append(f"held-input Jacobi (most importers' loop): {lim} (linearised at the initial state); "
                          f"DefaultExperiment stepSize {self.default_step:g} s")
@@ -311,7 +314,8 @@ def build_scene(scene, out_dir, prune: Optional[bool] = None, progress=None, use
             progress(f"{gname}: generate and compile ({model.nx} states)")
             tol = g.tolerance or scene.spec.tolerance
             if len(scene.groups) > 1:
-                lim = "none found" if limit == float("inf") else f"{limit:.3g} s"
+                lim = "none found" if limit == float("inf") else "not computed" if limit != limit else \
+                    f"{limit:.3g} s"
                 model = dataclasses.replace(model, description=(
                     f"{model.description} [scene {scene.name}: held-input Jacobi stability limit {lim} "
                     f"(linearised at rest); couple with the scene's connections]").strip())
@@ -377,7 +381,12 @@ def _jacobi_limit(scene, keys: dict, use_cache: bool) -> float:
             return float(json.loads(path.read_text())["jacobi_hold_limit"])
         except (OSError, ValueError, KeyError, TypeError):
             pass
-    limit = jacobi_hold_limit(scene)
+    try:
+        limit = jacobi_hold_limit(scene)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # a model the linearisation cannot take
+        progress = Progress()
+        progress(f"held-input Jacobi limit not computed ({exc}): DefaultExperiment stepSize = the scene's step")
+        return float("nan")
     if use_cache:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(f".{os.getpid()}.part")
