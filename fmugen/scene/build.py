@@ -374,12 +374,15 @@ def _jacobi_limit(scene, keys: dict, use_cache: bool) -> float:
     """:func:`fmugen.scene.stability.jacobi_hold_limit`, cached under the hash of every group's key."""
     if len(keys) < 2:
         return float("inf")
-    path = cache_dir() / "stability" / (hashlib.sha256(" ".join(sorted(keys.values())).encode()).hexdigest()[:32]
-                                        + ".json")
+    key = hashlib.sha256(" ".join(sorted(keys.values())).encode()).hexdigest()[:32]
+    path = cache_dir() / "stability" / f"{key}.json"
     if use_cache and path.is_file():
-        try:
-            return float(json.loads(path.read_text())["jacobi_hold_limit"])
-        except (OSError, ValueError, KeyError, TypeError):
+        try:  # served only as written for this key (a swapped or edited entry is computed again)
+            d = json.loads(path.read_text())
+            value = d["jacobi_hold_limit"]
+            if d.get("key") == key and d.get("sha256") == hashlib.sha256(f"{key} {value}".encode()).hexdigest():
+                return float(value)
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
             pass
     try:
         limit = jacobi_hold_limit(scene)
@@ -390,7 +393,9 @@ def _jacobi_limit(scene, keys: dict, use_cache: bool) -> float:
     if use_cache:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(f".{os.getpid()}.part")
-        tmp.write_text(json.dumps({"jacobi_hold_limit": limit if limit != float("inf") else "inf"}))
+        value = limit if limit != float("inf") else "inf"
+        tmp.write_text(json.dumps({"jacobi_hold_limit": value, "key": key,
+                                   "sha256": hashlib.sha256(f"{key} {value}".encode()).hexdigest()}))
         os.replace(tmp, path)
     return limit
 
