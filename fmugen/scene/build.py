@@ -32,7 +32,6 @@ from typing import Optional
 
 from .. import __version__
 from .errors import SceneError
-from .stability import jacobi_hold_limit, stable_step
 
 
 @dataclass
@@ -271,6 +270,8 @@ def build_scene(scene, out_dir, prune: Optional[bool] = None, progress=None, use
     cdir = cache_dir() / "fmus"
     keys = {gname: _group_key(scene, gname, prune, x0, u0) for gname in scene.groups}
     limit = _jacobi_limit(scene, keys, use_cache)
+    from .stability import stable_step  # here: it imports scipy (start-up of a run from cached FMUs)
+
     default_step = stable_step(limit, scene.spec.step, STABLE_SAFETY)
     plan = {}  # group -> (key, model or None when cached, removed)
     for gname, g in scene.groups.items():
@@ -376,6 +377,8 @@ def _jacobi_limit(scene, keys: dict, use_cache: bool) -> float:
             return float(json.loads(path.read_text())["jacobi_hold_limit"])
         except (OSError, ValueError, KeyError, TypeError):
             pass
+    from .stability import jacobi_hold_limit
+
     limit = jacobi_hold_limit(scene)
     if use_cache:
         path.parent.mkdir(parents=True, exist_ok=True)
