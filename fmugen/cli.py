@@ -99,12 +99,12 @@ def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler", mo
         from .values import as_number, check_model_values, robot_value_problem
 
         sets = {k: as_number(v, f"{path}: --set {k}") for k, v in sets.items()}
-        check_model_values(m, sets, lambda k: f"{path}: --set {k}")  # the checks file values get
-        if kind == "robot":
+        if kind == "robot":  # the robot file's checks, with the link and quantity named
             params = {p.name for p in m.parameters}
             problem = robot_value_problem(arm.robot, {k: v for k, v in sets.items() if k in params})
             if problem:
                 raise SceneError(f"{path}: --set: {problem}")
+        check_model_values(m, sets, lambda k: f"{path}: --set {k}")  # the checks file values get
         m = m.with_starts(sets)
     return m
 
@@ -123,8 +123,17 @@ def _cmd_export_urdf(args) -> int:
     from .robot.urdf_export import robot_to_urdf
     from .scene import parse_sets
 
+    from .arguments import output_file
+    from .values import robot_value_problem
+
+    output_file(args.output, "-o", inputs=[args.robot])  # never over its own input
     robot = load_robot_description(args.robot)
-    text = robot_to_urdf(robot, parse_sets(args.set) or None)
+    sets = parse_sets(args.set)
+    problem = robot_value_problem(robot, {k: v for k, v in sets.items()
+                                          if k in {p.name for p in robot.parameters}})
+    if problem:
+        raise ValueError(f"{args.robot}: --set: {problem}")
+    text = robot_to_urdf(robot, sets or None)
     Path(args.output).write_text(text)
     print(f"wrote {args.output}: {robot.n} joints, {len(robot.frames)} frames")
     return 0

@@ -67,6 +67,11 @@ def variable_problem(var, value) -> Optional[str]:
         return problem
     lo, hi = getattr(var, "min", None), getattr(var, "max", None)  # a declared range (component files)
     if lo is not None and v < lo:
+        if lo == sys.float_info.min:  # the FMU's form of "> 0" (FMI's min is inclusive)
+            return ("is not > 0 (the quantity must be positive)" if v <= 0 else
+                    f"is below the smallest positive normal double {lo:.3g} (the FMU's least value)")
+        if lo == 0.0:
+            return "is negative (must be >= 0)"
         return f"is below its minimum {lo!r}"
     if hi is not None and v > hi:
         return f"is above its maximum {hi!r}"
@@ -86,7 +91,8 @@ def check_model_values(model, values: Mapping[str, object], where_of) -> None:
             continue
         problem = variable_problem(var, value)
         if problem:
-            raise FmugenError(f"{where_of(name)} = {value!r} {problem}")
+            shown = repr(value) if len(repr(value)) <= 40 else repr(value)[:20] + "..."
+            raise FmugenError(f"{where_of(name)} = {shown} {problem}")
 
 
 def robot_value_problem(robot, values: Mapping[str, float]) -> Optional[str]:

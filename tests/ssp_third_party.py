@@ -302,3 +302,21 @@ def exact(times, m_a: float = M_A, k: float = K) -> dict:
     x0 = np.array(list(X0) + [0.0, 0.0, 1.0])
     xs = np.array([sl.expm(A * t) @ x0 for t in times])
     return {"A.x": xs[:, 0], "A.v": xs[:, 1], "B.F": xs[:, 2], "B.v2": xs[:, 3]}
+
+
+SSD_SPRING_ONLY = """<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon" version="1.0" name="supplier">
+  <ssd:System name="supplier">
+    <ssd:Elements>
+      <ssd:Component name="B" source="resources/spring.fmu">
+        <ssd:Connectors>
+          <ssd:Connector name="v_in" kind="input"><ssc:Real unit="mm/s"/></ssd:Connector>
+          <ssd:Connector name="F" kind="output"><ssc:Real unit="N"/></ssd:Connector>
+        </ssd:Connectors>
+        <ssd:ParameterBindings><ssd:ParameterBinding source="resources/B.ssv"/></ssd:ParameterBindings>
+      </ssd:Component>
+    </ssd:Elements>
+  </ssd:System>
+</ssd:SystemStructureDescription>
+"""

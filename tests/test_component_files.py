@@ -36,19 +36,19 @@ def smoothstep(d, eps):
     return 0.5 + 0.75 * c - 0.25 * c**3
 
 
-def simulate(model, inputs, t_end, x0=None):
-    """The component's own equations (compiled program) under scipy Radau, inputs u(t)."""
+def simulate(model, inputs, t_end, x0=None, method="Radau"):
+    """The component's own equations (compiled program) under scipy (Radau: with its exact Jacobian), inputs u(t)."""
     ev = NumericModel(model)
     x0 = [v.start for v in model.states] if x0 is None else x0
-    sol = solve_ivp(lambda t, x: ev.f(t, x, inputs(t)), (0, t_end), x0, method="Radau", rtol=RTOL,
-                    atol=1e-12, dense_output=True,
-                    jac=lambda t, x: ev.dfdx(t, x, inputs(t)))
+    jac = {"jac": lambda t, x: ev.dfdx(t, x, inputs(t))} if method == "Radau" else {}
+    sol = solve_ivp(lambda t, x: ev.f(t, x, inputs(t)), (0, t_end), x0, method=method, rtol=RTOL,
+                    atol=1e-12, dense_output=True, **jac)
     assert sol.success
     return sol, ev
 
 
-def reference(f, x0, t_end):
-    sol = solve_ivp(f, (0, t_end), x0, method="Radau", rtol=RTOL, atol=1e-12, dense_output=True)
+def reference(f, x0, t_end, method="Radau"):
+    sol = solve_ivp(f, (0, t_end), x0, method=method, rtol=RTOL, atol=1e-12, dense_output=True)
     assert sol.success
     return sol
 
@@ -119,8 +119,8 @@ def test_gear_backlash_against_hand_written_equations():
     def f(t, x):
         return [x[1], (taum(t) - torque(x, t) / p["n"] - p["b_m"] * x[1]) / p["J_m"]]
 
-    sol, ev = simulate(m, lambda t: [taum(t), phiL(t), wL(t)], 1.0)
-    ref = reference(f, [0.0, 0.0], 1.0)
+    sol, ev = simulate(m, lambda t: [taum(t), phiL(t), wL(t)], 1.0, method="DOP853")  # not stiff
+    ref = reference(f, [0.0, 0.0], 1.0, method="DOP853")
     t = np.linspace(0, 1, 41)
     assert np.max(np.abs(sol.sol(t)[0] - ref.sol(t)[0])) < 1e-6
     taus = [torque(ref.sol(tk), tk) for tk in t]
@@ -576,3 +576,17 @@ parameter_set = "heavy"
     d = dict(zip([v.name for v in m.states], ev.f(0, [x[v.name] for v in m.states], [0.3])))
     u = 50.0 * 0.2 + 5.0 * (0.2 - 0.01) / 2e-3
     assert d["load.w"] == pytest.approx(u / 0.5, rel=1e-12)  # at rest: the smoothed sign is 0
+
+
+def test_fmugen_linearize_a_component_file_flags_the_smoothed_coulomb_term(tmp_path, capsys):
+    from fmugen.cli import main
+
+    lib = str(ROOT / "fmugen/components/library/stribeck.toml")
+    args = ["linearize", lib, "--at", "w=0", "--at", "phi=0", "--trim", "tau", "--out"]
+    assert main(args + [str(tmp_path / "a.npz")]) == 0
+    out = capsys.readouterr().out
+    assert "warning: sign(w, w_eps)" in out and "--set w_eps=1e12" in out
+    assert np.load(tmp_path / "a.npz")["A"][1, 1] == pytest.approx(-(3.0 / 1e-3 + 0.02) / 0.05, rel=1e-12)
+    assert main(args + [str(tmp_path / "b.npz"), "--set", "w_eps=1e12"]) == 0
+    assert "warning" not in capsys.readouterr().out
+    assert np.load(tmp_path / "b.npz")["A"][1, 1] == pytest.approx(-0.02 / 0.05, rel=1e-6)  # friction-free

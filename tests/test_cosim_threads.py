@@ -28,7 +28,8 @@ def test_cheap_sweeps_stay_on_one_thread():
 def test_threads_give_the_one_thread_result_bit_for_bit(threads_always, scheme, ext, adaptive):
     one = run(split_system(stop=0.3), scheme, ext, step=2e-3, adaptive=adaptive, tol=1e-2, workers=1)
     two = run(split_system(stop=0.3), scheme, ext, step=2e-3, adaptive=adaptive, tol=1e-2, workers=2)
-    assert one.ok and two.ok, (one.summary, two.summary)
+    # (tol also judges the non-adaptive runs' error estimates: the same verdict either way)
+    assert one.summary.failure is None and one.summary.status == two.summary.status, (one.summary, two.summary)
     if adaptive:  # rollbacks restore FMUs that threads stepped
         assert one.summary.rollbacks >= 1
     assert two.summary.threads == 2 and one.summary.threads == 1

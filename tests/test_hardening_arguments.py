@@ -58,6 +58,7 @@ def test_an_output_path_is_never_an_input_a_folder_for_a_file_or_a_file_for_a_fo
     assert "names a folder" in _refused(capsys, "build", SPLIT, "-o", robot)
     assert "input file" in _refused(capsys, "linearize", robot, "--out", robot, *sets)
     assert "names a folder" in _refused(capsys, "cosim", SPLIT, "--out", robot)
+    assert "input file" in _refused(capsys, "export-urdf", robot, "-o", robot)
     assert robot.read_bytes() == HORN.read_bytes()
 
 
@@ -116,6 +117,12 @@ def test_a_compiler_failure_is_one_line_and_leaves_no_output_folder(tmp_path):
     assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
     assert "C compiler failed" in proc.stderr and "the compiler refuses" in proc.stderr
     assert not (tmp_path / "o").exists()
+    # a single FMU into a folder that does not exist yet: the folder is not left behind either
+    proc = subprocess.run([sys.executable, "-m", "fmugen.cli", "build", str(HORN), "--set", "m=1", "--set", "l=1",
+                           "--set", "g=9.81", "-o", str(tmp_path / "new" / "h.fmu")],
+                          capture_output=True, text=True, env=env, timeout=300)
+    assert proc.returncode == 1 and proc.stderr.count("\n") == 1 and "C compiler failed" in proc.stderr
+    assert not (tmp_path / "new").exists()
 
 
 # ----------------------------------------------------------------- bounded work, network waits
@@ -139,6 +146,7 @@ def test_a_device_fifo_or_huge_file_is_refused_before_it_is_read(tmp_path, capsy
     (["--scheduler", "tcp://127.0.0.1:1"], "cannot reach"),
     (["--scheduler", "not an address"], "--scheduler"),
     (["--grid", "amp.K_a=linspace(1,2,200000)", "--grid", "joint.B_m=linspace(0,1,300000)"], "1.2e+11 points"),
+    (["--sample", "joint.B_m=uniform(0,1)", "-n", "7" * 330, "--seed", "1"], "a 330-digit number of samples"),
 ])
 def test_a_sweep_refuses_before_writing_anything(tmp_path, capsys, extra, named):
     out = tmp_path / "sweep"

@@ -167,3 +167,62 @@ def test_cli_cosim_on_an_archive_with_set(fmus, tmp_path):
                           str(tmp_path / "o2")], capture_output=True, text=True, cwd=ROOT)
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "A.nope" in bad.stderr
     shutil.rmtree(tmp_path / "o", ignore_errors=True)
+
+
+def test_scene_with_an_external_ssp_component(fmus, tmp_path):
+    """A scene's own joint inertia coupled to a supplier's spring FMU from an SSP ([external]): the
+    co-simulation equals the linear system's matrix exponential; the scene keeps tau_load an input."""
+    import scipy.linalg as sl
+
+    from ssp_third_party import C_B, M_B, SSD_SPRING_ONLY
+
+    write_ssp(tmp_path / "spring.ssp", fmus, k=3.0e4, ssd=SSD_SPRING_ONLY)
+    scene_file = tmp_path / "scene.toml"
+    scene_file.write_text('''
+[scene]
+name = "joint_and_supplier"
+stop = 0.3
+step = 1e-3
+tolerance = 1e-10
+record = ["joint.theta", "joint.w"]
+
+[instances]
+joint = { type = "joint_inertia", start = { tau = 100.0 } }
+
+[fmus.joint]
+members = ["joint"]
+solver = "rodas3"
+
+[external]
+ssp = "spring.ssp"
+connections = [["joint.w", "B.v_in", 1000.0], ["B.F", "joint.tau_load", -1.0]]  # the spring pulls back
+record = ["B.F"]
+''')
+    scene = fmugen.load_scene(scene_file)
+    built = scene.build(tmp_path / "fmus")
+    assert "inputs of the system: none" in built.summary()  # tau_load is the supplier's, tau fixed
+    system = built.system
+    assert [u.name for u in system.units] == ["joint", "B"]
+    assert [c.column for c in system.recorded] == ["joint.theta", "joint.w", "B.F"]
+    r = run(system, "newton", "linear", step=1e-3)
+    assert r.ok
+    p = {v.name: v.start for v in scene.base_models["joint"].parameters}
+    J, B_m, k = p["J"], p["B_m"], 3.0e4
+    # theta, w, F, v2 and a constant 1 (the torque tau = 100 N.m)
+    A = np.array([[0, 1, 0, 0, 0], [0, -B_m / J, 1 / J, 0, 100.0 / J], [0, -k, 0, k, 0],
+                  [0, 0, -1 / M_B, -C_B / M_B, 0], [0, 0, 0, 0, 0]])
+    xs = np.array([sl.expm(A * t) @ np.array([0, 0, 0, 0, 1.0]) for t in r.time])
+    for col, x in (("joint.theta", xs[:, 0]), ("joint.w", xs[:, 1]), ("B.F", xs[:, 2])):
+        assert np.max(np.abs(r[col] - x)) < 5e-3 * np.max(np.abs(x)), col  # Newton/linear: O(H^2)
+    with pytest.raises(ValueError, match="no reference solution"):
+        scene.reference_problem()
+    # the combined system exported as one archive runs as the scene, bit for bit
+    from fmugen.ssp import export_ssp
+
+    e = export_ssp(scene, tmp_path / "combined.ssp", fmus_dir=tmp_path / "fmus")
+    again = run(fmugen.load_system(e["path"]), "newton", "linear", step=1e-3)
+    assert again.columns == r.columns and np.array_equal(again.values, r.values)
+    bad = scene_file.read_text().replace('["B.F", "joint.tau_load", -1.0]', '["B.F", "joint.tau_load"]')
+    scene_file.write_text(bad)
+    with pytest.raises(ValueError, match="unit mismatch"):
+        fmugen.load_scene(scene_file)

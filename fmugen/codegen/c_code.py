@@ -1083,7 +1083,9 @@ def generate_c(
 
         runtime_start = runtime_starts(runtime_start)
     decls = [
-        *([_array("double", "rt_start", [_c_double(runtime_start[n]) for n in RT_START_ORDER])]
+        # sized by the runtime's count: a runtime with more parameters zero-fills, never over-reads
+        *([_array("double", "rt_start", [_c_double(runtime_start[n]) for n in RT_START_ORDER])
+           .replace(f"rt_start[{len(RT_START_ORDER)}]", "rt_start[FMUGEN_RT_COUNT]")]
           if runtime_start else []),
         _array("double", "x_start", [_c_double(v.start) for v in model.states]),
         _array("double", "x_nominal", [_c_double(v.nominal if v.nominal else 1.0) for v in model.states]),

@@ -303,7 +303,9 @@ class SymbolicModel:
             if v.name in values:
                 problem = variable_problem(v, values[v.name])
                 if problem:
-                    raise FmugenError(f"{self.name}: parameter {v.name} = {values[v.name]!r} {problem}")
+                    shown = repr(values[v.name])
+                    shown = shown if len(shown) <= 40 else shown[:20] + "..."
+                    raise FmugenError(f"{self.name}: parameter {v.name} = {shown} {problem}")
         groups = {}
         for g in ("states", "inputs", "parameters"):
             groups[g] = tuple(replace(v, start=as_number(values[v.name], f"{self.name}: {v.name}"))

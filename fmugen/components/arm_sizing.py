@@ -238,6 +238,9 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
+    from ..arguments import output_folder
+
+    output_folder(args.out, "--out", inputs=[args.robot, args.trajectory])  # before any work
     traj = None
     if args.trajectory:
         data = np.genfromtxt(args.trajectory, delimiter=",", names=True)

@@ -9,7 +9,8 @@
 
 ``cosim`` writes DIR/results.csv (``time``, then every recorded column),
 DIR/results.npz (a structured array ``results`` and the summary), DIR/results.png
-and DIR/summary.txt; the exit status is 0 on success, 1 with the failure
+and DIR/summary.txt; the exit status is 0 on success, 3 when the run ended but is unreliable (its coupling
+error estimate exceeds --tol, or grows), 1 with the failure
 report when the run failed (the results up to the failure are written).
 """
 from __future__ import annotations
@@ -49,8 +50,10 @@ def add_cosim_commands(subparsers) -> None:
                    "step, else its [scene] step)")
     p.add_argument("--adaptive", action="store_true", default=None,
                    help="control H by the interface defect (with --tol)")
-    p.add_argument("--tol", type=float, default=None, help="adaptive: tolerance relative to each coupled signal "
-                   "(default: the scene's, else 1e-4)")
+    p.add_argument("--tol", type=float, default=None,
+                   help="accuracy relative to each signal's range: a run whose coupling error estimate exceeds it "
+                        "ends unreliable (exit 3); with --adaptive also the step's target (default: the scene's, "
+                        "else 1e-4)")
     _run_flags(p)
     p.set_defaults(func=cmd_cosim)
 
@@ -225,6 +228,9 @@ def cmd_cosim(args) -> int:
             with open(paths["summary"], "a") as fh:
                 fh.write("\n".join(lines) + "\n")
     print(f"wrote {paths['csv']}, {paths['npz']}, {paths['plot']}, {paths['summary']}")
+    if result.summary.status == "unreliable":  # ran to the end, but its error estimate says no (exit 3)
+        print("fmugen cosim: unreliable: " + result.summary.reliability, file=sys.stderr)
+        return 3
     if not result.ok:
         print("fmugen cosim: " + str(result.summary.failure).splitlines()[0], file=sys.stderr)
         return 1

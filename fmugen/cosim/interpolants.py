@@ -47,6 +47,15 @@ class InputHistory:
         self.pred = np.zeros(max(nu, 1))[:nu]
         self.hold_only = hold_only  # zero-order hold of a non-iterated scheme: P = U_n, no slopes, one row
 
+    def copy(self):
+        """An independent history with the same points, writing into the same slope buffers."""
+        other = InputHistory(self.nu, self.ext, 0.0, self.DU, self.DDU, self.hold_only)
+        other.DU = self.DU  # the (nu-long) view itself
+        other.U[:] = self.U
+        other.t = list(self.t)
+        other.n = self.n
+        return other
+
     def predict(self, H):
         if self.hold_only:
             return self.U0  # held: the prediction of U_{n+1} is U_n (the slopes stay zero)

@@ -29,6 +29,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from .accuracy import ErrorEstimate, coupling_tolerance, internal_rtol
 from .errors import CosimError
 from .executor import SweepExecutor
 from .interpolants import CUBIC_THETA, EXTRAPOLATIONS, ORDER, InputHistory  # noqa: F401 (public names)
@@ -47,8 +48,14 @@ STATUS_NAMES = dict(enumerate(STATUS))
 _ALIASES = {"gs": "gauss-seidel", "gauss_seidel": "gauss-seidel", "seidel": "gauss-seidel",
             "fixed-point": "iterative", "held": "hold", "constant": "hold", "zoh": "hold"}
 
+DEFAULT_TOL = 1e-4  # the adaptive macro step's defect target when no tol is given
+
 # what to do about a coupling above its stability limit
-ADVICE = "take a smaller step, extrapolation, or an iterative/newton scheme"
+# (true for the scheme that ran: Newton is told no "use newton")
+ADVICE = {"jacobi": "take a smaller step, extrapolation, or an iterative/newton scheme",
+          "gauss-seidel": "take a smaller step, extrapolation, or an iterative/newton scheme",
+          "iterative": "take a smaller step, or the newton scheme",
+          "newton": "take a smaller step, or quadratic/cubic inputs (L-stable, damped)"}
 
 
 def _norm_choice(value, choices, what) -> str:
@@ -356,17 +363,21 @@ class Master:
 
     # -- the run ----------------------------------------------------------------
     def run(self, step: Optional[float] = None, stop: Optional[float] = None, adaptive: bool = False,
-            tol: float = 1e-4, min_step: Optional[float] = None, max_step: Optional[float] = None,
-            coupling_tol: float = 1e-8, max_iterations: int = 30, detect_divergence: bool = True,
-            dense: bool = False) -> CosimResult:
+            tol: Optional[float] = None, min_step: Optional[float] = None, max_step: Optional[float] = None,
+            coupling_tol: Optional[float] = None, max_iterations: int = 30, detect_divergence: bool = True,
+            dense: bool = False, estimate: bool = True) -> CosimResult:
         sysm = self.system
         t0 = float(sysm.start_time)
         stop = float(sysm.stop_time if stop is None else stop)
         H0 = _positive("step", sysm.step if step is None else step)
         if not (math.isfinite(stop) and stop > t0):
             raise CosimError(f"stop time {stop} must be finite and after the start time {t0}")
-        tol = _positive("tol", tol)
-        coupling_tol = _positive("coupling_tol", coupling_tol)
+        user_tol = None if tol is None else _positive("tol", tol)  # the accuracy the user asked for
+        tol = DEFAULT_TOL if tol is None else user_tol  # the adaptive step's target
+        if coupling_tol is None:  # what the FMUs' own accuracy allows (accuracy.py)
+            coupling_tol, tol_source = coupling_tolerance(self.units)
+        else:
+            coupling_tol, tol_source = _positive("coupling_tol", coupling_tol), "given"
         Hmin = _positive("min_step", min_step) if min_step is not None else (H0 * 1e-3 if adaptive else H0)
         Hmax = _positive("max_step", max_step) if max_step is not None else (max(H0, (stop - t0) / 10) if adaptive else H0)
         if Hmin > Hmax:
@@ -374,6 +385,8 @@ class Master:
         scheme = self._prepare(adaptive, coupling_tol, int(max_iterations))
         implicit = scheme.implicit
         summ = Summary(sysm.name, self.scheme, self.extrapolation, bool(adaptive))
+        if implicit:
+            summ.coupling_tol, summ.coupling_tol_source = coupling_tol, tol_source
         nu, ext = self.nu, ORDER[self.extrapolation]
         # the defect (what the predictor said against what came out) is O(H^p): the predictor is the
         # extrapolant through 1, 2 or 3 past points, also for the iterated schemes
@@ -396,6 +409,12 @@ class Master:
         if self.scheme != "gauss-seidel":
             self.executor = SweepExecutor(self.units, self._do, self.workers)
         states, monitor, failure, calls, scale0 = [], None, None, 0, None
+        est = shadow = None  # the a-posteriori error estimate by step doubling on a sample of steps (accuracy.py)
+        if estimate and len(self.rec_idx) and all(getattr(u, "can_save_state", True) for u in self.units):
+            rtols = [r for r in map(internal_rtol, self.units) if r is not None]
+            est = ErrorEstimate(self.scheme, self.extrapolation, int((stop - t0) / H0), self.columns,
+                                max(rtols) if rtols else 0.0)
+            shadow = self._prepare(adaptive, coupling_tol, int(max_iterations)) if implicit else scheme
         t = t0
         H = min(H0, Hmax)
         try:
@@ -415,10 +434,12 @@ class Master:
             if self.me_block is not None:
                 self.me_block.start(t0)
             if detect_divergence and nu and not adaptive:  # adaptive: the step control bounds the defect
-                monitor = DivergenceMonitor(self.coupling_labels, scale0[:nu], history.U[0, :nu], ADVICE)
+                monitor = DivergenceMonitor(self.coupling_labels, scale0[:nu], history.U[0, :nu], ADVICE[self.scheme])
             t_last = stop - 1e-12 * max(1.0, abs(stop))  # loop guard, computed once
             while t < t_last:
                 H = _land(t, H, stop)
+                if est is not None and est.due(t, H, stop):  # 0. a shadow step of 2H, for the estimate
+                    calls += self._shadow(t, H, shadow, est, scale, G, summ)
                 # 1. predict: the inputs at t_n and the extrapolant's derivatives into the FMUs' buffers
                 Uset_v[:] = history.U0
                 P = history.predict(H)
@@ -436,6 +457,8 @@ class Master:
                                 calls += self._restore_all(states)
                                 summ.rollbacks += 1
                                 H = control.retry(H)
+                                if est is not None:
+                                    est.discard()
                                 continue
                             failure = FailureReport(t, "not-converged",
                                                     f"{self.scheme} coupling iteration did not converge in "
@@ -454,6 +477,8 @@ class Master:
                     calls += self._restore_all(states)
                     summ.rollbacks += 1
                     H = control.retry(H)
+                    if est is not None:
+                        est.discard()
                     continue
                 # 4. measure: the interface defect
                 np.subtract(Unew_v, P, out=d_v)
@@ -477,6 +502,8 @@ class Master:
                         calls += self._restore_all(states)
                         summ.rollbacks += 1
                         H = control.reject(H, err)
+                        if est is not None:
+                            est.discard()
                         continue
                 t = t + H if stop - (t + H) > 1e-6 * H else stop
                 summ.macro_steps += 1
@@ -489,6 +516,8 @@ class Master:
                     self.dU0[:nu] = G[nu:]  # the slopes at t_{n+1}: the next step's predictor
                 # 6. record, watch
                 rec.append(t)
+                if est is not None:
+                    est.accepted(H, rec.V[rec.n - 1])
                 if monitor is not None:
                     failure = monitor.observe(t, H, d_v, Unew_v)
                     if failure is not None:
@@ -500,15 +529,24 @@ class Master:
             summ.threads = self.executor.threads if self.executor is not None else 1
             if self.executor is not None:
                 self.executor.shutdown()
-            for k, s in enumerate(states):
+            for k, s in enumerate(states + (getattr(self, "_shadow_states", None) or [])
+                                  + (getattr(self, "_shadow_work", None) or [])):
                 try:
-                    self.units[k].free_state(s)
+                    self.units[k % len(self.units)].free_state(s)
                 except Exception:
                     pass
+            self._shadow_states = self._shadow_work = None
         summ.wall_time = _time.perf_counter() - wall0
         summ.simulated_time = t - t0
         summ.fmu_calls = calls + sum(getattr(u, "n_calls", 0) for u in self.units)
         summ.do_steps = self._do_steps + sum(getattr(u, "do_steps", 0) for u in self.units)
+        if est is not None:
+            summ.error_estimates, summ.error_estimate, summ.error_trend, summ.error_growth, verdict = \
+                est.finish(rec.V[: rec.n], user_tol)
+            summ.estimate_samples = len(est.local)
+            if verdict is not None and failure is None:
+                summ.status = "unreliable"
+                summ.reliability = verdict
         if failure is not None:
             summ.status = "failed"
             summ.failure = failure
@@ -584,6 +622,56 @@ class Master:
         return FailureReport(t, "diverged", msg, unit=e.unit, coupling=self.coupling_labels[j],
                              fmu_messages=e.messages)
 
+    def _shadow(self, t, H, shadow, est, scale, G, summ) -> int:
+        """2 x ``est.window`` steps of H/2 from t by the run's scheme (a shadow run with its own input history),
+        its recorded outputs at the window's end handed to the estimate; then the FMUs and the master's buffers
+        back as they were (the run goes on bit for bit).  Returns the FMU calls."""
+        calls = 0
+        if getattr(self, "_shadow_states", None) is None:
+            self._shadow_states = [u.new_state() for u in self.units]
+            self._shadow_work = [u.new_state() for u in self.units]
+            calls += 2 * len(self.units)
+        saved, work = self._shadow_states, self._shadow_work
+        calls += self._save_all(saved)
+        bufs = (self.Uset, self.DUset, self.DDUset, self.DDDUset, self.Y, self.DY, self.dU0)
+        copies = [b.copy() for b in bufs]
+        history = self.history
+        mine = history.copy()  # the shadow's own past points (it writes into the FMUs' slope buffers as well)
+        self.history, self.U_n = mine, mine.U[0]
+        nu, H2, ok, ts = self.nu, 0.5 * H, True, t
+        Us, Gs = np.zeros(max(nu, 1)), np.zeros_like(G)
+        try:
+            for _ in range(2 * est.window):
+                self.Uset[:nu] = mine.U0
+                P = mine.predict(H2)
+                if shadow.implicit:
+                    calls += self._save_all(work)
+                    c, it, err, R = shadow.step(ts, H2, self._guess(P, H2), work, scale.copy(), Gs, Us, summ)
+                    if not err <= 1.0:
+                        ok = False
+                        break
+                else:
+                    c = shadow.step(ts, H2, ORDER[self.extrapolation], 0)
+                    self._coupled(Us)
+                calls += c
+                ts = ts + H2
+                mine.push(ts, Us[:nu])
+                if self.hermite:
+                    self.dU0[:nu] = Gs[nu:]
+            Ys = self.Y[self.rec_idx].copy()
+            ok = ok and bool(np.all(np.isfinite(Ys)))
+        except UnitFailure:  # a shadow that fails says nothing about the run's steps
+            ok = False
+        self.history, self.U_n = history, history.U[0]
+        calls += self._restore_all(saved)
+        for b, c in zip(bufs, copies):
+            b[:] = c
+        if ok:
+            est.started(t, H, Ys)
+        else:
+            est.count = 0
+        return calls
+
     def _save_all(self, states) -> int:
         for k, u in enumerate(self.units):
             st = u.save(states[k])
@@ -654,8 +742,9 @@ def run(system, scheme: Optional[str] = None, extrapolation: Optional[str] = Non
     side by side under Jacobi and the iterated schemes (results are identical
     to one thread; worth it when a macro step costs well above the ~50 us a
     thread hand-over costs).  Further options: ``min_step``, ``max_step``,
-    ``coupling_tol`` (iterative, newton), ``max_iterations``,
-    ``detect_divergence``, ``dense`` (slopes for dense output, :mod:`fmugen.cosim.dense`).
+    ``coupling_tol`` (iterative, newton; default: 10x the FMUs' internal rtol,
+    see :mod:`.accuracy`), ``max_iterations``, ``detect_divergence``, ``dense`` (slopes for
+    dense output, :mod:`fmugen.cosim.dense`), ``estimate`` (the coupling error estimate, on).
 
     Returns a :class:`CosimResult` (``time``, ``values`` per column,
     ``summary``); a run that fails returns its values up to the failure and

@@ -40,7 +40,7 @@ class Summary:
     scheme: str
     extrapolation: str
     adaptive: bool
-    status: str = "ok"  # "ok" or "failed"
+    status: str = "ok"  # "ok", "unreliable" (estimate above tol, or growing) or "failed"
     macro_steps: int = 0  # accepted
     rollbacks: int = 0  # rejected (restored) macro steps
     iterations: int = 0  # coupling iterations beyond the first (iterative/newton)
@@ -52,6 +52,15 @@ class Summary:
     step_min: float = math.inf
     step_max: float = 0.0
     threads: int = 1  # threads that stepped the FMUs (workers > 1 and macro steps costly enough)
+    coupling_tol: float = 0.0  # iterated schemes: the residual tolerance of the coupling iteration
+    coupling_tol_source: str = ""  # where it came from ("given", or derived from the FMUs' tolerances)
+    # the a-posteriori estimate of the coupling error (accuracy.py: step doubling on a sample of steps)
+    error_estimate: float = math.nan  # the largest column's estimate relative to its range
+    error_estimates: dict = field(default_factory=dict)  # column -> estimated coupling error (its unit)
+    error_trend: str = "unknown"  # "decaying", "steady", "growing" (local error over the run's last half)
+    error_growth: float = math.nan  # factor of that growth
+    estimate_samples: int = 0  # shadow steps the estimate rests on
+    reliability: str = ""  # why the status is "unreliable"
     failure: Optional[FailureReport] = None
 
     @property
@@ -63,7 +72,9 @@ class Summary:
         d = {k: getattr(self, k) for k in ("system", "scheme", "extrapolation", "adaptive", "status",
                                            "macro_steps", "rollbacks", "iterations", "jacobians",
                                            "do_steps", "fmu_calls", "wall_time", "simulated_time",
-                                           "step_min", "step_max", "threads")}
+                                           "step_min", "step_max", "threads", "coupling_tol",
+                                           "coupling_tol_source", "error_estimate", "error_estimates",
+                                           "error_trend", "error_growth", "estimate_samples", "reliability")}
         d["real_time_factor"] = self.real_time_factor
         d["failure"] = str(self.failure) if self.failure else ""
         return d
@@ -74,6 +85,13 @@ class Summary:
              f"{self.rollbacks} rollbacks, {self.iterations} iterations, {self.jacobians} Jacobians, "
              f"{self.do_steps} doStep, {self.fmu_calls} FMU calls, wall {self.wall_time:.4g} s "
              f"({self.real_time_factor:.3g}x real time)" + (f", {self.threads} threads" if self.threads > 1 else ""))
+        if self.estimate_samples:
+            s += (f"\nestimated coupling error {self.error_estimate:.3g} of the largest column's range "
+                  f"({self.estimate_samples} step-doubling samples), trend {self.error_trend}")
+        if self.reliability:
+            s += f"\nunreliable: {self.reliability}"
+        if self.coupling_tol:
+            s += f"\ncoupling tolerance {self.coupling_tol_source if self.coupling_tol_source != 'given' else f'{self.coupling_tol:.3g} (given)'}"
         if self.failure:
             s += "\n" + str(self.failure)
         return s

@@ -63,6 +63,7 @@ class RunSettings:
     workers: int = 1
     detect_divergence: Optional[bool] = None
     dense: Optional[bool] = None  # API only: record the outputs' slopes for dense output (fmugen.cosim.dense)
+    estimate: Optional[bool] = None  # API only: the coupling error estimate (fmugen.cosim.accuracy; on)
 
     def master_keywords(self) -> dict:
         """Keywords of :class:`fmugen.cosim.master.Master` (besides the system)."""
@@ -72,7 +73,8 @@ class RunSettings:
     def run_keywords(self) -> dict:
         """Keywords of ``Master.run``: only those set (the master keeps its defaults for the others)."""
         out = {"step": self.step, "stop": self.stop, "adaptive": self.adaptive}
-        for k in ("tol", "min_step", "max_step", "max_iterations", "coupling_tol", "detect_divergence", "dense"):
+        for k in ("tol", "min_step", "max_step", "max_iterations", "coupling_tol", "detect_divergence", "dense",
+                  "estimate"):
             v = getattr(self, k)
             if v is not None:
                 out[k] = v
@@ -141,7 +143,7 @@ def _check(field: str, value, where: str):
         return _positive(where, value)
     if field in ("max_iterations", "workers"):
         return _whole(where, value)
-    if field in ("adaptive", "detect_divergence", "dense"):
+    if field in ("adaptive", "detect_divergence", "dense", "estimate"):
         return _flag(where, value)
     if field == "order":
         if isinstance(value, str):

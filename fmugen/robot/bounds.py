@@ -30,12 +30,18 @@ def parameter_bounds(robot: Robot) -> dict:
         if isinstance(expr, sp.Symbol):
             lows[expr.name] = max(lows.get(expr.name, low), low)
 
-    for link in robot.links:
+    # a DH file's own quantities are its links'; a URDF robot's are its bodies' (a merged body's mass is a
+    # sum, not a parameter, and keeps an open range)
+    for link in robot.links or robot.bodies:
         at_least(link.mass, POSITIVE_MIN)
         at_least(link.rotor_inertia, 0.0)
         at_least(link.damping, 0.0)
+        at_least(getattr(link, "friction", 0), 0.0)
         for k in range(3):
             at_least(link.inertia_com[k][k], 0.0)
     if robot.payload is not None:
         at_least(robot.payload.mass, 0.0)
-    return lows
+    # a URDF keeps its published numbers (a rounding-level -5e-20 moment of inertia is read with a
+    # warning): a range the file's own value falls outside is not imposed
+    values = {p.name: p.value for p in robot.parameters}
+    return {k: v for k, v in lows.items() if values.get(k) is None or values[k] >= v}

@@ -162,6 +162,7 @@ def _group_key(scene, group: str, prune: bool, x0: dict, u0: Optional[dict] = No
         "x0": {k: v for k, v in sorted(x0.items()) if k.split(".", 1)[0] in members},
         "u0": {k: v for k, v in sorted(u0.items()) if k.split(".", 1)[0] in members},
         "inputs": [i for i in scene.spec.inputs if i.split(".", 1)[0] in members],
+        "external": scene.external_links(members),
         "run": [scene.spec.start, scene.spec.stop, scene.spec.step, scene.spec.tolerance],
         "default_set": _set_digest(scene.spec.parameter_set),
         # validity ranges the group's sources take from the inputs they drive (other instances' models)

@@ -23,7 +23,7 @@ SCENE_KEYS = {"name", "description", "parameter_set", "start", "stop", "step", "
               "initial", "prune", "connections", "monolithic", "connect", "record_bonds",
               "inputs"}
 COMMON_INSTANCE_KEYS = {"parameters", "fixed", "start", "hold"}
-ROBOT_KEYS = {"robot", "formulation", "locked", "outputs"}
+ROBOT_KEYS = {"robot", "formulation", "locked", "outputs", "mimic"}
 FACTORY_KEYS = {"factory", "options", "parameter_set"}
 GROUP_KEYS = {"members", "fmi_type", "solver", "tolerance", "jacobian"}
 SOLVERS = {"dopri5": 1, "rodas3": 2, "rk4": 3}
@@ -78,6 +78,7 @@ class SceneSpec:
     bonds: tuple = ()  # the expanded connect pairs (fmugen.scene.connect.Bond), set by Scene
     record_bonds: bool = False  # also record each bond's effort and flow (fmugen/scene/bonds.py)
     inputs: tuple = ()  # undriven inputs kept as inputs of the FMUs (not fixed) when pruning
+    external: Optional[dict] = None  # [external]: an SSP's components beside the instances (scene/external.py)
 
 
 def _number(v, where, positive=False, nonneg=False) -> float:
@@ -200,10 +201,10 @@ def _instance_keys(spec: dict) -> set:
 
 def parse_scene(data: dict, path: Path) -> SceneSpec:
     src = str(path)
-    extra = sorted(set(data) - {"scene", "instances", "fmus", "cosim"})
+    extra = sorted(set(data) - {"scene", "instances", "fmus", "cosim", "external"})
     if extra:
         raise SceneError(f"{src}: unknown top-level key(s) {', '.join(extra)}; a scene has [scene], "
-                         f"[instances.*], [fmus.*] and [cosim]")
+                         f"[instances.*], [fmus.*], [cosim] and [external]")
     sc = data.get("scene")
     if not isinstance(sc, dict):
         raise SceneError(f"{src}: missing [scene] table")
@@ -315,7 +316,7 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
                      prune=sc.get("prune", True), connections=tuple(conns), instances=instances,
                      groups=groups, monolithic=bool(monolithic), cosim=dict(cosim),
                      connect=tuple(tuple(c) for c in connect), record_bonds=bool(sc.get("record_bonds", False)),
-                     inputs=exposed)
+                     inputs=exposed, external=data.get("external"))
 
 
 def _instance(iname: str, spec, path: Path) -> InstanceSpec:
@@ -368,7 +369,13 @@ def _instance(iname: str, spec, path: Path) -> InstanceSpec:
             if not (k.startswith("q[") and k.endswith("]") and k[2:-1].isdigit()):
                 raise SceneError(f"{where} locked: {k!r} is not a joint position 'q[i]'")
             locked[int(k[2:-1])] = _number(v, f"{where} locked.{k}")
-        return InstanceSpec(iname, "robot", str(rp.resolve()), {"formulation": form, "outputs": outs},
+        mimic = spec.get("mimic", "independent")
+        if mimic not in ("independent", "tied"):
+            raise SceneError(f"{where} mimic must be 'independent' or 'tied' (URDF mimic joints), got {mimic!r}")
+        opts = {"formulation": form, "outputs": outs}
+        if mimic != "independent":
+            opts["mimic"] = mimic  # only when set: the FMU cache keys of existing scenes stay the same
+        return InstanceSpec(iname, "robot", str(rp.resolve()), opts,
                             None, params, fixed, start, hold, locked)
     if "factory" in spec:
         ref = spec["factory"]

@@ -41,6 +41,10 @@ def instance_model(spec: InstanceSpec, default_set: str, src: str, sets: Optiona
         params = {v.name for v in model.parameters}
         late = {k: v for k, v in sets.items() if k in params}
         if late:  # parameters change derived start values too: make the model again
+            try:  # named as the user wrote it, before the model is made again
+                check_model_values(model, late, lambda k: f"--set {spec.name}.{k}")
+            except FmugenError as exc:
+                raise SceneError(str(exc)) from None
             for k, v in late.items():
                 overrides[k] = _float(v, f"--set {spec.name}.{k}")
                 sets.pop(k)
@@ -53,16 +57,16 @@ def instance_model(spec: InstanceSpec, default_set: str, src: str, sets: Optiona
         values[k] = _float(v, f"--set {spec.name}.{k}")
         origin[k] = f"--set {spec.name}.{k}"
     # the physical checks a file value gets, for a value from parameters, start or --set
-    try:
-        check_model_values(model, values, origin.get)
-    except FmugenError as exc:
-        raise SceneError(str(exc)) from None
-    if arm is not None:
+    if arm is not None:  # the robot's own checks first: they name the link and the quantity
         pnames = {v.name for v in model.parameters}
         given = {k: v for k, v in values.items() if k in pnames}
         problem = robot_value_problem(arm.robot, given)
         if problem:
             raise SceneError(f"{where} ({', '.join(origin[k] for k in given)}): {problem}")
+    try:
+        check_model_values(model, values, origin.get)
+    except FmugenError as exc:
+        raise SceneError(str(exc)) from None
     known = {v.name for g in (model.states, model.inputs, model.parameters) for v in g}
     for k in values:
         if k not in known:
@@ -95,7 +99,8 @@ def _robot_model(spec: InstanceSpec, where: str, outputs, strategy: str = "strai
     import fmugen
 
     try:
-        arm = fmugen.load_robot(spec.source, spec.options.get("formulation", "newton_euler"))
+        arm = fmugen.load_robot(spec.source, spec.options.get("formulation", "newton_euler"),
+                                mimic=spec.options.get("mimic", "independent"))
         if spec.locked:
             strategy = "straight"  # the looped dynamics have no locked joints
         return arm.state_space_model(outputs=tuple(outputs), name=spec.name, locked=spec.locked or None,

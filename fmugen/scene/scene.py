@@ -73,6 +73,11 @@ class Scene:
         self._check_loops()
         self._check_undriven_inputs()
         self._check_exposed_inputs()
+        self.external = None  # [external]: an SSP's components beside the instances (scene/external.py)
+        if spec.external is not None:
+            from .external import read_external
+
+            self.external = read_external(self, spec.external)
 
     # ------------------------------------------------------------------ basics
     @property
@@ -169,13 +174,25 @@ class Scene:
         """Undriven inputs that stay inputs of the built FMUs ("inst.var"): all of them without pruning,
         else those ``[scene] inputs`` lists (the others are fixed at their start values)."""
         prune = self.spec.prune if prune is None else prune
+        outside = self._externally_driven()
         out = []
         for inst in self.spec.instances:
             for v in self.undriven_inputs(inst):
                 name = f"{inst}.{v.name}"
-                if not prune or name in self.spec.inputs:
+                if name not in outside and (not prune or name in self.spec.inputs):
                     out.append(name)
         return out
+
+    def _externally_driven(self) -> set:
+        """Scene inputs an SSP component drives ("inst.var"): they stay inputs of their FMU."""
+        return {f"{i}.{v}" for _, _, i, v, _ in self.external.to_scene} if self.external else set()
+
+    def external_links(self, members) -> list:
+        """[external] connections touching ``members`` (for the build's cache key)."""
+        if not self.external:
+            return []
+        return [list(map(str, c)) for c in self.external.to_scene if c[2] in members] + \
+            [list(map(str, c)) for c in self.external.from_scene if c[0] in members]
 
     @cached_property
     def rest_inputs(self) -> dict:
@@ -276,6 +293,8 @@ class Scene:
         """Variables of ``inst`` that something reads: a connection or the record."""
         names = [sv for si, sv, _, _, _ in self.connections if si == inst]
         names += [r.split(".", 1)[1] for r in self.spec.record if r.split(".", 1)[0] == inst]
+        if self.external:  # read by an SSP component
+            names += [v for i, v, _, _, _ in self.external.from_scene if i == inst]
         return list(dict.fromkeys(names))
 
     def robot_outputs(self, inst: str, prune: bool = True) -> tuple:
@@ -328,8 +347,9 @@ class Scene:
         if fold:
             m = m.with_parameters_folded(fold)
         if prune:
+            kept = set(self.spec.inputs) | self._externally_driven()
             undriven = {v.name: v.start if v.start is not None else 0.0 for v in self.undriven_inputs(inst)
-                        if f"{inst}.{v.name}" not in self.spec.inputs}
+                        if f"{inst}.{v.name}" not in kept}
             if undriven:
                 m = m.with_inputs_fixed(undriven)
                 removed.append(f"{inst}: inputs {', '.join(undriven)} (nothing drives them; fixed at their values; "
@@ -505,12 +525,22 @@ class Scene:
             inst, var = r.split(".", 1)
             _, v = self._var(inst, var, self.src)
             recorded.append(Recorded(r, self.group_of(inst), self.fmu_name(inst, var), v.unit))
-        return CosimSystem(self.name, tuple(units), tuple(couplings), tuple(recorded), self.spec.start,
-                           self.spec.stop, self.spec.step, self.gauss_seidel_order(), dict(self.spec.cosim))
+        system = CosimSystem(self.name, tuple(units), tuple(couplings), tuple(recorded), self.spec.start,
+                             self.spec.stop, self.spec.step, self.gauss_seidel_order(), dict(self.spec.cosim))
+        if self.external:  # an SSP's components beside the scene's FMUs
+            from .external import extend_system
+
+            system = extend_system(self, system)
+        return system
 
     def reference_problem(self):
         """:class:`fmugen.cosim.system.ReferenceProblem`: the monolithic model from the scene's initial state."""
         from ..cosim.system import ReferenceProblem
+
+        if self.external:
+            raise SceneError(f"{self.src}: [external] components (an SSP's FMUs) have no symbolic model, so the "
+                             f"scene has no reference solution; export it (fmugen ssp) and run fmugen report on "
+                             f"the .ssp for a self-convergence reference")
 
         m = self.initial.model
         x0 = np.array([self.initial.values[v.name] for v in m.states])

@@ -72,8 +72,9 @@ def _unit_element(parent, unit: str):
         bu.set("factor", _fmt(b.factor))
 
 
-def _ssv(name: str, md) -> bytes:
-    """The parameter set of one FMU: every parameter and the inputs' start values."""
+def _ssv(name: str, md, bound: dict) -> bytes:
+    """The parameter set of one FMU: every parameter and the inputs' start values (``bound``: values
+    the system sets over the FMU's own, e.g. an external component's bindings)."""
     from lxml import etree
 
     root = etree.Element(f"{{{NS['ssv']}}}ParameterSet", nsmap={"ssv": NS["ssv"], "ssc": NS["ssc"]},
@@ -85,12 +86,13 @@ def _ssv(name: str, md) -> bytes:
         if v.variability == "constant":
             continue
         p = etree.SubElement(params, f"{{{NS['ssv']}}}Parameter", name=v.name)
+        value = bound.get(v.name, v.start)
         if v.type == "Real":
-            el = etree.SubElement(p, f"{{{NS['ssv']}}}Real", value=_fmt(float(v.start)))
+            el = etree.SubElement(p, f"{{{NS['ssv']}}}Real", value=_fmt(float(value)))
             if v.unit:
                 el.set("unit", v.unit)
         elif v.type == "Integer":
-            etree.SubElement(p, f"{{{NS['ssv']}}}Integer", value=str(int(v.start)))
+            etree.SubElement(p, f"{{{NS['ssv']}}}Integer", value=str(int(float(value))))
         else:
             params.remove(p)
     validate(root, "SystemStructureParameterValues.xsd", f"{name}.ssv")
@@ -136,7 +138,7 @@ def ssd_xml(built, settings: dict, libcosim_step: float) -> tuple:
         b = etree.SubElement(etree.SubElement(comp, f"{{{D}}}ParameterBindings"), f"{{{D}}}ParameterBinding",
                              source=f"resources/{u.name}.ssv")
         b.set("type", "application/x-ssp-parameter-set")
-        ssvs[u.name] = _ssv(u.name, md)
+        ssvs[u.name] = _ssv(u.name, md, dict(u.start_values))
     if system.couplings:
         ce = etree.SubElement(sysel, f"{{{D}}}Connections")
         for c in system.couplings:
@@ -169,11 +171,11 @@ def ssd_xml(built, settings: dict, libcosim_step: float) -> tuple:
     if system.order:
         etree.SubElement(run, f"{{{F}}}Order").text = " ".join(system.order)
     for u in system.units:
-        g = scene.groups[u.name]
+        g = scene.groups.get(u.name)  # None: a component of an [external] SSP
         el = etree.SubElement(run, f"{{{F}}}Unit", name=u.name, fmiType=u.fmi_type,
                               directionalDerivatives=_fmt(bool(u.provides_directional_derivative)),
                               members=" ".join(u.members))
-        if u.fmi_type == "cs":
+        if u.fmi_type == "cs" and g is not None:
             el.set("solver", g.solver)
         for k, v in u.start_values.items():  # what the master sets before initialisation
             etree.SubElement(el, f"{{{F}}}Start", name=k, value=_fmt(v))

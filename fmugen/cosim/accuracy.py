@@ -1,0 +1,188 @@
+"""How accurate a co-simulation can be and is: the coupling tolerance the FMUs' own accuracy allows.
+
+**Coupling tolerance** (``coupling_tol`` of the iterated schemes).  An iteration of the macro step stops when
+the residual R = G(V) - V is below ``coupling_tol`` relative to the coupled signals.  G is what the FMUs
+compute over the step with their internal solvers, so it carries their local errors, ~ rtol relative to the
+signals, and changes by that much whenever a guess moves the solvers' adaptive step sequence: a residual
+below that level cannot be reached (Newton at 1e-8 on FMUs integrating at rtol 1e-8 stalled at 2.3x the
+tolerance on the PUMA at rest).  The default is therefore ``COUPLING_TOL_FACTOR`` x the largest internal
+rtol of the FMUs that integrate adaptively (their ``solver.rtol``, else the FMU's default experiment
+tolerance); FMUs that integrate with fixed steps (fmugen's RK4) or declare no tolerance leave the old
+default, 1e-8.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+COUPLING_TOL_FACTOR = 10.0  # the residual sits at a few x rtol (2.3x measured): a decade above it
+COUPLING_TOL_FIXED = 1e-8  # without a stated internal tolerance
+FIXED_STEP_METHODS = {3}  # fmugen's solver.method of fixed-step solvers (RK4): no rtol applies
+
+
+def _number(x):
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return None
+    return v if v > 0 else None
+
+
+def internal_rtol(unit):
+    """The relative tolerance an FMU integrates to (None: fixed steps, or not stated)."""
+    if unit.kind == "me":  # integrated by the master's own Radau block (rtol 1e-10)
+        from .me_block import ME_RTOL
+
+        return ME_RTOL
+    sv = unit.unit.start_values
+    var = unit.variables
+    method = sv.get("solver.method", getattr(var.get("solver.method"), "start", None))
+    if _number(method) is not None and int(float(method)) in FIXED_STEP_METHODS:
+        return None
+    rtol = _number(sv.get("solver.rtol", getattr(var.get("solver.rtol"), "start", None)))
+    if rtol is None:
+        de = getattr(unit.md, "defaultExperiment", None)
+        rtol = _number(getattr(de, "tolerance", None)) if de is not None else None
+    return rtol
+
+
+def coupling_tolerance(units) -> tuple:
+    """(default coupling tolerance, the sentence that says where it comes from)."""
+    rtols = {u.name: internal_rtol(u) for u in units}
+    known = {k: v for k, v in rtols.items() if v is not None}
+    if not known:
+        return COUPLING_TOL_FIXED, f"{COUPLING_TOL_FIXED:g} (no FMU states an adaptive internal tolerance)"
+    name = max(known, key=known.get)
+    tol = COUPLING_TOL_FACTOR * known[name]
+    return tol, (f"{tol:.3g} = {COUPLING_TOL_FACTOR:g} x the largest internal rtol of the FMUs "
+                 f"({known[name]:.3g}, FMU {name!r})")
+
+
+# -- the a-posteriori estimate of the coupling error -----------------------------------------------------
+#
+# Step doubling (Richardson) on a sample of communication points.  Every ``every`` macro steps the master
+# saves the FMUs at t_n, takes one *shadow* step of 2H from there by the same scheme and extrapolation,
+# notes the recorded outputs, restores the FMUs (and its buffers) and goes on: the run itself is bit for bit
+# the run without the estimate.  Two steps of H later the difference between the shadow's outputs and the
+# run's, divided by 2^(p+1) - 2 (p: the scheme's order), estimates the local coupling error of one macro
+# step, and each sample stands for the ``every`` steps around it.  The estimate of a column's coupling
+# error at time t is the sum of those local errors up to t: the error the run would have if the coupling
+# errors of its steps added up without decaying (conservative for a stable system; a system that amplifies
+# them shows up in the trend).  The trend is the growth of the local error over the last half of the run
+# (a least-squares exponential fit): a coupling that slowly destabilises the system makes its local errors
+# grow without bound, long before the interface defect looks like a divergence.
+
+WINDOW_STEPS = 10  # macro steps a shadow window spans (at most)
+COST = 40  # the shadow costs about 1/COST of the run (plus a save and restore per window)
+GROWTH = 4.0  # the local error grew this much over the last half of the run: "growing"
+NOISE = 100.0  # local errors below NOISE x the FMUs' internal rtol (relative) are solver noise: no trend
+
+ESTIMATORS = {"sum": lambda e: e.est_sum, "max": lambda e: e.est_max}
+ESTIMATOR = "sum"
+
+# the scheme's order of accuracy (local error O(H^(p+1))): held inputs 1, the line 2, the parabola 3
+ORDERS = {"hold": 1, "linear": 2, "quadratic": 3, "cubic": 3}
+
+
+class ErrorEstimate:
+    """Accumulates the shadow samples of one run; ``finish`` gives the estimate, the trend and the verdict."""
+
+    def __init__(self, scheme, extrapolation, n_steps, columns, rtol):
+        p = ORDERS[extrapolation]
+        if scheme == "gauss-seidel" and p > 2:
+            p = 2  # a later FMU gets the line to its source's new value
+        self.p = p
+        self.div = 2.0 ** (p + 1) - 2.0
+        # macro steps a shadow window spans (2 x window steps of H/2): fewer in short runs
+        self.window = int(max(2, min(WINDOW_STEPS, n_steps // 25)))
+        self.every = max(COST * 2 * self.window, 1)  # shadow steps cost about 1 / COST of the run's
+        # over a window the errors are global: Richardson, e(H) = (y_H - y_H/2) 2^p / (2^p - 1)
+        self.div = (2.0 ** p - 1.0) / 2.0 ** p
+        self.columns = columns
+        self.rtol = rtol or 0.0
+        self.count = 0
+        self.pending = None  # (t, H, shadow outputs, steps still to go)
+        self.t, self.local = [], []  # sample times, local error per column (absolute)
+        self.weights = []  # macro steps each sample stands for
+        self.since = 0  # accepted steps since the last sample
+        self.first = max(1, min(self.every, n_steps // 10))  # the first window early in the run
+        self.shadow_steps = 0
+
+    def due(self, t, H, stop) -> bool:
+        """A shadow step from t now? (every ``every`` accepted steps, with two full steps left)."""
+        return (self.pending is None and self.count >= min(self.every, self.first) and
+                t + self.window * H < stop - 1e-9 * H)
+
+    def started(self, t, H, Ys) -> None:
+        self.pending = (t, H, Ys, self.window)
+        self.count = 0
+        self.first = self.every
+        self.shadow_steps += 1
+
+    def accepted(self, H, Y) -> None:
+        """After every accepted macro step, with its recorded outputs."""
+        self.count += 1
+        self.since += 1
+        if self.pending is None:
+            return
+        t, Hs, Ys, left = self.pending
+        if H != Hs:  # the step changed (adaptive, or the last step): the pair is no step doubling
+            self.pending = None
+            return
+        if left > 1:
+            self.pending = (t, Hs, Ys, left - 1)
+            return
+        self.pending = None
+        self.t.append(t)
+        self.local.append(np.abs(Ys - Y) / self.div)
+        self.weights.append(self.since)
+        self.since = 0
+
+    def discard(self) -> None:
+        """A step was rolled back: the pending comparison no longer compares the same start."""
+        self.pending = None
+
+    def finish(self, values, tol):
+        """(estimate per column, relative estimate, trend, growth factor, verdict sentence or None)."""
+        cols = self.columns
+        if not self.local:
+            return {}, math.nan, "unknown", math.nan, None
+        L = np.array(self.local)  # (samples, columns)
+        w = np.array(self.weights, dtype=float)
+        w[-1] += self.since  # the steps after the last sample count with it
+        self.est_sum = (L * w[:, None]).sum(axis=0) / self.window
+        self.est_max = L.max(axis=0)
+        est = ESTIMATORS[ESTIMATOR](self)
+        scale = np.max(np.abs(values), axis=0) if len(values) else np.ones(len(cols))
+        scale = np.where(scale > 0, scale, 1.0)
+        rel_est = est / scale
+        j = int(np.argmax(rel_est))
+        estimate = {c: float(e) for c, e in zip(cols, est)}
+        rel_local = (L / scale).max(axis=1)
+        trend, growth = _trend(np.array(self.t), rel_local, NOISE * self.rtol)
+        verdict = None
+        if tol is not None and rel_est[j] > tol:
+            verdict = (f"estimated coupling error {est[j]:.3g} in {cols[j]} ({rel_est[j]:.3g} of its range) exceeds "
+                       f"the tolerance {tol:.3g}")
+        elif trend == "growing":
+            verdict = (f"the coupling error grows: its local estimate grew {growth:.3g}x over the last half of the "
+                       f"run (a slow instability of the coupled system, or of the coupling)")
+        return estimate, float(rel_est[j]), trend, growth, verdict
+
+
+def _trend(t, e, floor):
+    """('growing' | 'steady' | 'decaying' | 'unknown', growth factor) of the local errors e at times t over
+    the last half of the run."""
+    if len(t) < 6:
+        return "unknown", math.nan
+    half = t >= t[0] + 0.5 * (t[-1] - t[0])
+    tt, ee = t[half], e[half]
+    if len(tt) < 4 or tt[-1] <= tt[0]:
+        return "unknown", math.nan
+    y = np.log(np.maximum(ee, 1e-300))
+    slope = np.polyfit(tt, y, 1)[0]
+    growth = float(math.exp(min(slope * (tt[-1] - tt[0]), 700.0)))
+    if growth >= GROWTH and ee[-1] > floor:
+        return "growing", growth
+    return ("decaying" if growth < 1.0 / GROWTH else "steady"), growth

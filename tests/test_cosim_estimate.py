@@ -1,0 +1,53 @@
+"""The a-posteriori estimate of the coupling error (fmugen/cosim/accuracy.py: step-halving shadow windows on a
+sample of steps): it leaves the run bit for bit unchanged, it is within 10x of the error measured against the
+monolithic reference (and not below a tenth of it), and a run whose estimate exceeds the user's tolerance ends
+``unreliable``, not ``ok``."""
+import numpy as np
+import pytest
+
+from cosim_rigs import reference_problem, split_system
+from fmugen.cosim import run, solve_reference
+
+pytestmark = pytest.mark.usefixtures("private_reference_cache")
+
+
+@pytest.fixture(scope="module")
+def ref():
+    return solve_reference(reference_problem("default", "smooth", 2.0), times=np.linspace(0.0, 2.0, 4001))
+
+
+def _err(r, ref):
+    idx = np.rint(r.time / 5e-4).astype(int)
+    return float(np.max(np.abs(r["joint.theta"] - ref["joint.theta"][idx])))
+
+
+@pytest.mark.parametrize("scheme,ext,H", [("jacobi", "hold", 2e-3), ("jacobi", "linear", 2e-3),
+                                          ("gauss-seidel", "hold", 1e-3), ("gauss-seidel", "linear", 4e-3),
+                                          ("newton", "linear", 1e-2), ("newton", "cubic", 2e-2)])
+def test_the_estimate_is_within_10x_of_the_measured_error(ref, scheme, ext, H):
+    r = run(split_system("default", "smooth", stop=2.0), scheme, ext, step=H)
+    assert r.ok and r.summary.estimate_samples >= 1, r.summary
+    est = r.summary.error_estimates["joint.theta"]
+    err = _err(r, ref)
+    assert err > 100 * ref.error_of("joint.theta")
+    assert est / 20 < err < 10 * est, (err, est)
+
+
+@pytest.mark.parametrize("scheme,ext,H", [("jacobi", "hold", 2e-3), ("gauss-seidel", "linear", 4e-3),
+                                          ("newton", "cubic", 2e-2)])
+def test_the_shadow_windows_leave_the_run_bit_for_bit(scheme, ext, H):
+    on = run(split_system("default", "smooth", stop=1.0), scheme, ext, step=H)
+    off = run(split_system("default", "smooth", stop=1.0), scheme, ext, step=H, estimate=False)
+    assert on.summary.estimate_samples >= 1 and off.summary.estimate_samples == 0
+    assert np.array_equal(on.time, off.time) and np.array_equal(on.values, off.values)
+
+
+def test_an_estimate_above_the_users_tolerance_is_unreliable_not_ok(ref):
+    system = split_system("default", "smooth", stop=2.0)
+    loose = run(system, "newton", "cubic", step=2e-2, tol=1e-3)
+    tight = run(system, "newton", "cubic", step=2e-2, tol=1e-5)
+    assert loose.summary.status == "ok" and loose.ok
+    assert tight.summary.status == "unreliable" and not tight.ok and tight.summary.failure is None
+    assert "exceeds the tolerance" in tight.summary.reliability
+    # the same trajectory: only the verdict differs
+    assert np.array_equal(loose.values, tight.values)
