@@ -438,8 +438,11 @@ class Master:
             t_last = stop - 1e-12 * max(1.0, abs(stop))  # loop guard, computed once
             while t < t_last:
                 H = _land(t, H, stop)
-                if est is not None and est.due(t, H, stop):  # 0. a shadow step of 2H, for the estimate
-                    calls += self._shadow(t, H, shadow, est, scale, G, summ)
+                if est is not None and summ.macro_steps >= est.next_at:  # 0. a shadow window, for the estimate
+                    if est.due(t, H, stop):
+                        calls += self._shadow(t, H, shadow, est, scale, G, summ)
+                    else:
+                        est.skipped(summ.macro_steps)
                 # 1. predict: the inputs at t_n and the extrapolant's derivatives into the FMUs' buffers
                 Uset_v[:] = history.U0
                 P = history.predict(H)
@@ -516,8 +519,8 @@ class Master:
                     self.dU0[:nu] = G[nu:]  # the slopes at t_{n+1}: the next step's predictor
                 # 6. record, watch
                 rec.append(t)
-                if est is not None:
-                    est.accepted(H, rec.V[rec.n - 1])
+                if est is not None and est.pending is not None:
+                    est.accepted(H, rec.V[rec.n - 1], summ.macro_steps)
                 if monitor is not None:
                     failure = monitor.observe(t, H, d_v, Unew_v)
                     if failure is not None:
@@ -542,7 +545,7 @@ class Master:
         summ.do_steps = self._do_steps + sum(getattr(u, "do_steps", 0) for u in self.units)
         if est is not None:
             summ.error_estimates, summ.error_estimate, summ.error_trend, summ.error_growth, verdict = \
-                est.finish(rec.V[: rec.n], user_tol)
+                est.finish(rec.V[: rec.n], user_tol, summ.macro_steps)
             summ.estimate_samples = len(est.local)
             if verdict is not None and failure is None:
                 summ.status = "unreliable"
@@ -667,9 +670,9 @@ class Master:
         for b, c in zip(bufs, copies):
             b[:] = c
         if ok:
-            est.started(t, H, Ys)
+            est.started(t, H, Ys, summ.macro_steps)
         else:
-            est.count = 0
+            est.skipped(summ.macro_steps)
         return calls
 
     def _save_all(self, states) -> int:
