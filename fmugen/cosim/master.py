@@ -387,6 +387,8 @@ class Master:
         summ = Summary(sysm.name, self.scheme, self.extrapolation, bool(adaptive))
         if implicit:
             summ.coupling_tol, summ.coupling_tol_source = coupling_tol, tol_source
+        if getattr(sysm, "rest_unstable", ()):
+            summ.physics = sysm.rest_unstable[0].split(": the system")[0]
         nu, ext = self.nu, ORDER[self.extrapolation]
         # the defect (what the predictor said against what came out) is O(H^p): the predictor is the
         # extrapolant through 1, 2 or 3 past points, also for the iterated schemes
@@ -434,7 +436,8 @@ class Master:
             if self.me_block is not None:
                 self.me_block.start(t0)
             if detect_divergence and nu and not adaptive:  # adaptive: the step control bounds the defect
-                monitor = DivergenceMonitor(self.coupling_labels, scale0[:nu], history.U[0, :nu], ADVICE[self.scheme])
+                monitor = DivergenceMonitor(self.coupling_labels, scale0[:nu], history.U[0, :nu], ADVICE[self.scheme],
+                                            getattr(sysm, "rest_unstable", ()))
             t_last = stop - 1e-12 * max(1.0, abs(stop))  # loop guard, computed once
             while t < t_last:
                 H = _land(t, H, stop)
@@ -618,10 +621,15 @@ class Master:
         if monitor is None or not monitor.growing():
             return FailureReport(t, "fmu-failure", str(e), unit=e.unit, fmu_messages=e.messages)
         j = int(np.argmax(np.abs(d[: self.nu]) / np.maximum(scale0[: self.nu], 1e-300)))
-        msg = (f"the coupling diverges: the interface defect grew over the last macro steps until FMU "
-               f"{e.unit!r} failed ({e.call} returned {STATUS_NAMES.get(e.status, e.status)}). The inputs "
-               f"this FMU was given jumped, so the coupling (H = {H:.4g} s is above this scheme's stability "
-               f"limit: {monitor.advice}) is the cause, not stiffness of the FMU, whatever its message suggests")
+        if monitor.physics:
+            msg = (f"the system diverges: the interface values grew over the last macro steps until FMU {e.unit!r} "
+                   f"failed ({e.call} returned {STATUS_NAMES.get(e.status, e.status)}); "
+                   f"{monitor._stability_limit(H)}")
+        else:
+            msg = (f"the coupling diverges: the interface defect grew over the last macro steps until FMU "
+                   f"{e.unit!r} failed ({e.call} returned {STATUS_NAMES.get(e.status, e.status)}). The inputs "
+                   f"this FMU was given jumped, so the coupling (H = {H:.4g} s is above this scheme's stability "
+                   f"limit: {monitor.advice}) is the cause, not stiffness of the FMU, whatever its message suggests")
         return FailureReport(t, "diverged", msg, unit=e.unit, coupling=self.coupling_labels[j],
                              fmu_messages=e.messages)
 
