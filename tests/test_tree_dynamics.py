@@ -213,3 +213,52 @@ def test_loops_equal_straight_line_code_on_a_tree_with_damping_and_friction():
             assert rel(dx, ref_dx) < RTOL and rel(y, ref_y) < RTOL
             for a, b in zip(cl.jacobian(p, 0.0, x, tau), cs.jacobian(p, 0.0, x, tau)):
                 assert rel(a, b) < RTOL
+
+
+@pytest.mark.parametrize("rel_path", ["allegro_hand_description/urdf/allegro_left_hand.urdf",
+                                      "kinova_description/robots/kinova.urdf"])
+def test_urdf_robots_through_the_loops_equal_pinocchio(rel_path):
+    """fmugen's URDF reader -> the general joint model -> the runtime's loops (a 16-DoF hand: four fingers on
+    a fixed palm; a chain with continuous joints), against Pinocchio's reading of the same file."""
+    import importlib.metadata
+    import warnings
+    from pathlib import Path
+
+    from fmugen.codegen.benchmarks import pinocchio_urdf_map, to_pinocchio
+    from fmugen.codegen.c_code import generate_c
+    from fmugen.codegen.c_harness import CompiledModel
+    from fmugen.dynamics.manipulator import Manipulator
+    from fmugen.robot.urdf import load_urdf
+
+    try:
+        root = Path(importlib.metadata.distribution("example-robot-data").locate_file(
+            "cmeel.prefix/share/example-robot-data/robots"))
+    except importlib.metadata.PackageNotFoundError:
+        pytest.skip("example-robot-data is not installed (pip install -e '.[test]')")
+    path = root / rel_path
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        robot = load_urdf(path)
+    model = pin.buildModelFromUrdf(str(path))
+    data = model.createData()
+    mp = pinocchio_urdf_map(model, robot)
+    iv = [m[1] for m in mp]
+    n = robot.n
+    m = Manipulator(robot).state_space_model(outputs=(), strategy="loops")
+    zero = {v.name: 0.0 for v in m.parameters if v.name.startswith(("b_", "fc_"))}  # Pinocchio has neither
+    p = np.array([zero.get(v.name, v.start) for v in m.parameters], float)
+    rng = np.random.default_rng(3)
+    with CompiledModel.build(generate_c(m).source) as cm:
+        for _ in range(2):
+            q, qd, tau = rng.uniform(-1, 1, n), rng.uniform(-1, 1, n), rng.uniform(-2, 2, n)
+            qp, vp = to_pinocchio(model, mp, q, qd)
+            taup = np.zeros(model.nv)
+            taup[iv] = tau
+            dx, _ = cm.evaluate(p, 0.0, np.r_[q, qd], tau, want_y=False)
+            assert rel(dx[n:], pin.aba(model, data, qp, vp, taup)[iv]) < 1e-9
+            dfdx, dfdu, _, _ = cm.jacobian(p, 0.0, np.r_[q, qd], tau)
+            pin.computeABADerivatives(model, data, qp, vp, taup)
+            minv = np.triu(data.Minv) + np.triu(data.Minv, 1).T
+            assert rel(dfdu[n:], minv[np.ix_(iv, iv)]) < 1e-9
+            assert rel(dfdx[n:, n:], data.ddq_dv[np.ix_(iv, iv)]) < 1e-9
+            assert rel(dfdx[n:, :n], data.ddq_dq[np.ix_(iv, iv)]) < 1e-9  # continuous: along the tangent

@@ -295,6 +295,8 @@ def test_frame_outputs_their_jacobians_and_locked_branches():
     names = [v.name for v in m.outputs]
     assert names[:3] == ["p_panda_hand_tcp[1]", "p_panda_hand_tcp[2]", "p_panda_hand_tcp[3]"]
     assert "R_panda_hand[2,3]" in names and "J_panda_leftfinger[6,9]" in names and len(names) == 3 + 9 + 54
+    q4 = m.states[3]  # the elbow's range [-3.0718, -0.0698] excludes 0: it starts mid-range
+    assert (q4.name, q4.min, q4.max, q4.start) == ("q[4]", -3.0718, -0.0698, pytest.approx(-1.5708))
     ev = ModelEvaluator(m)
     rng = np.random.default_rng(3)
     q = rng.uniform(-1, 1, 9)
@@ -492,3 +494,53 @@ def test_a_joint_that_moves_nothing_is_refused(tmp_path):
         '<inertia ixx="0.002" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/>', '').replace(
         '<inertia ixx="0.001" ixy="0.0001" ixz="0" iyy="0.002" iyz="0" izz="0.0015"/>', '')
     refused(text, "joint 'elbow': moves no mass", tmp_path)
+
+
+def test_mimic_joints_tied_to_their_leader(tmp_path):
+    """mimic="tied": the elbow follows the shoulder (q2 = -0.5 q1 + 0.1); the model keeps one joint and its
+    acceleration is the projection G^T M G qdd = G^T (tau - h) of the full arm's M and h (numpy)."""
+    from fmugen.codegen.evaluate import ModelEvaluator
+
+    path = tmp_path / "arm.urdf"
+    path.write_text(arm_urdf().replace('<axis xyz="0 1 0"/>', '<axis xyz="0 1 0"/>'
+                                       '<mimic joint="shoulder" multiplier="-0.5" offset="0.1"/>'))
+    with pytest.warns(MimicJointWarning, match="elbow"):
+        assert fmugen.load_robot(path).robot.bodies[1].mimic is None
+    arm = fmugen.load_robot(path, mimic="tied")
+    assert arm.robot.bodies[1].mimic[0] == 0
+    m = arm.state_space_model(outputs=("qdd", "p:tcp", "J:tcp"))
+    assert [v.name for v in m.states] == ["q[1]", "qd[1]"] and [v.name for v in m.inputs] == ["tau[1]"]
+    ev = ModelEvaluator(m)
+    G = np.array([[1.0], [-0.5]])
+    for q1, qd1, tau1 in ((0.3, 0.7, 2.0), (-1.1, -0.4, -5.0)):
+        q, qd = np.array([q1, -0.5 * q1 + 0.1]), np.array([qd1, -0.5 * qd1])
+        M, h = arm.mass_matrix(q), arm.bias(q, qd)
+        qdd = np.linalg.solve(G.T @ M @ G, G.T @ (np.array([tau1, 0.0]) - h))
+        assert ev.f(0.0, [q1, qd1], [tau1])[1] == pytest.approx(qdd[0], rel=1e-12)
+        y = ev.g(0.0, [q1, qd1], [tau1])
+        assert y[9] == pytest.approx(qdd[0], rel=1e-12)  # outputs: p_tcp, J_tcp, then qdd
+        assert np.abs(y[0:3] - arm.fk(q, "tcp")[:3, 3]).max() < 1e-14
+        assert np.abs(y[3:9] - (arm.jacobian(q, "tcp") @ G)[:, 0]).max() < 1e-14  # d p_tcp / d q1 includes q2
+    # the exact model Jacobian against central differences of f
+    x, u, e = np.array([0.3, 0.7]), np.array([2.0]), 1e-6
+    A, B, _, _ = ev.jacobians(0.0, x, u)
+    A_fd = np.column_stack([(ev.f(0.0, x + e * d, u) - ev.f(0.0, x - e * d, u)) / (2 * e) for d in np.eye(2)])
+    assert np.abs(A - A_fd).max() < 1e-6 * np.abs(A).max()
+    assert B[1, 0] == pytest.approx((ev.f(0.0, x, u + e)[1] - ev.f(0.0, x, u - e)[1]) / (2 * e), rel=1e-6)
+    with pytest.raises(ValueError, match="follow another joint"):
+        arm.state_space_model(locked={2: 0.0})
+
+
+def test_a_scene_ties_mimic_joints(tmp_path):
+    from fmugen.scene import load_scene
+    from fmugen.scene.errors import SceneError
+
+    (tmp_path / "arm.urdf").write_text(arm_urdf().replace(
+        '<axis xyz="0 1 0"/>', '<axis xyz="0 1 0"/><mimic joint="shoulder" multiplier="2"/>'))
+    text = '[scene]\nname = "m"\n[instances.arm]\nrobot = "arm.urdf"\nmimic = "{}"\n[fmus.arm]\nmembers = ["arm"]\n'
+    (tmp_path / "s.toml").write_text(text.format("tied"))
+    m, _ = load_scene(tmp_path / "s.toml").instance_model("arm")
+    assert [v.name for v in m.states] == ["q[1]", "qd[1]"]
+    (tmp_path / "s.toml").write_text(text.format("glued"))
+    with pytest.raises(SceneError, match="mimic must be 'independent' or 'tied'"):
+        load_scene(tmp_path / "s.toml")

@@ -115,8 +115,14 @@ def load_model(path: Path, sets: dict, robot_outputs=(), formulation="newton_eul
         model = load_assembly(path)
         check_model_values(model, sets, lambda k: f"{path}: --set {k}")
         return model, sets
-    raise InputFileError(f"{path}: neither a robot file ([robot] table), an assembly ([assembly] table) "
-                         f"nor a scene ([scene] table)")
+    if "component" in data:  # a component file: parameters through its own checks (ranges, exact ifs)
+        from ..components.equations import load_component, read_component_file
+
+        params = {d.name for d in read_component_file(path).of_kind("parameter")}
+        model = load_component(path, overrides={k: v for k, v in sets.items() if k in params})
+        return model, {k: v for k, v in sets.items() if k not in params}
+    raise InputFileError(f"{path}: neither a robot file ([robot] table), an assembly ([assembly] table), "
+                         f"a scene ([scene] table) nor a component file ([component] table)")
 
 
 def describe(lm, model, op=None, out=None) -> None:
@@ -142,6 +148,11 @@ def describe(lm, model, op=None, out=None) -> None:
 
 def _warn_kinks(path: Path, sets: dict, model, op) -> None:
     data = tomllib.loads(path.read_text())
+    if "component" in data:
+        from .kinks import component_kink_warnings
+
+        for line in component_kink_warnings(path, model, op):
+            print(line)
     if "scene" not in data:
         return
     from ..scene import load_scene

@@ -47,18 +47,20 @@ def _toml_names(data, out: set) -> None:
         for v in data:
             _toml_names(v, out)
     elif isinstance(data, str) and data.lower().endswith((".toml", ".urdf")):
-        out.add(data)
+        out.add(data[len("file:"):] if data.startswith("file:") else data)  # type = "file:part.toml" too
 
 
 def analysis_key(path, sets=None) -> Optional[str]:
     """The content key of a scene's analysis, or None when it is not cacheable (factories, unreadable)."""
     import tomllib
 
+    from ..errors import FmugenError, read_text_file
+
     path = Path(path).resolve()
-    try:
-        raw = path.read_bytes()
+    try:  # bounded: a device, a FIFO or a huge file is refused, never read (the full load says so)
+        raw = read_text_file(path, "scene file").encode("utf-8")
         data = tomllib.loads(raw.decode("utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+    except (OSError, FmugenError, UnicodeDecodeError, tomllib.TOMLDecodeError, RecursionError):
         return None  # the full load reports it
     sets = parse_sets(sets)
     instances = data.get("instances")

@@ -23,7 +23,7 @@ SCENE_KEYS = {"name", "description", "parameter_set", "start", "stop", "step", "
               "initial", "prune", "connections", "monolithic", "connect", "record_bonds",
               "inputs"}
 COMMON_INSTANCE_KEYS = {"parameters", "fixed", "start", "hold"}
-ROBOT_KEYS = {"robot", "formulation", "locked", "outputs"}
+ROBOT_KEYS = {"robot", "formulation", "locked", "outputs", "mimic"}
 FACTORY_KEYS = {"factory", "options", "parameter_set"}
 GROUP_KEYS = {"members", "fmi_type", "solver", "tolerance", "jacobian"}
 SOLVERS = {"dopri5": 1, "rodas3": 2, "rk4": 3}
@@ -369,7 +369,13 @@ def _instance(iname: str, spec, path: Path) -> InstanceSpec:
             if not (k.startswith("q[") and k.endswith("]") and k[2:-1].isdigit()):
                 raise SceneError(f"{where} locked: {k!r} is not a joint position 'q[i]'")
             locked[int(k[2:-1])] = _number(v, f"{where} locked.{k}")
-        return InstanceSpec(iname, "robot", str(rp.resolve()), {"formulation": form, "outputs": outs},
+        mimic = spec.get("mimic", "independent")
+        if mimic not in ("independent", "tied"):
+            raise SceneError(f"{where} mimic must be 'independent' or 'tied' (URDF mimic joints), got {mimic!r}")
+        opts = {"formulation": form, "outputs": outs}
+        if mimic != "independent":
+            opts["mimic"] = mimic  # only when set: the FMU cache keys of existing scenes stay the same
+        return InstanceSpec(iname, "robot", str(rp.resolve()), opts,
                             None, params, fixed, start, hold, locked)
     if "factory" in spec:
         ref = spec["factory"]
