@@ -53,9 +53,7 @@ def scale_first(text: str, pattern: str, factor: float = 1.01) -> str:
 
 def prepare(name: str, tmp: Path) -> Path:
     """The scene ``name`` in ``tmp``, its parameter sets as files next to it."""
-    (tmp / "robots").mkdir(parents=True)
-    for r in (ROOT / "robots").glob("*.toml"):
-        shutil.copy(r, tmp / "robots" / r.name)
+    shutil.copytree(ROOT / "robots", tmp / "robots")  # TOML and URDF robots (and what a URDF names)
     sdir = tmp / "examples" / "scenes"
     sdir.mkdir(parents=True)
     if (ROOT / "examples" / "components").is_dir():  # component files the scenes name
@@ -89,8 +87,15 @@ def edits(scene: Path):
     robots = re.findall(r'robot\s*=\s*"([^"]+)"', text)
     if robots:
         rfile = (sdir / robots[0]).resolve()
-        out.append((f"robot file {rfile.name} (a link mass)",
-                    lambda: rfile.write_text(scale_first(rfile.read_text(), r"^mass"))))
+        if rfile.suffix == ".urdf":  # <mass value="3.7"/>
+            def edit_robot():
+                t = rfile.read_text()
+                m = re.search(r'<mass\s+value="([^"]+)"', t)
+                rfile.write_text(t[:m.start(1)] + repr(float(m.group(1)) * 1.01) + t[m.end(1):])
+        else:
+            def edit_robot():
+                rfile.write_text(scale_first(rfile.read_text(), r"^mass"))
+        out.append((f"robot file {rfile.name} (a link mass)", edit_robot))
     comps = re.findall(r'type\s*=\s*"file:([^"]+)"', text)
     if comps:
         cfile = (sdir / comps[0]).resolve()

@@ -82,6 +82,8 @@ def test_building_x_fmu_keeps_a_users_x_fmu_part(tmp_path, capsys):
     (["report", SPLIT, "--target", "nan"], "--target"),
     (["report", SPLIT, "--target=-0.5"], "--target"),
     (["report", SPLIT, "--steps=-1e-3"], "--steps"),
+    (["report", SPLIT, "--steps", "-2.5e-3"], "must be a positive macro step"),
+    (["linearize", HORN, "--time", "-inf"], "--time -inf: must be a finite number"),
     (["report", SPLIT, "--steps", "a,b"], "--steps 'a,b': 'a' is not a number"),
     (["report", SPLIT, "--steps", "2e-3,,1e-3"], "--steps"),
     (["report", SPLIT, "--internal", "rodas3:nan"], "--internal"),

@@ -226,3 +226,28 @@ record = ["B.F"]
     scene_file.write_text(bad)
     with pytest.raises(ValueError, match="unit mismatch"):
         fmugen.load_scene(scene_file)
+
+
+def test_sweep_over_an_archive(fmus, tmp_path):
+    """fmugen sweep x.ssp: each point equals the serial run with that start value, bit for bit, and the
+    matrix exponential at its parameter; the error metric (a reference) is refused."""
+    import dataclasses
+
+    import fmugen.sweep
+
+    p = write_ssp(tmp_path / "two.ssp", fmus, stop=0.1)
+    opts = {"scheme": "newton", "extrapolation": "linear", "step": 1e-3}
+    r = fmugen.sweep.sweep(str(p), grid={"A.m": [1.0, 1.5]}, metrics=["A.x:final"], out=str(tmp_path / "sw"),
+                           processes=False, workers=1, options=opts, plot=False)
+    system = fmugen.load_system(p)
+    for row in r.rows:
+        assert row["status"] == "ok"
+        units = tuple(dataclasses.replace(u, start_values={**u.start_values, "m": row["A.m"]}) if u.name == "A"
+                      else u for u in system.units)
+        serial = run(dataclasses.replace(system, units=units), **opts)
+        assert row["A.x:final"] == serial["A.x"][-1]
+        ex = exact(np.array([0.1]), m_a=row["A.m"])["A.x"][-1]
+        assert abs(row["A.x:final"] - ex) < 2e-3 * abs(ex)
+    with pytest.raises(ValueError, match="no symbolic model"):
+        fmugen.sweep.sweep(str(p), grid={"A.m": [1.0]}, metrics=["A.x:error"], out=str(tmp_path / "sw2"),
+                           processes=False, workers=1, options=opts, plot=False)

@@ -96,7 +96,8 @@ def _system_to_json(system) -> dict:
                       for u in system.units],
             "couplings": [{"source": list(c.source), "target": list(c.target), "factor": c.factor, "unit": c.unit}
                           for c in system.couplings],
-            "recorded": [[r.column, r.unit, r.variable, r.physical_unit] for r in system.recorded]}
+            "recorded": [[r.column, r.unit, r.variable, r.physical_unit] for r in system.recorded],
+            "rest_unstable": list(getattr(system, "rest_unstable", ()))}
 
 
 def _system_from_json(d: dict, paths: dict):
@@ -107,7 +108,8 @@ def _system_from_json(d: dict, paths: dict):
     couplings = tuple(Coupling(tuple(c["source"]), tuple(c["target"]), c["factor"], c["unit"]) for c in d["couplings"])
     recorded = tuple(Recorded(*r) for r in d["recorded"])
     return CosimSystem(d["name"], units, couplings, recorded, d["start"], d["stop"], d["step"],
-                       tuple(d["order"]) if d["order"] else None, dict(d["settings"]))
+                       tuple(d["order"]) if d["order"] else None, dict(d["settings"]),
+                       tuple(d.get("rest_unstable", ())))
 
 
 class _CachedInitial:

@@ -165,7 +165,7 @@ def ssd_xml(built, settings: dict, libcosim_step: float) -> tuple:
                            scheme=str(settings["scheme"]), extrapolation=str(settings["extrapolation"]),
                            step=_fmt(system.step), startTime=_fmt(system.start_time),
                            stopTime=_fmt(system.stop_time))
-    if not math.isinf(built.jacobi_limit):
+    if math.isfinite(built.jacobi_limit):
         run.set("jacobiHoldLimit", _fmt(built.jacobi_limit))
     run.set("jacobiHoldStep", _fmt(libcosim_step))
     if system.order:
