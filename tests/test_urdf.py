@@ -544,3 +544,32 @@ def test_a_scene_ties_mimic_joints(tmp_path):
     (tmp_path / "s.toml").write_text(text.format("glued"))
     with pytest.raises(SceneError, match="mimic must be 'independent' or 'tied'"):
         load_scene(tmp_path / "s.toml")
+
+
+def test_urdf_table_example_runs(capsys):
+    """examples/urdf_table.py, cut down to one robot (the whole table: examples/urdf_table_results.md)."""
+    import importlib.util
+    import sys
+
+    path = Path(__file__).resolve().parents[1] / "examples" / "urdf_table.py"
+    spec = importlib.util.spec_from_file_location("urdf_table", path)
+    table = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("urdf_table", table)
+    spec.loader.exec_module(table)
+    assert table.main(["--only", "double_pendulum_continuous", "--states", "1", "--repeat", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "| double_pendulum_continuous.urdf | 2 | chain |" in out and "1 built and within tolerance" in out
+
+
+def test_linearize_takes_a_urdf_robot(tmp_path):
+    """fmugen linearize robots/ur5.urdf --trim tau: the holding torque is the UR5's gravity torque."""
+    from fmugen.cli import main
+
+    root = Path(__file__).resolve().parents[1]
+    q = [0.1, -1.2, 1.0, -1.4, -1.57, 0.0]
+    out = tmp_path / "ur5.npz"
+    assert main(["linearize", str(root / "robots/ur5.urdf"), "--at", "q=" + ",".join(map(str, q)), "--at", "qd=0",
+                 "--trim", "tau", "--out", str(out)]) == 0
+    lin = np.load(out)
+    g = fmugen.load_robot(root / "robots/ur5.urdf").bias(q, np.zeros(6))
+    assert np.abs(lin["u0"] - g).max() < 1e-8 * np.abs(g).max() and lin["A"].shape == (12, 12)
