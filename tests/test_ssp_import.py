@@ -190,6 +190,17 @@ def test_cli_cosim_on_an_archive_with_set(fmus, tmp_path):
                           str(tmp_path / "o2")], capture_output=True, text=True, cwd=ROOT)
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "A.nope" in bad.stderr
     shutil.rmtree(tmp_path / "o", ignore_errors=True)
+    # --set cosim.KEY is a run setting on an archive as on a scene (it was refused as "not a component")
+    run_ = subprocess.run([sys.executable, "-m", "fmugen.cli", "cosim", str(p), "--set", "cosim.scheme=newton",
+                           "--set", "cosim.step=0.0025", "--out", str(tmp_path / "o3")], capture_output=True,
+                          text=True, cwd=ROOT)
+    assert run_.returncode == 0, run_.stderr
+    assert run_.stdout.startswith(f"{fmugen.load_system(p).name}: newton/")
+    t = np.loadtxt(tmp_path / "o3" / "results.csv", delimiter=",", skiprows=1)[:, 0]
+    assert len(t) == 21 and t[-1] == pytest.approx(0.05, abs=1e-12)  # 0.05 s in steps of 2.5 ms
+    typo = subprocess.run([sys.executable, "-m", "fmugen.cli", "cosim", str(p), "--set", "cosim.schem=newton",
+                           "--out", str(tmp_path / "o4")], capture_output=True, text=True, cwd=ROOT)
+    assert typo.returncode == 2 and "did you mean 'scheme'" in typo.stderr
 
 
 def test_scene_with_an_external_ssp_component(fmus, tmp_path):

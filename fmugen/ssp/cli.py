@@ -68,11 +68,20 @@ def system_from_args(args):
     if not sets:
         return system
     units = {u.name: u for u in system.units}
+    cosim = {k[len("cosim."):]: v for k, v in sets.items() if k.startswith("cosim.")}
+    if cosim:  # run settings, as on a scene: the archive's [cosim] (its annotation) < --set < the flags
+        from ..cosim.settings import check_table
+
+        settings = {**dict(system.settings), **cosim}
+        check_table(settings, f"{args.scene}: --set cosim")
+        system = replace(system, settings=settings)
     for name, value in sets.items():
+        if name.startswith("cosim."):
+            continue
         comp, _, var = name.partition(".")
         if comp not in units or not var:
             raise InputFileError(f"{args.scene}: --set {name}: name a component's variable, 'component.variable' "
-                                 f"(components: {', '.join(units)})")
+                                 f"(components: {', '.join(units)}), or a run setting 'cosim.KEY'")
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise InputFileError(f"{args.scene}: --set {name}={value!r}: a number is needed")
         from fmpy import read_model_description
