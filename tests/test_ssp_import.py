@@ -285,3 +285,14 @@ def test_sweep_over_an_archive(fmus, tmp_path):
     with pytest.raises(ValueError, match="no symbolic model"):
         fmugen.sweep.sweep(str(p), grid={"A.m": [1.0]}, metrics=["A.x:error"], out=str(tmp_path / "sw2"),
                            processes=False, workers=1, options=opts, plot=False)
+    # --set on a sweep of an archive: the rules of fmugen cosim x.ssp (one function): a run setting and a
+    # start value; the point equals the serial run with both
+    r = fmugen.sweep.sweep(str(p), grid={"A.m": [1.5]}, metrics=["A.x:final"], out=str(tmp_path / "sw3"),
+                           processes=False, workers=1, sets=["cosim.step=0.002", "B.k=2.0"], plot=False,
+                           options={"scheme": "newton", "extrapolation": "linear"})
+    units = tuple(dataclasses.replace(u, start_values={**u.start_values, **({"m": 1.5} if u.name == "A" else
+                                                                              {"k": 2.0})}) for u in system.units)
+    serial = run(dataclasses.replace(system, units=units), scheme="newton", extrapolation="linear", step=0.002)
+    assert r.rows[0]["A.x:final"] == serial["A.x"][-1]
+    assert serial["A.x"][-1] != run(dataclasses.replace(system, units=units), scheme="newton",
+                                    extrapolation="linear", step=0.001)["A.x"][-1]
