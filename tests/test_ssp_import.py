@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import fmugen
+import fmugen.ssp.loader  # the attribute fmugen.ssp exists only once imported (the tests below use it)
 from fmugen.cosim import run
 from fmugen.errors import InputFileError
 from ssp_third_party import K, M_A, SSD, build_fmus, exact, write_ssp
@@ -117,6 +118,28 @@ def test_unsafe_or_invalid_archives_are_refused(tmp_path, members, links, match)
         fmugen.ssp.loader.load_system(p, workdir=work)
     assert not (tmp_path / "evil.txt").exists()
     assert not any(q.is_symlink() for q in work.rglob("*")) if work.exists() else True
+
+
+def test_duplicate_members_are_refused_naming_the_archive(tmp_path):
+    """Two members of one name: refused as such (open(.., "xb") used to fail with an OSError naming only the
+    temporary extraction folder)."""
+    p = tmp_path / "dup.ssp"
+    with zipfile.ZipFile(p, "w") as zf:
+        zf.writestr("SystemStructure.ssd", "x")
+        with pytest.warns(UserWarning):
+            zf.writestr("SystemStructure.ssd", "y")
+    with pytest.raises(InputFileError, match=r"dup\.ssp: archive member 'SystemStructure.ssd' appears twice"):
+        fmugen.ssp.loader.load_system(p, workdir=tmp_path / "work")
+
+
+def test_exported_member_names_are_plain_file_names():
+    """A component name from someone else's SSP (an [external] part) becomes a safe, distinct stem under
+    resources/ of the archive fmugen writes, never a path."""
+    from fmugen.ssp.export import resource_stems
+
+    got = resource_stems(["chain", "../../evil", "a/b", "a_b", "Mass 1", "A_b", ".hidden"])
+    assert got == {"chain": "chain", "../../evil": "______evil", "a/b": "a_b", "a_b": "a_b_2",
+                   "Mass 1": "Mass_1", "A_b": "A_b_3", ".hidden": "_hidden"}
 
 
 def test_unsupported_parts_are_refused_with_one_line(fmus, tmp_path):

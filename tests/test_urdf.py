@@ -387,8 +387,8 @@ def random_tree(n=7, seed=5):
 
 
 def test_newton_euler_and_composite_bodies_agree_on_a_random_tree_and_equal_pinocchio():
-    """Two derivations over a tree: M by CRBA equals M by n Newton-Euler passes (unit accelerations);
-    both, and the forward dynamics, equal Pinocchio's crba/rnea/aba on the same bodies."""
+    """Three derivations over a tree: M by CRBA equals M by n Newton-Euler passes (unit accelerations)
+    and the recursive Lagrange form; they and the forward dynamics equal Pinocchio's crba/rnea/aba."""
     import sympy as sp
 
     from fmugen.codegen.benchmarks import pinocchio_model
@@ -414,6 +414,9 @@ def test_newton_euler_and_composite_bodies_agree_on_a_random_tree_and_equal_pino
         assert np.abs(arm.inverse_dynamics(q, qd, qdd) - tp).max() < 1e-12 * np.abs(tp).max()
         ap = pin.aba(model, data, q, qd, tau)
         assert np.abs(arm.forward_dynamics(q, qd, tau) - ap).max() < 1e-10 * np.abs(ap).max()
+        # the thesis's recursive Lagrange form, extended to the tree (4x4 matrices, nothing shared with NE)
+        assert np.abs(arm.inverse_dynamics(q, qd, qdd, formulation="lagrange") - tp).max() < 1e-12 * np.abs(tp).max()
+        assert np.abs(arm.mass_matrix(q, formulation="lagrange") - M).max() < 1e-12 * np.abs(M).max()
 
 
 # ------------------------------------------------------------- export
