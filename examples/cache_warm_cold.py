@@ -63,7 +63,8 @@ def prepare(name: str, tmp: Path) -> Path:
     for set_name in sorted(set(re.findall(r'parameter_set\s*=\s*"([A-Za-z0-9_]+)"', text))):
         shutil.copy(DATA / f"{set_name}.toml", sdir / f"{set_name}_set.toml")
         text = text.replace(f'parameter_set = "{set_name}"', f'parameter_set = "{set_name}_set.toml"')
-    if not re.search(r"^parameter_set", text, flags=re.M):  # a scene-level file, used by components without one
+    # a scene-level file, used by components without one (a component file then needs its table: left out)
+    if not re.search(r"^parameter_set", text, flags=re.M) and "file:" not in text:
         shutil.copy(DATA / "default.toml", sdir / "default_set.toml")
         text = text.replace("[scene]\n", '[scene]\nparameter_set = "default_set.toml"\n', 1)
     (sdir / f"{name}.toml").write_text(text)
