@@ -8,6 +8,7 @@ Start-up (no timing here: that is ``examples/bench_startup.py``): nothing heavy 
 ``fmugen --help``, and the cached scene analysis gives exactly the system, and the results, of a full
 analysis, under a key that changes with the content.
 """
+import os
 import re
 import shutil
 import subprocess
@@ -50,6 +51,15 @@ def test_cached_analysis_gives_the_same_system_and_results(tmp_path):
     r1 = run(first.system, "gauss-seidel", "linear", stop=0.05)
     r2 = run(again.system, "gauss-seidel", "linear", stop=0.05)
     assert r1.ok and np.array_equal(r1.values, r2.values)
+    # a fresh process gets the system from the cache without importing sympy or scipy (what start-up costs)
+    code = ("import sys\nfrom fmugen.scene.analysis_cache import cached_analysis\n"
+            f"c = cached_analysis({str(SPLIT)!r}, ['joint.J=2'])\nb = c.materialise({str(tmp_path / 'c')!r})\n"
+            "print(len(b.system.units), len(b.scene.spec.bonds), "
+            "sorted(m for m in ('sympy', 'scipy') if m in sys.modules))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120,
+                       env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip().split(maxsplit=2) == [str(len(first.system.units)), str(len(first.scene.spec.bonds)), "[]"]
     # the full scene is there when asked for
     assert again.scene.monolithic_model().nx == first.scene.monolithic_model().nx
 

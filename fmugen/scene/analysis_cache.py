@@ -142,13 +142,23 @@ def _bonds_to_json(bonds) -> list:
             for b in bonds]
 
 
-def _bonds_from_json(items) -> tuple:
-    if not items:
-        return ()
-    from .connect import Bond
+@dataclasses.dataclass(frozen=True)
+class CachedBond:
+    """A bond as :class:`fmugen.scene.connect.Bond` has it (that module imports the component library,
+    sympy included: seconds of start-up; :mod:`fmugen.scene.bonds` reads only these fields)."""
 
-    return tuple(Bond(tuple(b["ends"]), b["type"], tuple(tuple(x) for x in b["signals"]), tuple(b["power"]))
-                 for b in items)
+    ends: tuple
+    type: str
+    signals: tuple
+    power: tuple
+
+    def __str__(self) -> str:
+        return f"{self.ends[0]} <-> {self.ends[1]} ({self.type})"
+
+
+def _bonds_from_json(items) -> tuple:
+    return tuple(CachedBond(tuple(b["ends"]), b["type"], tuple(tuple(x) for x in b["signals"]), tuple(b["power"]))
+                 for b in items or ())
 
 
 class DeferredScene:
