@@ -528,6 +528,8 @@ class Master:
                     failure = monitor.observe(t, H, d_v, Unew_v)
                     if failure is not None:
                         break
+                    if est is not None and monitor.count == 0:  # a block ended: a window if the defect rose
+                        est.active(monitor.level, summ.macro_steps)
                 H = control.accept(H, err) if adaptive else min(H0, Hmax)
         except UnitFailure as e:
             failure = self._diagnose(e, t, H, d, scale0, monitor)
@@ -652,7 +654,10 @@ class Master:
         nu, H2, ok, ts = self.nu, 0.5 * H, True, t
         Us, Gs = np.zeros(max(nu, 1)), np.zeros_like(G)
         try:
-            for _ in range(2 * est.window):
+            Ymid = None
+            for i in range(2 * est.window):
+                if i == 2 * (est.window // 2):  # the shadow halfway through the window, for the estimate
+                    Ymid = self.Y[self.rec_idx].copy()
                 self.Uset[:nu] = mine.U0
                 P = mine.predict(H2)
                 if shadow.implicit:
@@ -678,7 +683,7 @@ class Master:
         for b, c in zip(bufs, copies):
             b[:] = c
         if ok:
-            est.started(t, H, Ys, summ.macro_steps)
+            est.started(t, H, (Ymid, Ys), summ.macro_steps)
         else:
             est.skipped(summ.macro_steps)
         return calls
