@@ -84,6 +84,31 @@ def test_report_command_labels_the_reference(fmus, tmp_path):
     assert err["newton/linear"] < 0.1 * err["jacobi/hold"]
 
 
+def test_report_measures_an_unreliable_run_as_the_scene_report_does(fmus, monkeypatch):
+    """A run that reached the stop time with an "unreliable" verdict is measured and labelled with its
+    reason (the scene's report does so); it was listed as "failed" with no error."""
+    import dataclasses
+
+    import fmugen.ssp.report as rep
+
+    system = fmugen.load_system(write_ssp(Path(fmus["mass"]).parent / "two_unreliable.ssp", fmus, stop=0.05))
+    plain = rep.report_ssp(system, [0.005], [("newton", "linear")])
+    real = rep.run
+
+    def verdict(*a, **kw):
+        r = real(*a, **kw)
+        if kw.get("step") == 0.005:  # the measured run, not the reference's
+            r = dataclasses.replace(r, summary=dataclasses.replace(r.summary, status="unreliable",
+                                                                   reliability="a test verdict"))
+        return r
+
+    monkeypatch.setattr(rep, "run", verdict)
+    marked = rep.report_ssp(system, [0.005], [("newton", "linear")])
+    (_, _, _, err, status, _), = marked["rows"]
+    assert status == "unreliable: a test verdict"
+    assert err == plain["rows"][0][3] and 0 < err < 0.05  # the same run, measured (1.8e-2 at 5 ms)
+
+
 # ---------------------------------------------------------------------------- refusals
 def _archive(path, members: dict, links=()):
     with zipfile.ZipFile(path, "w") as zf:
