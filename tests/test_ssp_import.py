@@ -157,6 +157,25 @@ def test_binding_prefix_is_prepended_to_the_source_names(fmus, tmp_path):
         fmugen.load_system(write_ssp(tmp_path / "q.ssp", fmus, ssd=ssd))
 
 
+def test_connections_without_a_transformation_convert_units(fmus, tmp_path):
+    """SSP 1.0: without a LinearTransformation an importer converts between the connectors' units unless
+    suppressUnitConversion.  A.v [m/s] -> B.v_in [mm/s] then couples with 1000, the factor the fixture
+    states (it was coupled with 1: a silent factor of 1000 off); different quantities are refused."""
+    def couplings(ssd, name):
+        return {(c.source, c.target): c.factor
+                for c in fmugen.load_system(write_ssp(tmp_path / name, fmus, ssd=ssd)).couplings}
+
+    stated = couplings(_ok_ssd(), "stated.ssp")
+    assert stated[("A", "v"), ("B", "v_in")] == 1000.0
+    plain = _ok_ssd().replace('<ssc:LinearTransformation factor="1000"/>', "")
+    assert couplings(plain, "implied.ssp") == stated
+    suppressed = plain.replace('endConnector="v_in"', 'endConnector="v_in" suppressUnitConversion="true"')
+    assert couplings(suppressed, "suppressed.ssp")[("A", "v"), ("B", "v_in")] == 1.0
+    wrong = plain.replace('startConnector="v" endElement="B"', 'startConnector="x" endElement="B"')
+    with pytest.raises(InputFileError, match=r"\[m\] and \[mm/s\] are different quantities"):
+        couplings(wrong, "wrong.ssp")
+
+
 def test_duplicate_members_are_refused_naming_the_archive(tmp_path):
     """Two members of one name: refused as such (open(.., "xb") used to fail with an OSError naming only the
     temporary extraction folder)."""

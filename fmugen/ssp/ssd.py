@@ -82,6 +82,7 @@ class Connection:
     factor: float = 1.0
     offset: float = 0.0
     transformed: bool = False  # a LinearTransformation was given
+    suppress_unit_conversion: bool = False  # the connection's suppressUnitConversion
 
 
 @dataclass
@@ -325,11 +326,10 @@ def read_ssd(folder: Path, origin: Path) -> Ssd:
                                                             "IntegerMappingTransformation",
                                                             "EnumerationMappingTransformation")):
             raise InputFileError(f"{cw}: mapping transformations are not supported (LinearTransformation is)")
-        if e.get("suppressUnitConversion", "false") in ("true", "1"):
-            pass  # fmugen converts no units on its own: only stated factors
         f = _float(lin, "factor", cw, 1.0) if lin is not None else 1.0
         o = _float(lin, "offset", cw, 0.0) if lin is not None else 0.0
-        connections.append(Connection((se, sc), (ee, ec), f, o, lin is not None))
+        connections.append(Connection((se, sc), (ee, ec), f, o, lin is not None,
+                                      e.get("suppressUnitConversion", "false") in ("true", "1")))
     units = {}
     for u in root.iterfind("ssd:Units/ssc:Unit", NS):
         b = u.find("ssc:BaseUnit", NS)
