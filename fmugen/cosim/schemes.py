@@ -4,7 +4,8 @@ U is the vector of all coupled inputs, Y the outputs they come from (U = F * Y[S
 
 * :class:`Jacobi`: every FMU steps from the values at t_n (they could all run at once: the executor);
 * :class:`GaussSeidel`: the FMUs step one after another in ``order``; an input whose source has already
-  stepped is its value at t_{n+1} (held) or the line from U_n to it (with extrapolation);
+  stepped is its value at t_{n+1} (held) or the line from U_n to it (with extrapolation; its midpoint, held, for
+  an FMU that cannot interpolate);
 * :class:`FixedPoint` and :class:`Newton` (the *iterated* or *implicit* schemes, waveform relaxation over one
   step): all FMUs are saved (fmi2GetFMUstate), the end values V = U_{n+1} are predicted, every FMU steps with
   its inputs interpolated between U_n and V (:func:`~fmugen.cosim.interpolants.interpolate_to`), and V is
