@@ -51,6 +51,8 @@ def sign_problem(sign: str, value: float) -> Optional[str]:
     """Why ``value`` breaks the sign rule ``">0"`` / ``">=0"`` (a phrase), or None."""
     if sign == ">0" and not value > 0:
         return "is not > 0 (the equations need a positive value)"
+    if sign == ">0" and value < sys.float_info.min:  # the FMU's least value (FMI's min is inclusive)
+        return f"is below the smallest positive normal double {sys.float_info.min:.3g}"
     if sign == ">=0" and not value >= 0:
         return "is negative (must be >= 0)"
     return None

@@ -104,6 +104,14 @@ def test_a_bad_argument_is_named_and_nothing_is_written(tmp_path, capsys, argv, 
     assert not out.exists()
 
 
+def test_the_files_own_cosim_step_is_bounded_before_anything_is_built(tmp_path, capsys):
+    p = tmp_path / "s.toml"
+    p.write_text("[cosim]\nstep = 1e-290\n\n" + SPLIT.read_text())
+    assert "1e+290 macro steps" in _refused(capsys, "cosim", p, "--out", tmp_path / "o")
+    assert "macro steps" in _refused(capsys, "cosim", SPLIT, "--set", "cosim.step=3e-280", "--out", tmp_path / "o")
+    assert not (tmp_path / "o").exists()
+
+
 def test_a_compiler_failure_is_one_line_and_leaves_no_output_folder(tmp_path):
     fake = tmp_path / "bin"
     fake.mkdir()

@@ -387,8 +387,8 @@ def random_tree(n=7, seed=5):
 
 
 def test_newton_euler_and_composite_bodies_agree_on_a_random_tree_and_equal_pinocchio():
-    """Two derivations over a tree: M by CRBA equals M by n Newton-Euler passes (unit accelerations);
-    both, and the forward dynamics, equal Pinocchio's crba/rnea/aba on the same bodies."""
+    """Three derivations over a tree: M by CRBA equals M by n Newton-Euler passes (unit accelerations)
+    and the recursive Lagrange form; they and the forward dynamics equal Pinocchio's crba/rnea/aba."""
     import sympy as sp
 
     from fmugen.codegen.benchmarks import pinocchio_model
@@ -414,6 +414,9 @@ def test_newton_euler_and_composite_bodies_agree_on_a_random_tree_and_equal_pino
         assert np.abs(arm.inverse_dynamics(q, qd, qdd) - tp).max() < 1e-12 * np.abs(tp).max()
         ap = pin.aba(model, data, q, qd, tau)
         assert np.abs(arm.forward_dynamics(q, qd, tau) - ap).max() < 1e-10 * np.abs(ap).max()
+        # the thesis's recursive Lagrange form, extended to the tree (4x4 matrices, nothing shared with NE)
+        assert np.abs(arm.inverse_dynamics(q, qd, qdd, formulation="lagrange") - tp).max() < 1e-12 * np.abs(tp).max()
+        assert np.abs(arm.mass_matrix(q, formulation="lagrange") - M).max() < 1e-12 * np.abs(M).max()
 
 
 # ------------------------------------------------------------- export
@@ -544,3 +547,32 @@ def test_a_scene_ties_mimic_joints(tmp_path):
     (tmp_path / "s.toml").write_text(text.format("glued"))
     with pytest.raises(SceneError, match="mimic must be 'independent' or 'tied'"):
         load_scene(tmp_path / "s.toml")
+
+
+def test_urdf_table_example_runs(capsys):
+    """examples/urdf_table.py, cut down to one robot (the whole table: examples/urdf_table_results.md)."""
+    import importlib.util
+    import sys
+
+    path = Path(__file__).resolve().parents[1] / "examples" / "urdf_table.py"
+    spec = importlib.util.spec_from_file_location("urdf_table", path)
+    table = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("urdf_table", table)
+    spec.loader.exec_module(table)
+    assert table.main(["--only", "double_pendulum_continuous", "--states", "1", "--repeat", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "| double_pendulum_continuous.urdf | 2 | chain |" in out and "1 built and within tolerance" in out
+
+
+def test_linearize_takes_a_urdf_robot(tmp_path):
+    """fmugen linearize robots/ur5.urdf --trim tau: the holding torque is the UR5's gravity torque."""
+    from fmugen.cli import main
+
+    root = Path(__file__).resolve().parents[1]
+    q = [0.1, -1.2, 1.0, -1.4, -1.57, 0.0]
+    out = tmp_path / "ur5.npz"
+    assert main(["linearize", str(root / "robots/ur5.urdf"), "--at", "q=" + ",".join(map(str, q)), "--at", "qd=0",
+                 "--trim", "tau", "--out", str(out)]) == 0
+    lin = np.load(out)
+    g = fmugen.load_robot(root / "robots/ur5.urdf").bias(q, np.zeros(6))
+    assert np.abs(lin["u0"] - g).max() < 1e-8 * np.abs(g).max() and lin["A"].shape == (12, 12)

@@ -80,9 +80,10 @@ def parse_at(items) -> dict:
 def load_model(path: Path, sets: dict, robot_outputs=(), formulation="newton_euler", without=()):
     """(SymbolicModel, parameter values) of a robot, assembly or scene file."""
     from ..errors import InputFileError, read_text_file, toml_problem
+    from ..robot.loader import is_urdf
 
     try:
-        data = tomllib.loads(read_text_file(path, "TOML file"))
+        data = {"robot": {}} if is_urdf(path) else tomllib.loads(read_text_file(path, "TOML file"))
     except (tomllib.TOMLDecodeError, RecursionError) as exc:
         raise InputFileError(f"{path}: {toml_problem(exc)}") from None
     if "scene" in data:
@@ -147,6 +148,10 @@ def describe(lm, model, op=None, out=None) -> None:
 
 
 def _warn_kinks(path: Path, sets: dict, model, op) -> None:
+    from ..robot.loader import is_urdf
+
+    if is_urdf(path):
+        return  # a robot: no smoothed kinks
     data = tomllib.loads(path.read_text())
     if "component" in data:
         from .kinks import component_kink_warnings
@@ -168,8 +173,9 @@ def run(args) -> int:
     from .trim import trim
 
     from .. import arguments
+    from ..cli import _file_arg
 
-    path = Path(args.file)
+    path = _file_arg(args.file)  # a path, or lib:NAME (a shipped component file)
     # every argument first: named in its refusal, nothing derived or written before
     args.tol = arguments.tolerance(args.tol, "--tol")
     args.time = arguments.number(args.time, "--time")

@@ -127,9 +127,6 @@ class Manipulator:
         if formulation == "newton_euler":
             engine = NestedBodyInverseDynamics(P, self.robot.bodies, trig)
         elif formulation == "lagrange":
-            if not self.robot.links:
-                raise ValueError(f"{self.robot.name}: the recursive Lagrange formulation reads "
-                                 "Denavit-Hartenberg files; this robot is written as joints (use newton_euler)")
             engine = RecursiveLagrange(P, self.robot, trig)
         else:
             raise ValueError(f"formulation must be one of {FORMULATIONS}, not {formulation!r}")

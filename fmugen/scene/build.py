@@ -34,7 +34,6 @@ import numpy as np
 
 from .. import __version__
 from .errors import SceneError
-from .stability import jacobi_hold_limit, stable_step
 
 
 @dataclass
@@ -275,6 +274,8 @@ def build_scene(scene, out_dir, prune: Optional[bool] = None, progress=None, use
     cdir = cache_dir() / "fmus"
     keys = {gname: _group_key(scene, gname, prune, x0, u0) for gname in scene.groups}
     limit = _jacobi_limit(scene, keys, use_cache)
+    from .stability import stable_step  # here: it imports scipy (start-up of a run from cached FMUs)
+
     default_step = stable_step(limit, scene.spec.step, STABLE_SAFETY)
     plan = {}  # group -> (key, model or None when cached, removed)
     for gname, g in scene.groups.items():
@@ -384,6 +385,8 @@ def _jacobi_limit(scene, keys: dict, use_cache: bool) -> float:
                 return float(value)
         except (OSError, ValueError, KeyError, TypeError, AttributeError):
             pass
+    from .stability import jacobi_hold_limit  # here: it imports scipy (start-up from cached FMUs)
+
     try:
         limit = jacobi_hold_limit(scene)
     except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # a model the linearisation cannot take

@@ -14,7 +14,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional
 
-from ..components.assembly import COMPONENT_TYPES
 from ..cosim.settings import KEYS as COSIM_SETTING_KEYS, check_table
 from ..errors import read_text_file, toml_problem
 from .errors import SceneError, did_you_mean
@@ -194,6 +193,8 @@ def _instance_keys(spec: dict) -> set:
         return ROBOT_KEYS | COMMON_INSTANCE_KEYS
     if "factory" in spec:
         return FACTORY_KEYS | COMMON_INSTANCE_KEYS
+    from ..components.assembly import COMPONENT_TYPES  # here: the component library imports sympy (start-up)
+
     typ = spec.get("type")
     opts = set(COMPONENT_TYPES[typ][1]) if isinstance(typ, str) and typ in COMPONENT_TYPES else set()
     return {"type", "parameter_set"} | opts | COMMON_INSTANCE_KEYS
@@ -386,6 +387,8 @@ def _instance(iname: str, spec, path: Path) -> InstanceSpec:
         if not isinstance(opts, dict):
             raise SceneError(f"{where} options must be a table")
         return InstanceSpec(iname, "factory", ref, dict(opts), pset, params, fixed, start, hold)
+    from ..components.assembly import COMPONENT_TYPES
+
     typ = spec["type"]
     if isinstance(typ, str) and typ.startswith(FILE_TYPE_PREFIXES):
         return _file_instance(iname, typ, path, where, pset, params, fixed, start, hold)

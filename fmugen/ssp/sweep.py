@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Mapping, Sequence
@@ -27,38 +26,19 @@ class SspSweepPlan:
 
     def __init__(self, path, names: Sequence[str], fmu_dir, sets=None, progress=None,
                  allow_factories: bool = False):
-        from fmpy import read_model_description
-
         from ..scene import parse_sets
+        from .cli import settable, with_sets
 
         self.scene_path = Path(path)
-        system = load_system(self.scene_path)
-        units = {u.name: u for u in system.units}
-        variables = {name: {v.name: v for v in read_model_description(str(u.path), validate=False).modelVariables}
-                     for name, u in units.items()}
+        # --set: the same rules as fmugen cosim x.ssp (run settings and start values)
+        system = with_sets(load_system(self.scene_path), parse_sets(sets), str(self.scene_path), SweepError)
         self.names = tuple(names)
         self.targets = {}
-        settable = {}
-        for name, value in list(parse_sets(sets).items()) + [(n, None) for n in self.names]:
-            comp, _, var = name.partition(".")
-            if comp not in units or not var:
-                raise SweepError(f"{self.scene_path}: {name}: name a component's variable, 'component.variable' "
-                                 f"(components: {', '.join(units)})")
-            v = variables[comp].get(var)
-            ok = v is not None and v.type == "Real" and (
-                (v.causality == "parameter" and v.variability in ("fixed", "tunable"))
-                or v.causality == "input" or (v.initial == "exact" and v.causality in ("output", "local")))
-            if not ok:
-                raise SweepError(f"{self.scene_path}: {name}: {comp} has no Real parameter, input or state {var!r}")
-            if value is None:
-                self.targets[name] = (comp, var)
-            else:
-                if isinstance(value, bool) or not isinstance(value, (int, float)):
-                    raise SweepError(f"{self.scene_path}: --set {name}={value!r}: a number is needed")
-                settable.setdefault(comp, {})[var] = float(value)
-        if settable:
-            system = replace(system, units=tuple(
-                replace(u, start_values={**dict(u.start_values), **settable.get(u.name, {})}) for u in system.units))
+        for name in self.names:
+            comp, var, v = settable(system, name, str(self.scene_path), SweepError)
+            if v.type != "Real":
+                raise SweepError(f"{self.scene_path}: {name}: {comp}.{var} is {v.type}; a sweep sets Real values")
+            self.targets[name] = (comp, var)
         self.system = system
         self.parameters, self.states = self.names, ()
         self.equilibrium = False
