@@ -308,9 +308,9 @@ def read_ssd(folder: Path, origin: Path) -> Ssd:
                 inline = b.find("ssd:ParameterValues/ssv:ParameterSet", NS)
                 values = _parameter_set(inline, bw) if inline is not None else {}
             for k, v in values.items():
-                if prefix and not k.startswith(prefix):
-                    continue
-                params[k[len(prefix):]] = v
+                # SSP 1.0 (SystemStructureDescription.xsd, ParameterBinding/@prefix): "the specified prefix is
+                # prepended to all names in the parameter source" -- not stripped from them
+                params[prefix + k] = v
         components[name] = Component(name, c.get("source"), ctype, tuple(conns), params)
     connections = []
     for e in system.iterfind("ssd:Connections/ssd:Connection", NS):
