@@ -145,6 +145,37 @@ def test_unsafe_or_invalid_archives_are_refused(tmp_path, members, links, match)
     assert not any(q.is_symlink() for q in work.rglob("*")) if work.exists() else True
 
 
+def test_binding_prefix_is_prepended_to_the_source_names(fmus, tmp_path):
+    """SSP 1.0, ParameterBinding/@prefix: "the specified prefix is prepended to all names in the parameter
+    source" (the schema's documentation).  The loader stripped it instead and dropped every other name."""
+    ssd = _ok_ssd().replace("<ssd:ParameterBinding>", '<ssd:ParameterBinding prefix="f">', 1) \
+        .replace('<ssv:Parameter name="m">', '<ssv:Parameter name="0">', 1)
+    a = {u.name: u for u in fmugen.load_system(write_ssp(tmp_path / "p.ssp", fmus, ssd=ssd)).units}["A"]
+    assert a.start_values["f0"] == M_A and "m" not in a.start_values and "0" not in a.start_values
+    ssd = _ok_ssd().replace("<ssd:ParameterBinding>", '<ssd:ParameterBinding prefix="sub.">', 1)
+    with pytest.raises(InputFileError, match="names 'sub.m'"):
+        fmugen.load_system(write_ssp(tmp_path / "q.ssp", fmus, ssd=ssd))
+
+
+def test_connections_without_a_transformation_convert_units(fmus, tmp_path):
+    """SSP 1.0: without a LinearTransformation an importer converts between the connectors' units unless
+    suppressUnitConversion.  A.v [m/s] -> B.v_in [mm/s] then couples with 1000, the factor the fixture
+    states (it was coupled with 1: a silent factor of 1000 off); different quantities are refused."""
+    def couplings(ssd, name):
+        return {(c.source, c.target): c.factor
+                for c in fmugen.load_system(write_ssp(tmp_path / name, fmus, ssd=ssd)).couplings}
+
+    stated = couplings(_ok_ssd(), "stated.ssp")
+    assert stated[("A", "v"), ("B", "v_in")] == 1000.0
+    plain = _ok_ssd().replace('<ssc:LinearTransformation factor="1000"/>', "")
+    assert couplings(plain, "implied.ssp") == stated
+    suppressed = plain.replace('endConnector="v_in"', 'endConnector="v_in" suppressUnitConversion="true"')
+    assert couplings(suppressed, "suppressed.ssp")[("A", "v"), ("B", "v_in")] == 1.0
+    wrong = plain.replace('startConnector="v" endElement="B"', 'startConnector="x" endElement="B"')
+    with pytest.raises(InputFileError, match=r"\[m\] and \[mm/s\] are different quantities"):
+        couplings(wrong, "wrong.ssp")
+
+
 def test_duplicate_members_are_refused_naming_the_archive(tmp_path):
     """Two members of one name: refused as such (open(.., "xb") used to fail with an OSError naming only the
     temporary extraction folder)."""
