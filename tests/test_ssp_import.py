@@ -1,6 +1,7 @@
 """Any SSP in: third-party FMUs (hand-written C, built here) run by fmugen's master, parameter bindings and a
 linear transformation honoured, Newton stable and accurate where held-input Jacobi diverges (against the
 matrix exponential and the report's self-convergence reference); unsafe or unsupported archives refused."""
+import math
 import shutil
 import subprocess
 import sys
@@ -174,6 +175,27 @@ def test_connections_without_a_transformation_convert_units(fmus, tmp_path):
     wrong = plain.replace('startConnector="v" endElement="B"', 'startConnector="x" endElement="B"')
     with pytest.raises(InputFileError, match=r"\[m\] and \[mm/s\] are different quantities"):
         couplings(wrong, "wrong.ssp")
+
+
+def test_export_states_a_factor_of_one_between_different_units(fmus):
+    """A scene may state factor 1 between different units; the archive must say so (a LinearTransformation),
+    or an importer converts the units itself (SSP 1.0, and fmugen's loader) -- m/s to mm/s by 1000."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    from fmugen.ssp.export import ssd_xml
+    from fmugen.ssp.ssd import NS, parse_xml
+
+    system = fmugen.load_system(write_ssp(Path(fmus["mass"]).parent / "two_export.ssp", fmus))
+    system = dataclasses.replace(system, couplings=tuple(dataclasses.replace(c, factor=1.0)
+                                                         for c in system.couplings))
+    built = SimpleNamespace(scene=SimpleNamespace(name="t", spec=SimpleNamespace(description=""), groups={}),
+                            system=system, jacobi_limit=math.inf)
+    root = parse_xml(ssd_xml(built, {"scheme": "newton", "extrapolation": "linear"}, system.step)[0], "t")
+    lin = {(e.get("startConnector"), e.get("endConnector")): e.find("ssc:LinearTransformation", NS)
+           for e in root.iterfind("ssd:System/ssd:Connections/ssd:Connection", NS)}
+    assert lin[("v", "v_in")].get("factor") == "1.0"  # m/s -> mm/s, stated
+    assert lin[("F", "F")] is None  # N -> N: nothing to say
 
 
 def test_duplicate_members_are_refused_naming_the_archive(tmp_path):
