@@ -67,9 +67,9 @@ def _arm(robot):
 
 
 def pose_grid(arm, n_grid: int = 5, max_poses: int = 4096, seed: int = 0) -> np.ndarray:
-    """Poses: a grid of ``n_grid`` values per joint (the first joint left at 0: about a vertical base
-    axis it changes no gravity torque -- checked, not assumed: see :func:`requirements`), sampled at
-    random down to ``max_poses`` when the grid is larger."""
+    """Poses: a grid of ``n_grid`` values per joint (the first joint left at 0 when it changes no gravity
+    torque -- a vertical base axis, or any prismatic one: gravity is uniform -- which is checked on
+    random poses, not assumed), sampled at random down to ``max_poses`` when the grid is larger."""
     ranges = []
     for k, link in enumerate(arm.robot.bodies):
         lim = getattr(link, "limits", None)
@@ -78,12 +78,29 @@ def pose_grid(arm, n_grid: int = 5, max_poses: int = 4096, seed: int = 0) -> np.
         if lim is not None:
             lo = lim.lower if lim.lower is not None else lo
             hi = lim.upper if lim.upper is not None else hi
-        ranges.append(np.linspace(lo, hi, n_grid) if k > 0 else np.array([0.0]))
+        ranges.append(np.linspace(lo, hi, n_grid))
+    rng = np.random.default_rng(seed)
+    if not _first_joint_moves_gravity(arm, ranges, rng):
+        ranges[0] = np.array([0.0])
     n = int(np.prod([len(r) for r in ranges]))
     if n <= max_poses:
         return np.array(list(itertools.product(*ranges)))
-    rng = np.random.default_rng(seed)
     return np.array([[rng.choice(r) for r in ranges] for _ in range(max_poses)])
+
+
+def _first_joint_moves_gravity(arm, ranges, rng, poses: int = 4) -> bool:
+    """Whether turning (or sliding) the first joint changes the gravity torques h(q, 0) of some pose."""
+    zero = np.zeros(arm.n)
+    for _ in range(poses):
+        q = np.array([rng.uniform(r[0], r[-1]) for r in ranges])
+        q[0] = 0.0
+        ref = np.asarray(arm.bias(q, zero), dtype=float)
+        scale = max(float(np.max(np.abs(ref))), 1e-300)
+        for a in (ranges[0][0], 0.5 * (ranges[0][0] + ranges[0][-1]) + 0.3, ranges[0][-1]):
+            q[0] = a
+            if np.max(np.abs(np.asarray(arm.bias(q, zero), dtype=float) - ref)) > 1e-9 * scale:
+                return True
+    return False
 
 
 def requirements(robot, poses: Optional[np.ndarray] = None, trajectory: Optional[tuple] = None,
