@@ -10,7 +10,8 @@ loop around them shows.
 * bare loop: ``fmpy.fmi2.FMU2Slave.setReal / doStep / getReal`` with Python
   lists, recording into a preallocated array -- the least a user writes;
 * master: :func:`fmugen.cosim.run` (value references resolved once, raw C
-  entry points on preallocated numpy buffers, divergence monitor, recording).
+  entry points on preallocated numpy buffers, divergence monitor, recording, the coupling error estimate;
+  also timed without the estimate, for its cost).
 
 Prints the median time per macro step of each over ``--repeats`` runs (after a
 warm-up run) and their ratio, measured in the same process (goal: master <=
@@ -110,12 +111,12 @@ def bare_loop(chain, joint, n) -> tuple:
     return wall / n, cpu / n, rec
 
 
-def master_loop(sysm) -> tuple:
+def master_loop(sysm, estimate=True) -> tuple:
     """fmugen's master on the same system: (seconds per macro step, wall and CPU, result).  The FMUs are
     instantiated before the clocks start, as in the bare loop."""
     with Master(sysm, "jacobi", "hold") as m:
         c0 = time.process_time()
-        r = m.run()
+        r = m.run(estimate=estimate)
         cpu = time.process_time() - c0
     assert r.ok, r.summary
     return r.summary.wall_time / r.summary.macro_steps, cpu / r.summary.macro_steps, r
@@ -135,7 +136,7 @@ def main(argv=None) -> int:
     sysm = system(chain, joint, n)
     bare_loop(chain, joint, min(n, 1000))  # warm-up
     run(sysm, "jacobi", "hold", stop=min(n, 1000) * H, detect_divergence=True)
-    bare, master, bare_cpu, master_cpu = [], [], [], []
+    bare, master, bare_cpu, master_cpu, plain_cpu = [], [], [], [], []
     for _ in range(args.repeats):  # alternate, so both see the same machine load
         b, bc, rec = bare_loop(chain, joint, n)
         bare.append(b)
@@ -143,6 +144,8 @@ def main(argv=None) -> int:
         m, mc, r = master_loop(sysm)
         master.append(m)
         master_cpu.append(mc)
+        _, pc, plain = master_loop(sysm, estimate=False)
+        plain_cpu.append(pc)
         same = np.array_equal(rec, r.values[:, [0, 1, 2]])
     med = statistics.median
     print(f"split rig ({args.set} set), Jacobi/held, H = {H:g} s, {n} macro steps, 2 FMUs, RK4 one step per macro step")
@@ -151,6 +154,9 @@ def main(argv=None) -> int:
     print(f"  fmugen master               : {med(master_cpu) * 1e6:8.2f} us   {med(master) * 1e6:8.2f} us")
     print(f"  ratio master / bare = {med(master_cpu) / med(bare_cpu):.2f} CPU, {med(master) / med(bare):.2f} wall"
           f"  (goal <= 1.5)")
+    print(f"  master without the error estimate: {med(plain_cpu) * 1e6:8.2f} us CPU; the estimate costs "
+          f"{100 * (med(master_cpu) / med(plain_cpu) - 1):+.1f} % (goal <= 5 %; {r.summary.estimate_samples} "
+          f"shadow windows: {100 * (r.summary.do_steps / plain.summary.do_steps - 1):.1f} % more fmi2DoStep calls)")
     print(f"  same trajectory bit for bit: {same}")
     return 0 if same else 1
 

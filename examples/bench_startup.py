@@ -43,18 +43,18 @@ sys.exit(main(sys.argv[2:]))
 """
 
 
-def _wall(cmd, env) -> float:
+def _wall(cmd, env, cwd=None) -> float:
     t0 = time.perf_counter()
-    r = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    r = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=cwd)
     dt = time.perf_counter() - t0
     if r.returncode != 0:
         raise SystemExit(f"{' '.join(cmd)} failed:\n{r.stderr}")
     return dt
 
 
-def _first_step(args, env) -> float:
+def _first_step(args, env, cwd=None) -> float:
     r = subprocess.run([sys.executable, "-c", FIRST_STEP, repr(time.time()), *args], env=env, capture_output=True,
-                       text=True)
+                       text=True, cwd=cwd)
     for line in r.stdout.splitlines():
         if line.startswith("FIRST_STEP"):
             return float(line.split()[1])
@@ -80,12 +80,13 @@ def main(argv=None) -> int:
             out = str(Path(tmp) / f"run{len(rows)}")
             cosim = ["cosim", str(tree / args.scene), "--out", out, "--stop", "0.002", "--step", "0.001"]
             print(f"warm-up (fills the caches): {label}fmugen {' '.join(cosim)}", flush=True)
-            _wall(py + ["-m", "fmugen.cli", *cosim], env)
+            # run inside the tree: ``python -m`` puts the working folder first on sys.path
+            _wall(py + ["-m", "fmugen.cli", *cosim], env, tree)
             rows.update({
-                f"{label}fmugen --help": lambda env=env: _wall(py + ["-m", "fmugen.cli", "--help"], env),
-                f"{label}fmugen cosim: first macro step": lambda env=env, c=cosim: _first_step(c, env),
-                f"{label}fmugen cosim: whole, 2 steps": lambda env=env, c=cosim: _wall(py + ["-m", "fmugen.cli", *c],
-                                                                                     env),
+                f"{label}fmugen --help": lambda env=env, d=tree: _wall(py + ["-m", "fmugen.cli", "--help"], env, d),
+                f"{label}fmugen cosim: first macro step": lambda env=env, c=cosim, d=tree: _first_step(c, env, d),
+                f"{label}fmugen cosim: whole, 2 steps": lambda env=env, c=cosim, d=tree: _wall(
+                    py + ["-m", "fmugen.cli", *c], env, d),
             })
         res = {k: [] for k in rows}
         for _ in range(args.repeats):  # interleaved: a change in the machine's load hits every row alike

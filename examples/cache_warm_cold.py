@@ -53,9 +53,7 @@ def scale_first(text: str, pattern: str, factor: float = 1.01) -> str:
 
 def prepare(name: str, tmp: Path) -> Path:
     """The scene ``name`` in ``tmp``, its parameter sets as files next to it."""
-    (tmp / "robots").mkdir(parents=True)
-    for r in (ROOT / "robots").glob("*.toml"):
-        shutil.copy(r, tmp / "robots" / r.name)
+    shutil.copytree(ROOT / "robots", tmp / "robots")  # TOML and URDF robots (and what a URDF names)
     sdir = tmp / "examples" / "scenes"
     sdir.mkdir(parents=True)
     if (ROOT / "examples" / "components").is_dir():  # component files the scenes name
@@ -65,7 +63,8 @@ def prepare(name: str, tmp: Path) -> Path:
     for set_name in sorted(set(re.findall(r'parameter_set\s*=\s*"([A-Za-z0-9_]+)"', text))):
         shutil.copy(DATA / f"{set_name}.toml", sdir / f"{set_name}_set.toml")
         text = text.replace(f'parameter_set = "{set_name}"', f'parameter_set = "{set_name}_set.toml"')
-    if not re.search(r"^parameter_set", text, flags=re.M):  # a scene-level file, used by components without one
+    # a scene-level file, used by components without one (a component file then needs its table: left out)
+    if not re.search(r"^parameter_set", text, flags=re.M) and "file:" not in text:
         shutil.copy(DATA / "default.toml", sdir / "default_set.toml")
         text = text.replace("[scene]\n", '[scene]\nparameter_set = "default_set.toml"\n', 1)
     (sdir / f"{name}.toml").write_text(text)
@@ -89,8 +88,15 @@ def edits(scene: Path):
     robots = re.findall(r'robot\s*=\s*"([^"]+)"', text)
     if robots:
         rfile = (sdir / robots[0]).resolve()
-        out.append((f"robot file {rfile.name} (a link mass)",
-                    lambda: rfile.write_text(scale_first(rfile.read_text(), r"^mass"))))
+        if rfile.suffix == ".urdf":  # <mass value="3.7"/>
+            def edit_robot():
+                t = rfile.read_text()
+                m = re.search(r'<mass\s+value="([^"]+)"', t)
+                rfile.write_text(t[:m.start(1)] + repr(float(m.group(1)) * 1.01) + t[m.end(1):])
+        else:
+            def edit_robot():
+                rfile.write_text(scale_first(rfile.read_text(), r"^mass"))
+        out.append((f"robot file {rfile.name} (a link mass)", edit_robot))
     comps = re.findall(r'type\s*=\s*"file:([^"]+)"', text)
     if comps:
         cfile = (sdir / comps[0]).resolve()
@@ -158,7 +164,12 @@ def check(name: str) -> int:
 
 
 def main(argv) -> int:
-    names = argv or sorted(p.stem for p in SCENES.glob("*.toml"))
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("scenes", nargs="*", help="shipped scene names (default: all in examples/scenes)")
+    names = ap.parse_args(argv).scenes or sorted(p.stem for p in SCENES.glob("*.toml"))
     bad = sum(check(n) for n in names)
     print(f"{len(names)} scene(s): {'no warm build differed from its cold build' if not bad else f'{bad} differed'}")
     return 1 if bad else 0

@@ -57,6 +57,9 @@ def main(argv=None) -> int:
     ap.add_argument("--stop", type=float, default=None, help="stop time [s] (default: each scene's)")
     ap.add_argument("--out", default="out/ssp")
     ap.add_argument("--no-fmpy", action="store_true", help="skip FMPy's simulate_ssp (slow: Python per call)")
+    ap.add_argument("--reference", action="store_true",
+                    help="also the largest error of Jacobi/held at the archive's step (what libcosim computes) "
+                         "against the scene's reference solution (Radau at 1e-12), in the columns' units")
     args = ap.parse_args(argv)
     out = Path(args.out)
     for name in args.scenes.split(","):
@@ -105,6 +108,20 @@ def main(argv=None) -> int:
             ot = np.interp(jh.time, own.time, own[c.column])
             d_own = np.max(np.abs(ref - ot)) / scale
             print(f"  {c.column:<18} {scale:14.3g} {d_lc:18.2e} {d_fm:14.2e} {d_own:13.2e}")
+        if args.reference:
+            from fmugen.cosim.reference import solve_reference
+            from fmugen.cosim.system import ReferenceProblem
+
+            p = scene.reference_problem()
+            p = ReferenceProblem(p.model, p.x0, p.u, p.columns, p.start_time, float(jh.time[-1]), p.nominals)
+            ref = solve_reference(p, times=jh.time)
+            print(f"  Jacobi/held at {H:g} s (libcosim's result, to the figures above) against the reference "
+                  f"(its own error estimate in brackets):")
+            for c in system.recorded:
+                if c.column in ref.columns:
+                    k = list(ref.columns).index(c.column)
+                    print(f"    {c.column:<18} {np.max(np.abs(jh[c.column] - ref[c.column])):10.3g} "
+                          f"{c.physical_unit}  [{ref.error[k]:.1e}]")
     return 0
 
 

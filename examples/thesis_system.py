@@ -136,7 +136,7 @@ def stability_limit(system, scheme: str, extrapolation: str, stable: float, unst
 
     while unstable - stable > rel * stable:
         H = 0.5 * (stable + unstable)
-        if run(system, scheme, extrapolation, step=H, stop=stop).ok:
+        if run(system, scheme, extrapolation, step=H, stop=stop).summary.failure is None:  # ran to the end
             stable = H
         else:
             unstable = H

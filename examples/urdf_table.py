@@ -93,7 +93,7 @@ def measure(path: Path, args) -> dict:
     try:
         model = pin.buildModelFromUrdf(str(path))
     except Exception as exc:  # noqa: BLE001 -- Pinocchio's errors are RuntimeError/ValueError
-        row["status"] = f"Pinocchio cannot load it ({str(exc).splitlines()[0][:60]})"
+        row["status"] = f"Pinocchio cannot load it ({str(exc).replace(str(path), path.name).splitlines()[0][:60]})"
         return row
     row["dof"] = model.nv
     if model.nv == 0:

@@ -40,17 +40,19 @@ def __dir__():
     return sorted(list(globals()) + list(_LAZY))
 
 
-def load_robot(path, formulation: str = "newton_euler") -> "Manipulator":
-    """Read a robot file (TOML) and return its :class:`Manipulator`.
+def load_robot(path, formulation: str = "newton_euler", mimic: str = "independent") -> "Manipulator":
+    """Read a robot file (TOML or URDF) and return its :class:`Manipulator`.
 
     ``formulation`` chooses the default derivation: "newton_euler" (DYNAMAN's
     nested bodies) or "lagrange" (the thesis's recursive Lagrange); every
-    numeric evaluator also takes ``formulation=`` per call.
+    numeric evaluator also takes ``formulation=`` per call.  ``mimic``
+    (URDF): "independent" (default, as Pinocchio) or "tied" (a mimic joint
+    follows its leader in the state-space model).
     """
     from .dynamics.manipulator import Manipulator
     from .robot.loader import load_robot_description
 
-    return Manipulator(load_robot_description(path), formulation)
+    return Manipulator(load_robot_description(path, mimic=mimic), formulation)
 
 
 def load_scene(path, set=None, allow_factories: bool = False):

@@ -329,10 +329,26 @@ def _parser(argv) -> argparse.ArgumentParser:
     return parser
 
 
+def _negative_values(argv: list) -> list:
+    """``--steps -1e-3`` as ``--steps=-1e-3``: argparse takes a value starting with '-' in exponent form
+    (or -inf) for an option, so the option would be refused as having no value; the option's own check
+    then names the actual problem (a negative step)."""
+    import re
+
+    number = re.compile(r"-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?(,[-+0-9.eE]*)*|-(inf|nan|infinity)", re.I)
+    out: list = []
+    for tok in argv:
+        if out and out[-1].startswith("--") and "=" not in out[-1] and number.fullmatch(tok):
+            out[-1] = f"{out[-1]}={tok}"
+        else:
+            out.append(tok)
+    return out
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = _parser(argv)
-    args = parser.parse_args(argv)
+    args = parser.parse_args(_negative_values(sys.argv[1:] if argv is None else list(argv)))
     try:
         return args.func(args)
     except (ValueError, KeyError, OSError) as exc:  # clear message, no traceback, for user errors

@@ -51,6 +51,8 @@ def sign_problem(sign: str, value: float) -> Optional[str]:
     """Why ``value`` breaks the sign rule ``">0"`` / ``">=0"`` (a phrase), or None."""
     if sign == ">0" and not value > 0:
         return "is not > 0 (the equations need a positive value)"
+    if sign == ">0" and value < sys.float_info.min:  # the FMU's least value (FMI's min is inclusive)
+        return f"is below the smallest positive normal double {sys.float_info.min:.3g}"
     if sign == ">=0" and not value >= 0:
         return "is negative (must be >= 0)"
     return None
@@ -68,7 +70,8 @@ def variable_problem(var, value) -> Optional[str]:
     lo, hi = getattr(var, "min", None), getattr(var, "max", None)  # a declared range (component files)
     if lo is not None and v < lo:
         if lo == sys.float_info.min:  # the FMU's form of "> 0" (FMI's min is inclusive)
-            return "is not > 0 (the quantity must be positive)"
+            return ("is not > 0 (the quantity must be positive)" if v <= 0 else
+                    f"is below the smallest positive normal double {lo:.3g} (the FMU's least value)")
         if lo == 0.0:
             return "is negative (must be >= 0)"
         return f"is below its minimum {lo!r}"

@@ -58,3 +58,18 @@ def test_trajectory_torques_and_electric_feasibility():
     assert n["max_torque"] >= 1.5 * max(needs[1].tau_peak, needs[1].tau_g) and n["feasible"]
     (s, n), = arm_sizing.electric_sets(needs[1:2], w_m_max=1.0)
     assert not n["feasible"]
+
+
+def test_cli_refuses_a_zero_margin_and_a_junk_trajectory(tmp_path):
+    """--margin 0 was silently replaced by the default (``args.margin or 2.0``); a non-number in the
+    trajectory CSV became nan and reached the written sets."""
+    import subprocess
+    import sys
+
+    csv = tmp_path / "q.csv"
+    csv.write_text("time,q1,q2,q3,q4,q5,q6\n" + "\n".join(f"{0.1 * k},0,x,0,0,0,0" for k in range(4)) + "\n")
+    for extra, match in ((["--margin", "0"], "--margin positive"), (["--trajectory", str(csv)], "finite number")):
+        out = subprocess.run([sys.executable, "-m", "fmugen.cli", "size", "robots/stanford_arm.toml", *extra, "--out",
+                              str(tmp_path / "sets")], capture_output=True, text=True, cwd=ROOT)
+        assert out.returncode == 2 and match in out.stderr, out.stderr
+        assert not list((tmp_path / "sets").glob("*.toml"))

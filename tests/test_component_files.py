@@ -576,3 +576,17 @@ parameter_set = "heavy"
     d = dict(zip([v.name for v in m.states], ev.f(0, [x[v.name] for v in m.states], [0.3])))
     u = 50.0 * 0.2 + 5.0 * (0.2 - 0.01) / 2e-3
     assert d["load.w"] == pytest.approx(u / 0.5, rel=1e-12)  # at rest: the smoothed sign is 0
+
+
+def test_fmugen_linearize_a_component_file_flags_the_smoothed_coulomb_term(tmp_path, capsys):
+    from fmugen.cli import main
+
+    lib = str(ROOT / "fmugen/components/library/stribeck.toml")
+    args = ["linearize", lib, "--at", "w=0", "--at", "phi=0", "--trim", "tau", "--out"]
+    assert main(args + [str(tmp_path / "a.npz")]) == 0
+    out = capsys.readouterr().out
+    assert "warning: sign(w, w_eps)" in out and "--set w_eps=1e12" in out
+    assert np.load(tmp_path / "a.npz")["A"][1, 1] == pytest.approx(-(3.0 / 1e-3 + 0.02) / 0.05, rel=1e-12)
+    assert main(args + [str(tmp_path / "b.npz"), "--set", "w_eps=1e12"]) == 0
+    assert "warning" not in capsys.readouterr().out
+    assert np.load(tmp_path / "b.npz")["A"][1, 1] == pytest.approx(-0.02 / 0.05, rel=1e-6)  # friction-free

@@ -82,6 +82,8 @@ def test_building_x_fmu_keeps_a_users_x_fmu_part(tmp_path, capsys):
     (["report", SPLIT, "--target", "nan"], "--target"),
     (["report", SPLIT, "--target=-0.5"], "--target"),
     (["report", SPLIT, "--steps=-1e-3"], "--steps"),
+    (["report", SPLIT, "--steps", "-2.5e-3"], "must be a positive macro step"),
+    (["linearize", HORN, "--time", "-inf"], "--time -inf: must be a finite number"),
     (["report", SPLIT, "--steps", "a,b"], "--steps 'a,b': 'a' is not a number"),
     (["report", SPLIT, "--steps", "2e-3,,1e-3"], "--steps"),
     (["report", SPLIT, "--internal", "rodas3:nan"], "--internal"),
@@ -102,6 +104,14 @@ def test_a_bad_argument_is_named_and_nothing_is_written(tmp_path, capsys, argv, 
     assert not out.exists()
 
 
+def test_the_files_own_cosim_step_is_bounded_before_anything_is_built(tmp_path, capsys):
+    p = tmp_path / "s.toml"
+    p.write_text("[cosim]\nstep = 1e-290\n\n" + SPLIT.read_text())
+    assert "1e+290 macro steps" in _refused(capsys, "cosim", p, "--out", tmp_path / "o")
+    assert "macro steps" in _refused(capsys, "cosim", SPLIT, "--set", "cosim.step=3e-280", "--out", tmp_path / "o")
+    assert not (tmp_path / "o").exists()
+
+
 def test_a_compiler_failure_is_one_line_and_leaves_no_output_folder(tmp_path):
     fake = tmp_path / "bin"
     fake.mkdir()
@@ -117,6 +127,12 @@ def test_a_compiler_failure_is_one_line_and_leaves_no_output_folder(tmp_path):
     assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
     assert "C compiler failed" in proc.stderr and "the compiler refuses" in proc.stderr
     assert not (tmp_path / "o").exists()
+    # a single FMU into a folder that does not exist yet: the folder is not left behind either
+    proc = subprocess.run([sys.executable, "-m", "fmugen.cli", "build", str(HORN), "--set", "m=1", "--set", "l=1",
+                           "--set", "g=9.81", "-o", str(tmp_path / "new" / "h.fmu")],
+                          capture_output=True, text=True, env=env, timeout=300)
+    assert proc.returncode == 1 and proc.stderr.count("\n") == 1 and "C compiler failed" in proc.stderr
+    assert not (tmp_path / "new").exists()
 
 
 # ----------------------------------------------------------------- bounded work, network waits
@@ -140,6 +156,7 @@ def test_a_device_fifo_or_huge_file_is_refused_before_it_is_read(tmp_path, capsy
     (["--scheduler", "tcp://127.0.0.1:1"], "cannot reach"),
     (["--scheduler", "not an address"], "--scheduler"),
     (["--grid", "amp.K_a=linspace(1,2,200000)", "--grid", "joint.B_m=linspace(0,1,300000)"], "1.2e+11 points"),
+    (["--sample", "joint.B_m=uniform(0,1)", "-n", "7" * 330, "--seed", "1"], "a 330-digit number of samples"),
 ])
 def test_a_sweep_refuses_before_writing_anything(tmp_path, capsys, extra, named):
     out = tmp_path / "sweep"

@@ -146,3 +146,41 @@ def test_the_reference_cache_serves_only_whole_entries_of_its_own_key(tmp_path, 
     os.replace(e2, entry)
     r3 = reference.solve_reference(prob, times)
     assert not r3.cached and np.array_equal(r3.values, r0.values)
+
+
+def test_the_analysis_cache_key_holds_component_files_and_refuses_devices(tmp_path):
+    import shutil
+
+    from fmugen.scene.analysis_cache import analysis_key
+
+    root = Path(__file__).resolve().parents[1]
+    (tmp_path / "examples" / "scenes").mkdir(parents=True)
+    shutil.copytree(root / "examples" / "components", tmp_path / "examples" / "components")
+    shutil.copytree(root / "robots", tmp_path / "robots")
+    scene = tmp_path / "examples" / "scenes" / "puma_geared_drive.toml"
+    shutil.copy(root / "examples" / "scenes" / "puma_geared_drive.toml", scene)
+    k0 = analysis_key(scene)
+    part = tmp_path / "examples" / "components" / "geared_drive.toml"
+    part.write_text(part.read_text().replace("value = 0.5,", "value = 0.55,", 1))  # type = "file:..." edited
+    assert analysis_key(scene) != k0
+    assert analysis_key("/dev/zero") is None  # refused before it is read (the full load says why)
+
+
+def test_the_stability_limit_cache_serves_only_its_own_entry(tmp_path, monkeypatch):
+    import json
+
+    from fmugen.scene.build import _jacobi_limit
+
+    monkeypatch.setenv("FMUGEN_CACHE", str(tmp_path / "cache"))
+    scene = load_scene(Path(__file__).resolve().parents[1] / "examples" / "scenes" / "single_joint_split.toml")
+    keys = {"chain": "k1", "joint": "k2"}
+    limit = _jacobi_limit(scene, keys, True)
+    (entry,) = (tmp_path / "cache" / "stability").glob("*.json")
+    d = json.loads(entry.read_text())
+    entry.write_text(json.dumps({**d, "jacobi_hold_limit": 1e9}))  # edited: the FMUs' step would follow it
+    assert _jacobi_limit(scene, keys, True) == limit
+    other = _jacobi_limit(scene, {"chain": "k3", "joint": "k4"}, True)
+    for f in (tmp_path / "cache" / "stability").glob("*.json"):  # another key's entry under this name
+        if f != entry:
+            os.replace(f, entry)
+    assert _jacobi_limit(scene, keys, True) == limit == other

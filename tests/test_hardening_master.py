@@ -16,6 +16,7 @@ held input u = 1 and B by A's output:
   command line prints it and exits 2) that names the FMU's file.
 """
 import math
+import os
 
 import pytest
 
@@ -88,7 +89,10 @@ def test_broken_fmus_give_one_line_naming_the_fmu(lag, tmp_path):
         msg = str(info.value)
         assert isinstance(info.value, CosimError) and "\n" not in msg, (kind, msg)
         assert f"FMU 'B' ({path})" in msg and EXPECTED[kind] in msg, (kind, msg)
-    # a folder and a file that does not exist
-    for path, said in ((tmp_path, "not a regular file"), (tmp_path / "none.fmu", "the file does not exist")):
+    # a folder, a FIFO (reading it would block) and a file that does not exist
+    fifo = tmp_path / "pipe.fmu"
+    os.mkfifo(fifo)
+    for path, said in ((tmp_path, "not a regular file"), (fifo, "not a regular file"),
+                       (tmp_path / "none.fmu", "the file does not exist")):
         with pytest.raises(CosimError, match=said):
             run(chain(lag, path), scheme="jacobi")

@@ -97,6 +97,9 @@ def test_a_component_value_is_checked_whatever_path_it_takes(tmp_path, capsys, v
     assert "J" in _cli(capsys, "info", str(SPLIT), "--set", f"joint.J={value}")
     err = _cli(capsys, "info", str(STIFF), "--set", f"valve.P_s={value}")
     assert "--set valve.P_s" in err and "> 0" in err
+    # --set of a suite run on a user's file (start values by FMI name)
+    err = _cli(capsys, "suite", str(STIFF), "--set", f"valve.P_s={value}", "--quick", "--out", str(tmp_path / "sx"))
+    assert "--set valve.P_s" in err and not (tmp_path / "sx").exists()
 
 
 @pytest.mark.parametrize("value", ["-0.05", "0"])

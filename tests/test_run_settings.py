@@ -8,6 +8,7 @@ Start-up (no timing here: that is ``examples/bench_startup.py``): nothing heavy 
 ``fmugen --help``, and the cached scene analysis gives exactly the system, and the results, of a full
 analysis, under a key that changes with the content.
 """
+import os
 import re
 import shutil
 import subprocess
@@ -50,6 +51,18 @@ def test_cached_analysis_gives_the_same_system_and_results(tmp_path):
     r1 = run(first.system, "gauss-seidel", "linear", stop=0.05)
     r2 = run(again.system, "gauss-seidel", "linear", stop=0.05)
     assert r1.ok and np.array_equal(r1.values, r2.values)
+    # a fresh ``fmugen cosim`` reaches its first macro step from the cache without importing sympy, scipy or
+    # matplotlib (what start-up costs)
+    code = ("import sys\nimport fmugen.cosim.master as M\n"
+            "def first_step(self, *a, **k):\n"
+            "    print(len(self.units), sorted(m for m in ('sympy', 'scipy', 'matplotlib') if m in sys.modules))\n"
+            "    raise SystemExit(0)\n"
+            "M.Master.run = first_step\nfrom fmugen.cli import main\n"
+            f"main(['cosim', {str(SPLIT)!r}, '--set', 'joint.J=2', '--out', {str(tmp_path / 'c')!r}])\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120,
+                       env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip().split(maxsplit=1) == [str(len(first.system.units)), "[]"]
     # the full scene is there when asked for
     assert again.scene.monolithic_model().nx == first.scene.monolithic_model().nx
 

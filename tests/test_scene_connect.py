@@ -94,7 +94,11 @@ def test_connect_two_component_files_equals_the_hand_wiring(tmp_path):
     ('["gear.load", "act.flange"]', r"gear.load needs phi \(gear.phi_L is an input\) but act.flange has no phi"),
     ('["gear.shaft", "load.flange"]', r"gear.shaft is not a connector of gear \(connectors: load\)"),
     ('["valve.Q_L", "valve_b.Q_L"]', r"both valve.Q_L and valve_b.Q_L compute the signal"),
-    ('["act.port", "valve.port"], ["valve.P_L", "act.P_L"]', r"input valve.P_L is already driven by act.P_L"),
+    # named at the connect entry the file has, not at a generated connections[k] the file does not have
+    ('["act.port", "valve.port"], ["valve.P_L", "act.P_L"]',
+     r"connect\[1\] \(valve.P_L <-> act.P_L\): input valve.P_L is already driven by \[scene\] connect\[0\] "
+     r"\(act.port <-> valve.port\)"),
+    ('["act.port", "valve.port"], ["act.port", "valve.port"]', r"connect\[1\] .*already driven by \[scene\] connect\[0\]"),
 ])
 def test_connect_refusals_name_both_ends(tmp_path, pairs, message):
     with pytest.raises(SceneError, match=message):

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import fmugen
+import fmugen.ssp.loader  # the attribute fmugen.ssp exists only once imported (the tests below use it)
 from fmugen.cosim import run
 from fmugen.errors import InputFileError
 from ssp_third_party import K, M_A, SSD, build_fmus, exact, write_ssp
@@ -119,6 +120,28 @@ def test_unsafe_or_invalid_archives_are_refused(tmp_path, members, links, match)
     assert not any(q.is_symlink() for q in work.rglob("*")) if work.exists() else True
 
 
+def test_duplicate_members_are_refused_naming_the_archive(tmp_path):
+    """Two members of one name: refused as such (open(.., "xb") used to fail with an OSError naming only the
+    temporary extraction folder)."""
+    p = tmp_path / "dup.ssp"
+    with zipfile.ZipFile(p, "w") as zf:
+        zf.writestr("SystemStructure.ssd", "x")
+        with pytest.warns(UserWarning):
+            zf.writestr("SystemStructure.ssd", "y")
+    with pytest.raises(InputFileError, match=r"dup\.ssp: archive member 'SystemStructure.ssd' appears twice"):
+        fmugen.ssp.loader.load_system(p, workdir=tmp_path / "work")
+
+
+def test_exported_member_names_are_plain_file_names():
+    """A component name from someone else's SSP (an [external] part) becomes a safe, distinct stem under
+    resources/ of the archive fmugen writes, never a path."""
+    from fmugen.ssp.export import resource_stems
+
+    got = resource_stems(["chain", "../../evil", "a/b", "a_b", "Mass 1", "A_b", ".hidden"])
+    assert got == {"chain": "chain", "../../evil": "______evil", "a/b": "a_b", "a_b": "a_b_2",
+                   "Mass 1": "Mass_1", "A_b": "A_b_3", ".hidden": "_hidden"}
+
+
 def test_unsupported_parts_are_refused_with_one_line(fmus, tmp_path):
     base = _ok_ssd()
     cases = {
@@ -167,6 +190,17 @@ def test_cli_cosim_on_an_archive_with_set(fmus, tmp_path):
                           str(tmp_path / "o2")], capture_output=True, text=True, cwd=ROOT)
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "A.nope" in bad.stderr
     shutil.rmtree(tmp_path / "o", ignore_errors=True)
+    # --set cosim.KEY is a run setting on an archive as on a scene (it was refused as "not a component")
+    run_ = subprocess.run([sys.executable, "-m", "fmugen.cli", "cosim", str(p), "--set", "cosim.scheme=newton",
+                           "--set", "cosim.step=0.0025", "--out", str(tmp_path / "o3")], capture_output=True,
+                          text=True, cwd=ROOT)
+    assert run_.returncode == 0, run_.stderr
+    assert run_.stdout.startswith(f"{fmugen.load_system(p).name}: newton/")
+    t = np.loadtxt(tmp_path / "o3" / "results.csv", delimiter=",", skiprows=1)[:, 0]
+    assert len(t) == 21 and t[-1] == pytest.approx(0.05, abs=1e-12)  # 0.05 s in steps of 2.5 ms
+    typo = subprocess.run([sys.executable, "-m", "fmugen.cli", "cosim", str(p), "--set", "cosim.schem=newton",
+                           "--out", str(tmp_path / "o4")], capture_output=True, text=True, cwd=ROOT)
+    assert typo.returncode == 2 and "did you mean 'scheme'" in typo.stderr
 
 
 def test_scene_with_an_external_ssp_component(fmus, tmp_path):
@@ -226,3 +260,39 @@ record = ["B.F"]
     scene_file.write_text(bad)
     with pytest.raises(ValueError, match="unit mismatch"):
         fmugen.load_scene(scene_file)
+
+
+def test_sweep_over_an_archive(fmus, tmp_path):
+    """fmugen sweep x.ssp: each point equals the serial run with that start value, bit for bit, and the
+    matrix exponential at its parameter; the error metric (a reference) is refused."""
+    import dataclasses
+
+    import fmugen.sweep
+
+    p = write_ssp(tmp_path / "two.ssp", fmus, stop=0.1)
+    opts = {"scheme": "newton", "extrapolation": "linear", "step": 1e-3}
+    r = fmugen.sweep.sweep(str(p), grid={"A.m": [1.0, 1.5]}, metrics=["A.x:final"], out=str(tmp_path / "sw"),
+                           processes=False, workers=1, options=opts, plot=False)
+    system = fmugen.load_system(p)
+    for row in r.rows:
+        assert row["status"] == "ok"
+        units = tuple(dataclasses.replace(u, start_values={**u.start_values, "m": row["A.m"]}) if u.name == "A"
+                      else u for u in system.units)
+        serial = run(dataclasses.replace(system, units=units), **opts)
+        assert row["A.x:final"] == serial["A.x"][-1]
+        ex = exact(np.array([0.1]), m_a=row["A.m"])["A.x"][-1]
+        assert abs(row["A.x:final"] - ex) < 2e-3 * abs(ex)
+    with pytest.raises(ValueError, match="no symbolic model"):
+        fmugen.sweep.sweep(str(p), grid={"A.m": [1.0]}, metrics=["A.x:error"], out=str(tmp_path / "sw2"),
+                           processes=False, workers=1, options=opts, plot=False)
+    # --set on a sweep of an archive: the rules of fmugen cosim x.ssp (one function): a run setting and a
+    # start value; the point equals the serial run with both
+    r = fmugen.sweep.sweep(str(p), grid={"A.m": [1.5]}, metrics=["A.x:final"], out=str(tmp_path / "sw3"),
+                           processes=False, workers=1, sets=["cosim.step=0.002", "B.k=2.0"], plot=False,
+                           options={"scheme": "newton", "extrapolation": "linear"})
+    units = tuple(dataclasses.replace(u, start_values={**u.start_values, **({"m": 1.5} if u.name == "A" else
+                                                                              {"k": 2.0})}) for u in system.units)
+    serial = run(dataclasses.replace(system, units=units), scheme="newton", extrapolation="linear", step=0.002)
+    assert r.rows[0]["A.x:final"] == serial["A.x"][-1]
+    assert serial["A.x"][-1] != run(dataclasses.replace(system, units=units), scheme="newton",
+                                    extrapolation="linear", step=0.001)["A.x"][-1]

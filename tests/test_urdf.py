@@ -295,6 +295,8 @@ def test_frame_outputs_their_jacobians_and_locked_branches():
     names = [v.name for v in m.outputs]
     assert names[:3] == ["p_panda_hand_tcp[1]", "p_panda_hand_tcp[2]", "p_panda_hand_tcp[3]"]
     assert "R_panda_hand[2,3]" in names and "J_panda_leftfinger[6,9]" in names and len(names) == 3 + 9 + 54
+    q4 = m.states[3]  # the elbow's range [-3.0718, -0.0698] excludes 0: it starts mid-range
+    assert (q4.name, q4.min, q4.max, q4.start) == ("q[4]", -3.0718, -0.0698, pytest.approx(-1.5708))
     ev = ModelEvaluator(m)
     rng = np.random.default_rng(3)
     q = rng.uniform(-1, 1, 9)
@@ -385,8 +387,8 @@ def random_tree(n=7, seed=5):
 
 
 def test_newton_euler_and_composite_bodies_agree_on_a_random_tree_and_equal_pinocchio():
-    """Two derivations over a tree: M by CRBA equals M by n Newton-Euler passes (unit accelerations);
-    both, and the forward dynamics, equal Pinocchio's crba/rnea/aba on the same bodies."""
+    """Three derivations over a tree: M by CRBA equals M by n Newton-Euler passes (unit accelerations)
+    and the recursive Lagrange form; they and the forward dynamics equal Pinocchio's crba/rnea/aba."""
     import sympy as sp
 
     from fmugen.codegen.benchmarks import pinocchio_model
@@ -412,6 +414,9 @@ def test_newton_euler_and_composite_bodies_agree_on_a_random_tree_and_equal_pino
         assert np.abs(arm.inverse_dynamics(q, qd, qdd) - tp).max() < 1e-12 * np.abs(tp).max()
         ap = pin.aba(model, data, q, qd, tau)
         assert np.abs(arm.forward_dynamics(q, qd, tau) - ap).max() < 1e-10 * np.abs(ap).max()
+        # the thesis's recursive Lagrange form, extended to the tree (4x4 matrices, nothing shared with NE)
+        assert np.abs(arm.inverse_dynamics(q, qd, qdd, formulation="lagrange") - tp).max() < 1e-12 * np.abs(tp).max()
+        assert np.abs(arm.mass_matrix(q, formulation="lagrange") - M).max() < 1e-12 * np.abs(M).max()
 
 
 # ------------------------------------------------------------- export
@@ -492,3 +497,82 @@ def test_a_joint_that_moves_nothing_is_refused(tmp_path):
         '<inertia ixx="0.002" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/>', '').replace(
         '<inertia ixx="0.001" ixy="0.0001" ixz="0" iyy="0.002" iyz="0" izz="0.0015"/>', '')
     refused(text, "joint 'elbow': moves no mass", tmp_path)
+
+
+def test_mimic_joints_tied_to_their_leader(tmp_path):
+    """mimic="tied": the elbow follows the shoulder (q2 = -0.5 q1 + 0.1); the model keeps one joint and its
+    acceleration is the projection G^T M G qdd = G^T (tau - h) of the full arm's M and h (numpy)."""
+    from fmugen.codegen.evaluate import ModelEvaluator
+
+    path = tmp_path / "arm.urdf"
+    path.write_text(arm_urdf().replace('<axis xyz="0 1 0"/>', '<axis xyz="0 1 0"/>'
+                                       '<mimic joint="shoulder" multiplier="-0.5" offset="0.1"/>'))
+    with pytest.warns(MimicJointWarning, match="elbow"):
+        assert fmugen.load_robot(path).robot.bodies[1].mimic is None
+    arm = fmugen.load_robot(path, mimic="tied")
+    assert arm.robot.bodies[1].mimic[0] == 0
+    m = arm.state_space_model(outputs=("qdd", "p:tcp", "J:tcp"))
+    assert [v.name for v in m.states] == ["q[1]", "qd[1]"] and [v.name for v in m.inputs] == ["tau[1]"]
+    ev = ModelEvaluator(m)
+    G = np.array([[1.0], [-0.5]])
+    for q1, qd1, tau1 in ((0.3, 0.7, 2.0), (-1.1, -0.4, -5.0)):
+        q, qd = np.array([q1, -0.5 * q1 + 0.1]), np.array([qd1, -0.5 * qd1])
+        M, h = arm.mass_matrix(q), arm.bias(q, qd)
+        qdd = np.linalg.solve(G.T @ M @ G, G.T @ (np.array([tau1, 0.0]) - h))
+        assert ev.f(0.0, [q1, qd1], [tau1])[1] == pytest.approx(qdd[0], rel=1e-12)
+        y = ev.g(0.0, [q1, qd1], [tau1])
+        assert y[9] == pytest.approx(qdd[0], rel=1e-12)  # outputs: p_tcp, J_tcp, then qdd
+        assert np.abs(y[0:3] - arm.fk(q, "tcp")[:3, 3]).max() < 1e-14
+        assert np.abs(y[3:9] - (arm.jacobian(q, "tcp") @ G)[:, 0]).max() < 1e-14  # d p_tcp / d q1 includes q2
+    # the exact model Jacobian against central differences of f
+    x, u, e = np.array([0.3, 0.7]), np.array([2.0]), 1e-6
+    A, B, _, _ = ev.jacobians(0.0, x, u)
+    A_fd = np.column_stack([(ev.f(0.0, x + e * d, u) - ev.f(0.0, x - e * d, u)) / (2 * e) for d in np.eye(2)])
+    assert np.abs(A - A_fd).max() < 1e-6 * np.abs(A).max()
+    assert B[1, 0] == pytest.approx((ev.f(0.0, x, u + e)[1] - ev.f(0.0, x, u - e)[1]) / (2 * e), rel=1e-6)
+    with pytest.raises(ValueError, match="follow another joint"):
+        arm.state_space_model(locked={2: 0.0})
+
+
+def test_a_scene_ties_mimic_joints(tmp_path):
+    from fmugen.scene import load_scene
+    from fmugen.scene.errors import SceneError
+
+    (tmp_path / "arm.urdf").write_text(arm_urdf().replace(
+        '<axis xyz="0 1 0"/>', '<axis xyz="0 1 0"/><mimic joint="shoulder" multiplier="2"/>'))
+    text = '[scene]\nname = "m"\n[instances.arm]\nrobot = "arm.urdf"\nmimic = "{}"\n[fmus.arm]\nmembers = ["arm"]\n'
+    (tmp_path / "s.toml").write_text(text.format("tied"))
+    m, _ = load_scene(tmp_path / "s.toml").instance_model("arm")
+    assert [v.name for v in m.states] == ["q[1]", "qd[1]"]
+    (tmp_path / "s.toml").write_text(text.format("glued"))
+    with pytest.raises(SceneError, match="mimic must be 'independent' or 'tied'"):
+        load_scene(tmp_path / "s.toml")
+
+
+def test_urdf_table_example_runs(capsys):
+    """examples/urdf_table.py, cut down to one robot (the whole table: examples/urdf_table_results.md)."""
+    import importlib.util
+    import sys
+
+    path = Path(__file__).resolve().parents[1] / "examples" / "urdf_table.py"
+    spec = importlib.util.spec_from_file_location("urdf_table", path)
+    table = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("urdf_table", table)
+    spec.loader.exec_module(table)
+    assert table.main(["--only", "double_pendulum_continuous", "--states", "1", "--repeat", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "| double_pendulum_continuous.urdf | 2 | chain |" in out and "1 built and within tolerance" in out
+
+
+def test_linearize_takes_a_urdf_robot(tmp_path):
+    """fmugen linearize robots/ur5.urdf --trim tau: the holding torque is the UR5's gravity torque."""
+    from fmugen.cli import main
+
+    root = Path(__file__).resolve().parents[1]
+    q = [0.1, -1.2, 1.0, -1.4, -1.57, 0.0]
+    out = tmp_path / "ur5.npz"
+    assert main(["linearize", str(root / "robots/ur5.urdf"), "--at", "q=" + ",".join(map(str, q)), "--at", "qd=0",
+                 "--trim", "tau", "--out", str(out)]) == 0
+    lin = np.load(out)
+    g = fmugen.load_robot(root / "robots/ur5.urdf").bias(q, np.zeros(6))
+    assert np.abs(lin["u0"] - g).max() < 1e-8 * np.abs(g).max() and lin["A"].shape == (12, 12)

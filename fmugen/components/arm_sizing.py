@@ -248,14 +248,18 @@ def run(args) -> int:
             raise FmugenError(f"{args.trajectory}: expected a CSV with a header time, q[1], ..., q[n]")
         cols = data.dtype.names
         traj = (np.asarray(data[cols[0]], dtype=float), np.column_stack([data[c] for c in cols[1:]]))
-    if not 1 <= args.grid <= 50 or not all(math.isfinite(x) and x > 0 for x in (args.speed, args.alpha,
-                                                                                args.margin or 1.0)):
+        if not (np.all(np.isfinite(traj[0])) and np.all(np.isfinite(traj[1]))):  # genfromtxt reads junk as nan
+            raise FmugenError(f"{args.trajectory}: every cell must be a finite number (a cell is empty or not a "
+                              f"number)")
+    # --margin 0 is refused, not replaced by the default (``args.margin or 2.0`` did that silently)
+    margin = args.margin if args.margin is not None else (2.0 if args.kind == "hydraulic" else 1.5)
+    if not 1 <= args.grid <= 50 or not all(math.isfinite(x) and x > 0 for x in (args.speed, args.alpha, margin)):
         raise FmugenError("size: --grid must be 1..50; --speed, --alpha and --margin positive numbers")
     needs = requirements(args.robot, trajectory=traj, n_grid=args.grid, speed=args.speed)
     if args.kind == "hydraulic":
-        sets = hydraulic_sets(needs, margin=args.margin or 2.0, alpha_ref=args.alpha)
+        sets = hydraulic_sets(needs, margin=margin, alpha_ref=args.alpha)
     else:
-        sets = electric_sets(needs, margin=args.margin or 1.5, alpha_ref=args.alpha)
+        sets = electric_sets(needs, margin=margin, alpha_ref=args.alpha)
     paths = write_sets(sets, args.out, Path(args.robot).stem)
     for p in paths:
         print("\n".join(line for line in p.read_text().splitlines() if line.startswith("#   ")))

@@ -18,6 +18,7 @@ the file and the field.
 from __future__ import annotations
 
 import math
+import sys
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -61,6 +62,8 @@ def value_problem(family: str, name: str, value) -> str | None:
     sign = SIGNS.get(family, {}).get(name)
     if sign == ">0" and not value > 0:
         return "is not > 0 (the equations need a positive value)"
+    if sign == ">0" and value < sys.float_info.min:  # the FMU's least value (its min: FMI's min is inclusive)
+        return f"is below the smallest positive normal double {sys.float_info.min:.3g}"
     if sign == ">=0" and not value >= 0:
         return "is negative (must be >= 0)"
     return None

@@ -80,9 +80,10 @@ def parse_at(items) -> dict:
 def load_model(path: Path, sets: dict, robot_outputs=(), formulation="newton_euler", without=()):
     """(SymbolicModel, parameter values) of a robot, assembly or scene file."""
     from ..errors import InputFileError, read_text_file, toml_problem
+    from ..robot.loader import is_urdf
 
     try:
-        data = tomllib.loads(read_text_file(path, "TOML file"))
+        data = {"robot": {}} if is_urdf(path) else tomllib.loads(read_text_file(path, "TOML file"))
     except (tomllib.TOMLDecodeError, RecursionError) as exc:
         raise InputFileError(f"{path}: {toml_problem(exc)}") from None
     if "scene" in data:
@@ -115,8 +116,14 @@ def load_model(path: Path, sets: dict, robot_outputs=(), formulation="newton_eul
         model = load_assembly(path)
         check_model_values(model, sets, lambda k: f"{path}: --set {k}")
         return model, sets
-    raise InputFileError(f"{path}: neither a robot file ([robot] table), an assembly ([assembly] table) "
-                         f"nor a scene ([scene] table)")
+    if "component" in data:  # a component file: parameters through its own checks (ranges, exact ifs)
+        from ..components.equations import load_component, read_component_file
+
+        params = {d.name for d in read_component_file(path).of_kind("parameter")}
+        model = load_component(path, overrides={k: v for k, v in sets.items() if k in params})
+        return model, {k: v for k, v in sets.items() if k not in params}
+    raise InputFileError(f"{path}: neither a robot file ([robot] table), an assembly ([assembly] table), "
+                         f"a scene ([scene] table) nor a component file ([component] table)")
 
 
 def describe(lm, model, op=None, out=None) -> None:
@@ -141,7 +148,16 @@ def describe(lm, model, op=None, out=None) -> None:
 
 
 def _warn_kinks(path: Path, sets: dict, model, op) -> None:
+    from ..robot.loader import is_urdf
+
+    if is_urdf(path):
+        return  # a robot: no smoothed kinks
     data = tomllib.loads(path.read_text())
+    if "component" in data:
+        from .kinks import component_kink_warnings
+
+        for line in component_kink_warnings(path, model, op):
+            print(line)
     if "scene" not in data:
         return
     from ..scene import load_scene

@@ -80,16 +80,32 @@ def kink_warnings(scene, model, op) -> list:
                 break
         if env is None:
             continue
-        for eq, text, name, dists, eps in cf.kinks:
-            e = float(sp.sympify(eps).xreplace(env))
-            d = min(abs(float(sp.sympify(dd).xreplace(env))) for dd in dists)
-            if not np.isfinite(d) or d >= abs(e) or abs(e) >= KINK_OFF:
-                continue
-            where = f"{inst}: {text} in '{eq}'"
-            hint = ("the plant without it: " + f"--set {inst}.{eps}=1e12 (the smoothed sign and its slope vanish)"
-                    if name == "sign" and isinstance(eps, sp.Symbol) else
-                    "the plant beside it: an operating point outside the band (--at)")
-            lines.append(f"warning: {where}: the operating point is inside its smooth band (distance {d:.3g} < "
-                         f"eps = {e:.3g}): the linearisation sees the smoothed kink's slope (~1/eps), not the "
-                         f"kink; choose the smooth form (linearised here) or {hint}")
+        lines += _site_lines(cf, env, f"{inst}.", f"{inst}: ")
     return lines
+
+
+def _site_lines(cf, env: dict, set_prefix: str, where_prefix: str) -> list:
+    """The warning lines of a component file's kinks at the values ``env`` (symbol -> number)."""
+    lines = []
+    for eq, text, name, dists, eps in cf.kinks:
+        e = float(sp.sympify(eps).xreplace(env))
+        d = min(abs(float(sp.sympify(dd).xreplace(env))) for dd in dists)
+        if not np.isfinite(d) or d >= abs(e) or abs(e) >= KINK_OFF:
+            continue
+        hint = ("the plant without it: " + f"--set {set_prefix}{eps}=1e12 (the smoothed sign and its slope vanish)"
+                if name == "sign" and isinstance(eps, sp.Symbol) else
+                "the plant beside it: an operating point outside the band (--at)")
+        lines.append(f"warning: {where_prefix}{text} in '{eq}': the operating point is inside its smooth band "
+                     f"(distance {d:.3g} < eps = {e:.3g}): the linearisation sees the smoothed kink's slope "
+                     f"(~1/eps), not the kink; choose the smooth form (linearised here) or {hint}")
+    return lines
+
+
+def component_kink_warnings(path, model, op) -> list:
+    """:func:`kink_warnings` for a component file linearised on its own (``fmugen linearize x.toml``)."""
+    from ..components.equations import read_cached
+
+    env = {v.symbol: v.start for v in model.parameters}
+    env.update({v.symbol: float(op.x[k]) for k, v in enumerate(model.states)})
+    env.update({v.symbol: float(op.u[k]) for k, v in enumerate(model.inputs)})
+    return _site_lines(read_cached(path), env, "", "")

@@ -106,14 +106,16 @@ def _check_args(args, scene) -> None:
         stop = a.number(args.stop, "--stop")
         if not stop > start:
             raise a.FmugenError(f"--stop {args.stop!r}: must be after the scene's start time {start!r}")
+    cosim = dict(getattr(scene.spec, "cosim", None) or {})
     if getattr(args, "step", None) is not None:
         step = a.positive(args.step, "--step", "a positive macro step [s]")
+    elif cosim.get("step") is not None:  # the file's [cosim] step (or --set cosim.step): bounded the same way
+        step = a.positive(cosim["step"], "[cosim] step", "a positive macro step [s]")
     if getattr(args, "tol", None) is not None:
         a.tolerance(args.tol, "--tol")
-    try:
-        check_time_grid(start, stop, min(step, stop - start), "--stop/--step:")
-    except a.FmugenError as exc:
-        raise a.FmugenError(str(exc)) from None
+    given = [o for o, v in (("--stop", args.stop), ("--step", getattr(args, "step", None))) if v is not None]
+    check_time_grid(start, stop, min(step, stop - start),
+                    f"{'/'.join(given)}:" if given else f"{args.scene}: [scene]/[cosim] stop and step:")
     if getattr(args, "points", None) is not None:
         args.points = a.count(args.points, "--points", 1, a.MAX_POINTS)
     if getattr(args, "steps", None) is not None:

@@ -387,6 +387,8 @@ class Master:
         summ = Summary(sysm.name, self.scheme, self.extrapolation, bool(adaptive))
         if implicit:
             summ.coupling_tol, summ.coupling_tol_source = coupling_tol, tol_source
+        if getattr(sysm, "rest_unstable", ()):
+            summ.physics = sysm.rest_unstable[0].split(": the system")[0]
         nu, ext = self.nu, ORDER[self.extrapolation]
         # the defect (what the predictor said against what came out) is O(H^p): the predictor is the
         # extrapolant through 1, 2 or 3 past points, also for the iterated schemes
@@ -434,12 +436,16 @@ class Master:
             if self.me_block is not None:
                 self.me_block.start(t0)
             if detect_divergence and nu and not adaptive:  # adaptive: the step control bounds the defect
-                monitor = DivergenceMonitor(self.coupling_labels, scale0[:nu], history.U[0, :nu], ADVICE[self.scheme])
+                monitor = DivergenceMonitor(self.coupling_labels, scale0[:nu], history.U[0, :nu], ADVICE[self.scheme],
+                                            getattr(sysm, "rest_unstable", ()))
             t_last = stop - 1e-12 * max(1.0, abs(stop))  # loop guard, computed once
             while t < t_last:
                 H = _land(t, H, stop)
-                if est is not None and est.due(t, H, stop):  # 0. a shadow step of 2H, for the estimate
-                    calls += self._shadow(t, H, shadow, est, scale, G, summ)
+                if est is not None and summ.macro_steps >= est.next_at:  # 0. a shadow window, for the estimate
+                    if est.due(t, H, stop):
+                        calls += self._shadow(t, H, shadow, est, scale, G, summ)
+                    else:
+                        est.skipped(summ.macro_steps)
                 # 1. predict: the inputs at t_n and the extrapolant's derivatives into the FMUs' buffers
                 Uset_v[:] = history.U0
                 P = history.predict(H)
@@ -516,8 +522,8 @@ class Master:
                     self.dU0[:nu] = G[nu:]  # the slopes at t_{n+1}: the next step's predictor
                 # 6. record, watch
                 rec.append(t)
-                if est is not None:
-                    est.accepted(H, rec.V[rec.n - 1])
+                if est is not None and est.pending is not None:
+                    est.accepted(H, rec.V[rec.n - 1], summ.macro_steps)
                 if monitor is not None:
                     failure = monitor.observe(t, H, d_v, Unew_v)
                     if failure is not None:
@@ -542,7 +548,7 @@ class Master:
         summ.do_steps = self._do_steps + sum(getattr(u, "do_steps", 0) for u in self.units)
         if est is not None:
             summ.error_estimates, summ.error_estimate, summ.error_trend, summ.error_growth, verdict = \
-                est.finish(rec.V[: rec.n], user_tol)
+                est.finish(rec.V[: rec.n], user_tol, summ.macro_steps)
             summ.estimate_samples = len(est.local)
             if verdict is not None and failure is None:
                 summ.status = "unreliable"
@@ -615,10 +621,15 @@ class Master:
         if monitor is None or not monitor.growing():
             return FailureReport(t, "fmu-failure", str(e), unit=e.unit, fmu_messages=e.messages)
         j = int(np.argmax(np.abs(d[: self.nu]) / np.maximum(scale0[: self.nu], 1e-300)))
-        msg = (f"the coupling diverges: the interface defect grew over the last macro steps until FMU "
-               f"{e.unit!r} failed ({e.call} returned {STATUS_NAMES.get(e.status, e.status)}). The inputs "
-               f"this FMU was given jumped, so the coupling (H = {H:.4g} s is above this scheme's stability "
-               f"limit: {monitor.advice}) is the cause, not stiffness of the FMU, whatever its message suggests")
+        if monitor.physics:
+            msg = (f"the system diverges: the interface values grew over the last macro steps until FMU {e.unit!r} "
+                   f"failed ({e.call} returned {STATUS_NAMES.get(e.status, e.status)}); "
+                   f"{monitor._stability_limit(H)}")
+        else:
+            msg = (f"the coupling diverges: the interface defect grew over the last macro steps until FMU "
+                   f"{e.unit!r} failed ({e.call} returned {STATUS_NAMES.get(e.status, e.status)}). The inputs "
+                   f"this FMU was given jumped, so the coupling (H = {H:.4g} s is above this scheme's stability "
+                   f"limit: {monitor.advice}) is the cause, not stiffness of the FMU, whatever its message suggests")
         return FailureReport(t, "diverged", msg, unit=e.unit, coupling=self.coupling_labels[j],
                              fmu_messages=e.messages)
 
@@ -667,9 +678,9 @@ class Master:
         for b, c in zip(bufs, copies):
             b[:] = c
         if ok:
-            est.started(t, H, Ys)
+            est.started(t, H, Ys, summ.macro_steps)
         else:
-            est.count = 0
+            est.skipped(summ.macro_steps)
         return calls
 
     def _save_all(self, states) -> int:

@@ -126,11 +126,13 @@ class DivergenceMonitor:
     """Watches the interface of one run (see the module docstring).  ``observe`` per accepted step;
     ``growing()`` tells whether the defect was growing when an FMU failed."""
 
-    def __init__(self, labels, scale0, U0, advice):
+    def __init__(self, labels, scale0, U0, advice, physics=()):
         nu = len(labels)
         self.labels = labels
         self.scale0 = scale0  # each coupling's initial magnitude or nominal
         self.advice = advice  # what to do about a coupling above its stability limit (depends on the scheme)
+        self.physics = tuple(physics)  # the system's own unstable modes at rest (a runaway no step cures)
+        self.what = "the system diverges" if self.physics else "the coupling diverges"
         self.windows = []
         self.count = 0
         self.D = np.zeros((WINDOW, nu))  # the block's defects, one row per macro step
@@ -156,6 +158,9 @@ class DivergenceMonitor:
         return _growing(self.windows) or _growing_steps(self.recent)
 
     def _stability_limit(self, H) -> str:
+        if self.physics:
+            return (f"physically unstable, not a coupling error: {self.physics[0].split(': the system')[0]}; "
+                    f"it runs away from rest whatever the macro step or scheme")
         return f"H = {H:.4g} s is above this scheme's stability limit: {self.advice}"
 
     def _check(self, t, H, D, U):
@@ -192,13 +197,13 @@ class DivergenceMonitor:
             j = int(jd[rel.index(rel_max)])
             return FailureReport(
                 t, "diverged",
-                f"the coupling diverges: coupled values grew to {sn[-1]:.3g} x their initial scale with an "
+                f"{self.what}: coupled values grew to {sn[-1]:.3g} x their initial scale with an "
                 f"interface defect {rel_max:.2g} x the signal ({self._stability_limit(H)})",
                 coupling=self.labels[j])
         if _explosive(recent):
             return FailureReport(
                 t, "diverged",
-                f"the coupling diverges: the coupled values grew more than 4x on each of 4 macro steps with a "
+                f"{self.what}: the coupled values grew more than 4x on each of 4 macro steps with a "
                 f"defect as large as the signal ({self._stability_limit(H)})",
                 coupling=self.labels[int(jd[-1])])
         k = dn.index(max(dn))  # the first largest, as argmax
@@ -207,7 +212,7 @@ class DivergenceMonitor:
         if div:
             return FailureReport(
                 t, "diverged",
-                f"the coupling diverges: the interface defect (changed {div:.3g}x over the last "
+                f"{self.what}: the interface defect (changed {div:.3g}x over the last "
                 f"{len(D) * max(_run_length(windows), min(len(windows), SUSTAINED))} macro steps) "
                 f"does not decay and is as large as the signal ({self._stability_limit(H)})",
                 coupling=self.labels[int(jd[k])])

@@ -259,7 +259,9 @@ def make_report(system: CosimSystem, problem: ReferenceProblem, steps: Sequence[
                     walls.append(r2.summary.wall_time)
             row = Row(label, scheme, ext, H, s.status, macro_steps=s.macro_steps, rollbacks=s.rollbacks,
                       iterations=s.iterations, fmu_calls=s.fmu_calls, threads=s.threads,
-                      failure=str(s.failure).splitlines()[0] if s.failure else "", wall_first=s.wall_time)
+                      failure=(str(s.failure).splitlines()[0] if s.failure else
+                               f"unreliable: {s.reliability}" if getattr(s, "reliability", "") else ""),
+                      wall_first=s.wall_time)
             if finished:
                 row.wall_median = statistics.median(walls)
                 row.real_time_factor = (t1 - t0) / row.wall_median if row.wall_median > 0 else math.inf

@@ -61,6 +61,7 @@ class Summary:
     error_growth: float = math.nan  # factor of that growth
     estimate_samples: int = 0  # shadow steps the estimate rests on
     reliability: str = ""  # why the status is "unreliable"
+    physics: str = ""  # the system's state of rest is unstable (its linearisation's growing mode)
     failure: Optional[FailureReport] = None
 
     @property
@@ -74,7 +75,8 @@ class Summary:
                                            "do_steps", "fmu_calls", "wall_time", "simulated_time",
                                            "step_min", "step_max", "threads", "coupling_tol",
                                            "coupling_tol_source", "error_estimate", "error_estimates",
-                                           "error_trend", "error_growth", "estimate_samples", "reliability")}
+                                           "error_trend", "error_growth", "estimate_samples", "reliability",
+                                           "physics")}
         d["real_time_factor"] = self.real_time_factor
         d["failure"] = str(self.failure) if self.failure else ""
         return d
@@ -88,6 +90,8 @@ class Summary:
         if self.estimate_samples:
             s += (f"\nestimated coupling error {self.error_estimate:.3g} of the largest column's range "
                   f"({self.estimate_samples} step-doubling samples), trend {self.error_trend}")
+        if self.physics:
+            s += f"\nwarning: the system is unstable at rest ({self.physics}); its runaway is physics, not coupling"
         if self.reliability:
             s += f"\nunreliable: {self.reliability}"
         if self.coupling_tol:

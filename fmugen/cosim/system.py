@@ -70,6 +70,9 @@ class CosimSystem:
     # only integrate their inputs -- the arm -- first); None: scene order
     order: Optional[tuple] = None
     settings: Mapping[str, object] = field(default_factory=dict)  # the scene's [cosim] table
+    # the scene's state of rest is unstable (its linearisation's growing modes, as sentences): a divergence
+    # of the co-simulation is then the physics', not the coupling's
+    rest_unstable: tuple = ()
 
     def unit(self, name: str) -> Unit:
         for u in self.units:

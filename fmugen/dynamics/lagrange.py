@@ -17,6 +17,13 @@ homogeneous gravity vector.  The thesis's actuator kinetic energy (eq. 21)
 adds Ia_i qdd_i; viscous damping adds b_i qd_i.  External forces enter as
 -J_c^T w (the thesis's K(theta)^T k of eq. 29).
 
+A robot written as joints (URDF) has no DH parameters: its link matrices are
+A_j = [R p; 0 1] M(k, q_j) (the placement, then the motion about / along the
+unit axis k), dA_j = A_j Q and ddA_j = A_j Q Q with Q the motion's generator,
+and on a tree the recursions run over the parent of each body -- T_j from
+T_parent(j) in eqs. 33-35, D_i and c_i summed over the children of i in eqs.
+37-38 -- which is Hollerbach's recursion unchanged along every path.
+
 This module deliberately shares nothing with the Newton-Euler module except
 the program builder: it uses the file's own DH convention and 4x4 matrices,
 so the two formulations check each other.
@@ -67,7 +74,11 @@ class RecursiveLagrange:
     def __init__(self, program: Program, robot: Robot, trig: Optional[TrigCache] = None):
         self.P = program
         self.robot = robot
-        self.links = combined_last_link(robot)
+        # a DH file: its links in its own convention; a robot written as joints (URDF): its bodies, with
+        # A_j = [R p; 0 1] M(axis, q_j) (placement, then the motion), on a tree (parent per body)
+        self.general = not robot.links
+        self.links = robot.bodies if self.general else combined_last_link(robot)
+        self.parents = [b.parent for b in robot.bodies]
         self.modified = robot.convention == MODIFIED
         self.trig = trig or TrigCache(program)
         self._pseudo = {}
@@ -78,7 +89,7 @@ class RecursiveLagrange:
         if i not in self._pseudo:
             L, P = self.links[i], self.P
             m = sp.sympify(L.mass)
-            c = sp.Matrix(L.com)
+            c = sp.Matrix(list(L.com))
             Io = sp.Matrix(L.inertia_com) + m * ((c.T * c)[0, 0] * sp.eye(3) - c * c.T)
             Sigma = (Io.trace() / 2) * sp.eye(3) - Io
             J = _zero4()
@@ -99,6 +110,8 @@ class RecursiveLagrange:
         comes first) and dA = A Q, ddA = A Q Q in the modified one.
         """
         L = self.links[i]
+        if self.general:
+            return self._general_matrices(L, q_i)
         A = dh_transform(self.P, self.trig, L, q_i, self.modified)
         col = lambda M, j: [M[r][j] for r in range(4)]  # noqa: E731
         if not self.modified:
@@ -119,20 +132,50 @@ class RecursiveLagrange:
                 ddA = _zero4()
         return A, dA, ddA
 
+    def _general_matrices(self, body, q_i):
+        """A = [R p; 0 1] M(k, q + offset), dA = A Q, ddA = A Q Q with Q the motion's generator
+        ([k]x for a revolute joint, the translation k for a prismatic one)."""
+        P = self.P
+        k = [sp.sympify(x) for x in body.axis]
+        R0 = [[sp.sympify(x) for x in row] for row in body.rotation]
+        p0 = [sp.sympify(x) for x in body.translation]
+        theta = q_i + body.offset
+        H = [R0[r] + [p0[r]] for r in range(3)] + [[Z, Z, Z, ONE]]
+        if body.joint == REVOLUTE:
+            c, s_ = self.trig.cos_sin(theta)
+            K = [[Z, -k[2], k[1]], [k[2], Z, -k[0]], [-k[1], k[0], Z]]
+            C, S = sp.Dummy("c"), sp.Dummy("s")  # c + (1 - c) folds to 1 before numbers come in
+            Rm = [[sp.expand((C if r == m else 0) + S * K[r][m] + (1 - C) * k[r] * k[m]).xreplace({C: c, S: s_})
+                   for m in range(3)] for r in range(3)]
+            Mq = [Rm[r] + [Z] for r in range(3)] + [[Z, Z, Z, ONE]]
+            Q = [K[r] + [Z] for r in range(3)] + [[Z] * 4]
+        elif body.joint == PRISMATIC:
+            Mq = [[ONE if r == m else Z for m in range(3)] + [k[r] * theta] for r in range(3)] + [[Z, Z, Z, ONE]]
+            Q = [[Z, Z, Z, k[r]] for r in range(3)] + [[Z] * 4]
+        else:
+            raise ValueError(f"unknown joint type {body.joint!r}")
+        A = _mm(P, H, Mq, "A")
+        dA = _mm(P, A, Q, "dA")
+        ddA = _mm(P, dA, Q, "dA") if body.joint == REVOLUTE else _zero4()
+        return A, dA, ddA
+
+    def _parent(self, j: int) -> int:
+        return self.parents[j] if self.general else j - 1
+
     def positions(self, q):
         """A_j, dA_j, ddA_j, T_j and dT_j/dq_j = T_{j-1} dA_j for all j, bound once per q."""
         key = tuple(q)
         if key not in self._positions:
             P = self.P
-            T_prev = _identity4()
             out = ([], [], [], [], [])
             for j in range(len(self.links)):
+                par = self._parent(j)
+                T_prev = out[3][par] if par >= 0 else _identity4()
                 A, dA, ddA = self.link_matrices(j, q[j])
                 T_dA = _mm(P, T_prev, dA, "dT")
                 T = _mm(P, T_prev, A)
                 for lst, v in zip(out, (A, dA, ddA, T, T_dA)):
                     lst.append(v)
-                T_prev = T
             self._positions[key] = out
         return self._positions[key]
 
@@ -141,9 +184,11 @@ class RecursiveLagrange:
         P, n = self.P, len(self.links)
         g = [sp.sympify(x) for x in gravity] + [Z] if gravity is not None else None
         As, dAs, ddAs, Ts, dTs = self.positions(q)
-        T_prev, Td_prev, Tdd_prev = _identity4(), _zero4(), _zero4()
-        Tdds = []
+        Tds, Tdds = [], []
         for j in range(n):
+            par = self._parent(j)  # the chain (DH) or the tree (joints): T', T'' of the parent
+            T_prev, Td_prev, Tdd_prev = (Ts[par], Tds[par], Tdds[par]) if par >= 0 else \
+                (_identity4(), _zero4(), _zero4())
             A, dA, ddA, T, T_dA = As[j], dAs[j], ddAs[j], Ts[j], dTs[j]
             terms = [_mm(P, Tdd_prev, A, "Tdd")] if not _is_zero(Tdd_prev) else []
             if qd[j] != 0:
@@ -161,24 +206,24 @@ class RecursiveLagrange:
                 Td = _madd(P, *Td_terms, hint="Td")
             else:
                 Td = _zero4()
+            Tds.append(Td)
             Tdds.append(Tdd)
-            T_prev, Td_prev, Tdd_prev = T, Td, Tdd
 
         tau: list = [None] * n
-        D_next = c_next = None
+        Ds, cs = [None] * n, [None] * n
         for i in range(n - 1, first - 1, -1):
             J, mr = self.pseudo_inertia(i)
             Tdd = Tdds[i]
-            # D_i = J_i Tdd_i^T + A_{i+1} D_{i+1}
+            # D_i = J_i Tdd_i^T + sum over the children c of A_c D_c (a chain: A_{i+1} D_{i+1})
             D = [[sum(J[r][k] * Tdd[c][k] for k in range(4)) for c in range(4)] for r in range(4)]
             c = list(mr)
-            if D_next is not None:
-                An = As[i + 1]
+            for ch in [j for j in range(i + 1, n) if self._parent(j) == i]:
+                An, D_next, c_next = As[ch], Ds[ch], cs[ch]
                 D = [[D[r][cc] + sum(An[r][k] * D_next[k][cc] for k in range(4)) for cc in range(4)] for r in range(4)]
                 c = [c[r] + sum(An[r][k] * c_next[k] for k in range(4)) for r in range(4)]
             D = [[P.let(e, "D") for e in row] for row in D]
             c = [P.let(e, "cm") for e in c]
-            D_next, c_next = D, c
+            Ds[i], cs[i] = D, c
             dT = dTs[i]
             f = sum(dT[r][k] * D[k][r] for r in range(4) for k in range(4))
             if g is not None:
@@ -187,6 +232,8 @@ class RecursiveLagrange:
             L = self.links[i]
             if joint_terms:
                 f = f + L.rotor_inertia * qdd[i] + L.damping * qd[i]
+                if getattr(L, "friction", 0) != 0:  # smooth Coulomb friction (bodies of URDF robots)
+                    f = f + L.friction * sp.tanh(qd[i] / L.friction_velocity)
             tau[i] = P.let(f, "tau")
         if external:
             self._subtract_external(tau, Ts, dTs, As, external, first)
@@ -197,17 +244,23 @@ class RecursiveLagrange:
         P = self.P
         for k, (f, t) in external.items():
             L = self.links[k]
-            w = [sp.sympify(x) for x in L.com] + [ONE]  # w_k = r_k, w_{i-1} = A_i w_i
-            for i in range(k, -1, -1):
+            w = [sp.sympify(x) for x in L.com] + [ONE]  # w_k = r_k, w_parent(i) = A_i w_i
+            i = k
+            while i >= 0:  # the joints between link k and the base
                 if i >= first:
                     lin = [sum(dTs[i][r][m] * w[m] for m in range(4)) for r in range(3)]
                     proj = sum(lin[r] * f[r] for r in range(3))
                     if self.links[i].joint == REVOLUTE:
-                        # axis of joint i: z of frame i-1 (standard) or of frame i (modified)
-                        Tax = Ts[i] if self.modified else (Ts[i - 1] if i > 0 else _identity4())
-                        proj = proj + sum(Tax[r][2] * t[r] for r in range(3))
+                        if self.general:  # the axis in base coordinates: T_i's rotation times k
+                            ax = [sum(Ts[i][r][m] * sp.sympify(self.links[i].axis[m]) for m in range(3))
+                                  for r in range(3)]
+                        else:  # axis of joint i: z of frame i-1 (standard) or of frame i (modified)
+                            Tax = Ts[i] if self.modified else (Ts[i - 1] if i > 0 else _identity4())
+                            ax = [Tax[r][2] for r in range(3)]
+                        proj = proj + sum(ax[r] * t[r] for r in range(3))
                     tau[i] = P.let(tau[i] - proj, "tau")
                 w = [P.let(sum(As[i][r][m] * w[m] for m in range(4)), "wc") for r in range(4)]
+                i = self._parent(i)
 
 
 def inverse_dynamics(program: Program, robot: Robot, q, qd, qdd, gravity, external=None, trig=None) -> list:

@@ -127,9 +127,6 @@ class Manipulator:
         if formulation == "newton_euler":
             engine = NestedBodyInverseDynamics(P, self.robot.bodies, trig)
         elif formulation == "lagrange":
-            if not self.robot.links:
-                raise ValueError(f"{self.robot.name}: the recursive Lagrange formulation reads "
-                                 "Denavit-Hartenberg files; this robot is written as joints (use newton_euler)")
             engine = RecursiveLagrange(P, self.robot, trig)
         else:
             raise ValueError(f"formulation must be one of {FORMULATIONS}, not {formulation!r}")
@@ -234,9 +231,10 @@ class Manipulator:
         if strategy not in ("auto", "straight", "loops"):
             raise ValueError(f"strategy must be 'auto', 'straight' or 'loops', not {strategy!r}")
         # the runtime's loops take any tree of the general joint model (damping and Coulomb friction too)
-        loopable = not locked and not kin_outputs
+        followers = {i: b.mimic for i, b in enumerate(robot.bodies) if b.mimic is not None}
+        loopable = not locked and not kin_outputs and not followers
         if strategy == "loops" and not loopable:
-            why = "locked joints" if locked else "frame outputs"
+            why = "locked joints" if locked else "frame outputs" if kin_outputs else "tied mimic joints"
             raise ValueError(f"{robot.name}: strategy='loops' does not handle {why}; "
                              f"use strategy='straight'")
         if strategy == "loops" or (strategy == "auto" and loopable and n >= LOOP_MIN_LINKS):
@@ -244,24 +242,40 @@ class Manipulator:
         bad = [j for j in locked if not (isinstance(j, int) and 1 <= j <= n)]
         if bad:
             raise ValueError(f"{robot.name}: locked joint(s) {bad} do not exist (joints 1..{n})")
-        free = [i for i in range(n) if i + 1 not in locked]
+        tied = [f + 1 for f in followers if f + 1 in locked]
+        if tied:
+            raise ValueError(f"{robot.name}: joint(s) {tied} follow another joint (tied mimic joints); "
+                             "lock their leader instead")
+        free = [i for i in range(n) if i + 1 not in locked and i not in followers]
         if not free:
             raise ValueError(f"{robot.name}: every joint is locked; nothing moves")
         q = [sp.Float(locked[i + 1]) if i + 1 in locked else self.q[i] for i in range(n)]
         qd = [sp.Integer(0) if i + 1 in locked else self.qd[i] for i in range(n)]
         nf = len(free)
+        # tied mimic joints: q_f = m q_l + o, so q = G q_free + const and the equations are
+        # G^T (M G qdd_free + h) = G^T tau (the follower has no actuator of its own)
+        G = sp.zeros(n, nf)
+        for k, i in enumerate(free):
+            G[i, k] = 1
+        for f, (lead, mult, off) in sorted(followers.items()):
+            q[f] = mult * q[lead] + off
+            qd[f] = mult * qd[lead]
+            G[f, :] = mult * G[lead, :]
         d = self.derivation(formulation)
         P = d.program
         zeros = [sp.Integer(0)] * n
         h = d.engine.torques(q, qd, zeros, gravity=robot.gravity, external=self.ext or None)
         M_full = self._mass_matrix_into(d, q)
-        M = M_full.extract(free, free)
-        rhs = sp.Matrix([P.let(self.tau[i] - h[i], "r") for i in free])
+        if followers:
+            M = (G.T * M_full * G).applyfunc(lambda e: P.let(e, "M"))
+            hr = G.T * sp.Matrix(h)
+            rhs = sp.Matrix([P.let(self.tau[i] - hr[k], "r") for k, i in enumerate(free)])
+        else:
+            M = M_full.extract(free, free)
+            rhs = sp.Matrix([P.let(self.tau[i] - h[i], "r") for i in free])
         X = P.solve_spd(M, rhs, "qdd")
         qdd_f = list(X)
-        qdd = list(zeros)
-        for k, i in enumerate(free):
-            qdd[i] = qdd_f[k]
+        qdd = [P.let(e, "qdd") for e in G * sp.Matrix(qdd_f)]
         out_vars, out_exprs = [], []
         wanted = (["p_ee"] if "p_ee" in outputs else []) + kin_outputs
         if wanted:
@@ -292,6 +306,11 @@ class Manipulator:
                             out_exprs.append(T[r][c])
                 else:  # J: 6 x (free joints) geometric Jacobian of the frame origin
                     J = kinematics.geometric_jacobian(P, robot, Ts, [T[r][3] for r in range(3)], body)
+                    if followers:  # columns per free joint: the followers' motion included
+                        Jr = J * G
+                        J = sp.zeros(6, n)
+                        for k, i in enumerate(free):
+                            J[:, i] = Jr[:, k].applyfunc(lambda e: P.let(e, "Jv"))
                     for r in range(6):
                         for i in free:
                             unit = ("1" if robot.bodies[i].joint == REVOLUTE else "1/m") if r >= 3 else \
@@ -314,7 +333,7 @@ class Manipulator:
         d.engine.P = Jp  # keep the shared constants and sin/cos, write new steps to Jp
         d.trig.program = Jp
         idx = d.engine.torques(q, qd, qdd, gravity=robot.gravity, external=self.ext or None)
-        idx = [idx[i] for i in free]
+        idx = [Jp.let(e, "tau") for e in G.T * sp.Matrix(idx)] if followers else [idx[i] for i in free]
         ext = self.ext_symbols
         qf, qdf = [self.q[i] for i in free], [self.qd[i] for i in free]
         D = differentiate([P, Jp], idx, qf + qdf + ext, Jp)
@@ -359,10 +378,12 @@ class Manipulator:
             dgdx=dgdx,
             dgdu=dgdu,
             provenance=f"{robot.source or robot.name}; {formulation or self.formulation} formulation"
-                       + (f"; joints {sorted(locked)} locked at {[locked[j] for j in sorted(locked)]}" if locked else ""),
+                       + (f"; joints {sorted(locked)} locked at {[locked[j] for j in sorted(locked)]}" if locked else "")
+                       + (f"; joints {[f + 1 for f in sorted(followers)]} tied to their leaders (mimic)"
+                          if followers else ""),
         )
         # locked joints leave rows of M and h nobody reads: drop their steps
-        return model.pruned() if locked else model
+        return model.pruned() if locked or followers else model
 
     def _looped_state_space_model(self, outputs: Sequence[str], name=None) -> SymbolicModel:
         """The state-space model as two calls of the runtime's chain loops (strategy "loops").
@@ -461,8 +482,10 @@ class Manipulator:
             lim = L.limits
             lo = None if lim is None else lim.lower
             hi = None if lim is None else lim.upper
-            start = min(max(0.0, lo if lo is not None else 0.0), hi if hi is not None else 0.0) \
-                if (lo is not None and lo > 0) or (hi is not None and hi < 0) else 0.0
+            # start at 0, or mid-range when 0 is outside the joint's range (the Panda's elbow: [-3.07, -0.07])
+            start = 0.0
+            if (lo is not None and lo > 0) or (hi is not None and hi < 0):
+                start = 0.5 * (lo + hi) if lo is not None and hi is not None else (lo if lo is not None else hi)
             name = _joint_label(L)
             states.append(Variable(f"q[{i + 1}]", self.q[i], "rad" if rev else "m",
                                    f"position of joint {i + 1} ({name}, {L.joint})", start=start, output=True,

@@ -414,7 +414,6 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
     out = Path(output_path)
     if out.is_dir():
         out = out / f"{ident}.fmu"
-    out.parent.mkdir(parents=True, exist_ok=True)
 
     with tempfile.TemporaryDirectory(prefix=f"fmugen_{ident}_") as tmp:
         root = Path(tmp)
@@ -444,6 +443,7 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
             f"and place it in binaries/<platform>/ (linux64, darwin64, win64).\n")
 
         t2 = time.perf_counter()
+        out.parent.mkdir(parents=True, exist_ok=True)  # only now: a failed compile leaves no empty folder
         files = [root / "modelDescription.xml", lib]
         if keep_sources:
             files += sorted(src.iterdir())

@@ -41,4 +41,7 @@ def parameter_bounds(robot: Robot) -> dict:
             at_least(link.inertia_com[k][k], 0.0)
     if robot.payload is not None:
         at_least(robot.payload.mass, 0.0)
-    return lows
+    # a URDF keeps its published numbers (a rounding-level -5e-20 moment of inertia is read with a
+    # warning): a range the file's own value falls outside is not imposed
+    values = {p.name: p.value for p in robot.parameters}
+    return {k: v for k, v in lows.items() if values.get(k) is None or values[k] >= v}

@@ -165,6 +165,8 @@ class Body:
     limits: Optional[Limits] = None
     friction: sp.Expr = sp.Integer(0)  # Coulomb level F_c of the smooth term F_c tanh(qd / friction_velocity)
     friction_velocity: sp.Expr = sp.Integer(0)
+    # a tied mimic joint: (leader body index, multiplier, offset), q = multiplier q_leader + offset; None: independent
+    mimic: Optional[tuple] = None
 
 
 @dataclass(frozen=True)

@@ -93,7 +93,7 @@ def is_urdf(path) -> bool:
     return name.endswith((".urdf", ".xacro"))
 
 
-def load_robot_description(path) -> Robot:
+def load_robot_description(path, mimic: str = "independent") -> Robot:
     """Read, check and convert the robot file at ``path`` (TOML, or URDF: :mod:`fmugen.robot.urdf`).
 
     Raises :class:`RobotFileError` naming the file, link and field of the
@@ -104,7 +104,7 @@ def load_robot_description(path) -> Robot:
     if is_urdf(path):
         from .urdf import load_urdf
 
-        return load_urdf(path)
+        return load_urdf(path, mimic=mimic)
     try:
         text = read_text_file(path, "robot file")
     except InputFileError as exc:

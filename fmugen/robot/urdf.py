@@ -36,8 +36,10 @@ What is read
   (default 1 0 0, normalised), ``<limit lower upper effort velocity>``
   (validity ranges: q in [lower, upper], |tau| <= effort), ``<dynamics
   damping friction>`` (viscous damping b qd; Coulomb friction, see below),
-  ``<mimic>`` (read as an independent joint, with a warning naming it, as
-  Pinocchio's parser does).
+  ``<mimic joint multiplier offset>`` (read as an independent joint, with a
+  warning naming it, as Pinocchio's parser does; ``load_urdf(path,
+  mimic="tied")`` ties it to its leader instead: q = multiplier q_leader +
+  offset, and the state-space model keeps only the leader).
 * ``fixed`` joints are merged: the child link's mass, centre of mass and
   inertia are added exactly to the moving body it is welded to (or dropped
   when welded to the fixed base), and the child link stays a named frame
@@ -62,6 +64,7 @@ from __future__ import annotations
 import math
 import re
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -90,8 +93,13 @@ class MimicJointWarning(UserWarning):
     """The URDF has mimic joints; fmugen reads them as independent joints."""
 
 
-def load_urdf(path) -> Robot:
-    """Read, check and convert the URDF file at ``path``."""
+def load_urdf(path, mimic: str = "independent") -> Robot:
+    """Read, check and convert the URDF file at ``path``.
+
+    ``mimic``: "independent" (every mimic joint is a joint of its own, with a
+    :class:`MimicJointWarning`) or "tied" (``Body.mimic``: the state-space
+    model keeps only the leader, q = multiplier q_leader + offset).
+    """
     path = Path(path)
     if path.name.endswith(".xacro"):
         raise RobotFileError(f"{path}: a xacro file; expand it to plain URDF first "
@@ -106,15 +114,17 @@ def load_urdf(path) -> Robot:
         text = read_text_file(path, "URDF file")
     except InputFileError as exc:
         raise RobotFileError(str(exc)) from None
-    return robot_from_urdf(text, source=str(path), stem=path.stem)
+    return robot_from_urdf(text, source=str(path), stem=path.stem, mimic=mimic)
 
 
-def robot_from_urdf(text: str, source: str = "<string>", stem: str = "robot") -> Robot:
+def robot_from_urdf(text: str, source: str = "<string>", stem: str = "robot", mimic: str = "independent") -> Robot:
     """Like :func:`load_urdf` for the text of a URDF file; ``source`` names it in messages."""
+    if mimic not in ("independent", "tied"):
+        raise ValueError(f"mimic must be 'independent' or 'tied', not {mimic!r}")
     if len(text.encode("utf-8", "surrogatepass")) > MAX_BYTES:
         raise RobotFileError(f"{source}: more than {MAX_BYTES} bytes; a URDF file is read up to that size")
     root = _parse(text, source)
-    return _Reader(source).robot(root, stem)
+    return _Reader(source, mimic).robot(root, stem)
 
 
 # ------------------------------------------------------------------ parsing
@@ -189,8 +199,9 @@ def _smatrix(R: np.ndarray) -> sp.Matrix:
 
 
 class _Reader:
-    def __init__(self, source: str):
+    def __init__(self, source: str, mimic: str = "independent"):
         self.file = source
+        self.mimic = mimic
         self.params: dict = {}  # name -> Parameter
         self.taken: set = set()
 
@@ -309,8 +320,9 @@ class _Reader:
                 raise self._err(f"joint {j['name']!r}", f"type {j['type']!r}: {REFUSED[j['type']]} is not "
                                 "supported (fixed-base robots with revolute, continuous, prismatic and fixed "
                                 "joints only)")
+        self._joint_mimic = {j["name"]: j["mimic"] for j in joints}
         mimics = [j["name"] for j in joints if j["mimic"]]
-        if mimics:
+        if mimics and self.mimic == "independent":
             warnings.warn(f"{self.file}: mimic joints read as independent joints (as Pinocchio's parser "
                           f"does): {', '.join(mimics)}", MimicJointWarning, stacklevel=4)
 
@@ -372,12 +384,33 @@ class _Reader:
             for e in f.translation:
                 used |= sp.sympify(e).free_symbols
         used |= gravity[2].free_symbols
+        if self.mimic == "tied":
+            out = self._tie(out)
         params = tuple(p for p in self.params.values() if p.symbol in used)
         self._check_moves_something(out, {p.symbol: p.value for p in params})
         return Robot(
             name=name, convention=JOINTS, links=(), gravity=gravity, parameters=params,
             description=f"{name}: read from a URDF file",  # the file's own text never reaches C or XML
             source=self.file, bodies=tuple(out), frames=tuple(frames), end_frame=out[-1].name)
+
+    def _tie(self, bodies) -> list:
+        """Body.mimic = (leader index, multiplier, offset) for every mimic joint (leaders must move freely)."""
+        index = {b.joint_name: i for i, b in enumerate(bodies)}
+        out = []
+        for b in bodies:
+            spec = self._joint_mimic.get(b.joint_name)
+            if spec is None:
+                out.append(b)
+                continue
+            leader, mult, off = spec
+            what = f"joint {b.joint_name!r}: <mimic joint={_short(leader)}>"
+            if leader not in index:
+                raise self._err(what, "no such moving joint")
+            if self._joint_mimic.get(leader) is not None:
+                raise self._err(what, "its leader is itself a mimic joint; tie each to the first leader")
+            out.append(replace(b, mimic=(index[leader], sp.Float(mult) if mult != 1 else _ONE,
+                                         _exact(off))))
+        return out
 
     def _check_moves_something(self, bodies, values) -> None:
         """Refuse a joint whose subtree has no mass and no inertia about its axis (M_ii = 0: M singular).
@@ -473,7 +506,17 @@ class _Reader:
                                    f"Coulomb friction of joint {name} (smooth: F_c tanh(qd / v_coulomb))")
         return dict(name=name, type=jtype, parent=ends["parent"], child=ends["child"], p=p,
                     R=_smatrix(rpy_matrix(rpy)), axis=axis_s, limits=limits, damping=damping,
-                    friction=friction, mimic=el.find("mimic") is not None)
+                    friction=friction, mimic=self._mimic(el.find("mimic"), what))
+
+    def _mimic(self, el, what):
+        """(leader joint name, multiplier, offset) of a <mimic>, or None."""
+        if el is None:
+            return None
+        leader = el.get("joint")
+        if not leader:
+            raise self._err(f"{what}: <mimic>", "missing attribute 'joint'")
+        return (leader, self._float(el, "multiplier", f"{what}: <mimic>", 1.0),
+                self._float(el, "offset", f"{what}: <mimic>", 0.0))
 
     def _inertial(self, el, link: str, unrealisable: list):
         """(mass, com, inertia about the COM in link axes) as sympy, or None without <inertial>."""

@@ -47,18 +47,20 @@ def _toml_names(data, out: set) -> None:
         for v in data:
             _toml_names(v, out)
     elif isinstance(data, str) and data.lower().endswith((".toml", ".urdf")):
-        out.add(data)
+        out.add(data[len("file:"):] if data.startswith("file:") else data)  # type = "file:part.toml" too
 
 
 def analysis_key(path, sets=None) -> Optional[str]:
     """The content key of a scene's analysis, or None when it is not cacheable (factories, unreadable)."""
     import tomllib
 
+    from ..errors import FmugenError, read_text_file
+
     path = Path(path).resolve()
-    try:
-        raw = path.read_bytes()
+    try:  # bounded: a device, a FIFO or a huge file is refused, never read (the full load says so)
+        raw = read_text_file(path, "scene file").encode("utf-8")
         data = tomllib.loads(raw.decode("utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+    except (OSError, FmugenError, UnicodeDecodeError, tomllib.TOMLDecodeError, RecursionError):
         return None  # the full load reports it
     sets = parse_sets(sets)
     instances = data.get("instances")
@@ -94,7 +96,8 @@ def _system_to_json(system) -> dict:
                       for u in system.units],
             "couplings": [{"source": list(c.source), "target": list(c.target), "factor": c.factor, "unit": c.unit}
                           for c in system.couplings],
-            "recorded": [[r.column, r.unit, r.variable, r.physical_unit] for r in system.recorded]}
+            "recorded": [[r.column, r.unit, r.variable, r.physical_unit] for r in system.recorded],
+            "rest_unstable": list(getattr(system, "rest_unstable", ()))}
 
 
 def _system_from_json(d: dict, paths: dict):
@@ -105,7 +108,8 @@ def _system_from_json(d: dict, paths: dict):
     couplings = tuple(Coupling(tuple(c["source"]), tuple(c["target"]), c["factor"], c["unit"]) for c in d["couplings"])
     recorded = tuple(Recorded(*r) for r in d["recorded"])
     return CosimSystem(d["name"], units, couplings, recorded, d["start"], d["stop"], d["step"],
-                       tuple(d["order"]) if d["order"] else None, dict(d["settings"]))
+                       tuple(d["order"]) if d["order"] else None, dict(d["settings"]),
+                       tuple(d.get("rest_unstable", ())))
 
 
 class _CachedInitial:
@@ -138,13 +142,23 @@ def _bonds_to_json(bonds) -> list:
             for b in bonds]
 
 
-def _bonds_from_json(items) -> tuple:
-    if not items:
-        return ()
-    from .connect import Bond
+@dataclasses.dataclass(frozen=True)
+class CachedBond:
+    """A bond as :class:`fmugen.scene.connect.Bond` has it (that module imports the component library,
+    sympy included: seconds of start-up; :mod:`fmugen.scene.bonds` reads only these fields)."""
 
-    return tuple(Bond(tuple(b["ends"]), b["type"], tuple(tuple(x) for x in b["signals"]), tuple(b["power"]))
-                 for b in items)
+    ends: tuple
+    type: str
+    signals: tuple
+    power: tuple
+
+    def __str__(self) -> str:
+        return f"{self.ends[0]} <-> {self.ends[1]} ({self.type})"
+
+
+def _bonds_from_json(items) -> tuple:
+    return tuple(CachedBond(tuple(b["ends"]), b["type"], tuple(tuple(x) for x in b["signals"]), tuple(b["power"]))
+                 for b in items or ())
 
 
 class DeferredScene:

@@ -30,9 +30,10 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Optional
 
+import numpy as np
+
 from .. import __version__
 from .errors import SceneError
-from .stability import jacobi_hold_limit, stable_step
 
 
 @dataclass
@@ -79,6 +80,7 @@ class BuiltScene:
                                                  "none (undriven inputs are fixed; [scene] inputs keeps them)"))
         if len(self.fmus) > 1:
             lim = "no limit found" if self.jacobi_limit == float("inf") else \
+                "limit not computed" if self.jacobi_limit != self.jacobi_limit else \
                 f"stable below H = {self.jacobi_limit:.3g} s"
             lines.append(f"held-input Jacobi (most importers' loop): {lim} (linearised at the initial state); "
                          f"DefaultExperiment stepSize {self.default_step:g} s")
@@ -272,6 +274,8 @@ def build_scene(scene, out_dir, prune: Optional[bool] = None, progress=None, use
     cdir = cache_dir() / "fmus"
     keys = {gname: _group_key(scene, gname, prune, x0, u0) for gname in scene.groups}
     limit = _jacobi_limit(scene, keys, use_cache)
+    from .stability import stable_step  # here: it imports scipy (start-up of a run from cached FMUs)
+
     default_step = stable_step(limit, scene.spec.step, STABLE_SAFETY)
     plan = {}  # group -> (key, model or None when cached, removed)
     for gname, g in scene.groups.items():
@@ -311,7 +315,8 @@ def build_scene(scene, out_dir, prune: Optional[bool] = None, progress=None, use
             progress(f"{gname}: generate and compile ({model.nx} states)")
             tol = g.tolerance or scene.spec.tolerance
             if len(scene.groups) > 1:
-                lim = "none found" if limit == float("inf") else f"{limit:.3g} s"
+                lim = "none found" if limit == float("inf") else "not computed" if limit != limit else \
+                    f"{limit:.3g} s"
                 model = dataclasses.replace(model, description=(
                     f"{model.description} [scene {scene.name}: held-input Jacobi stability limit {lim} "
                     f"(linearised at rest); couple with the scene's connections]").strip())
@@ -370,18 +375,30 @@ def _jacobi_limit(scene, keys: dict, use_cache: bool) -> float:
     """:func:`fmugen.scene.stability.jacobi_hold_limit`, cached under the hash of every group's key."""
     if len(keys) < 2:
         return float("inf")
-    path = cache_dir() / "stability" / (hashlib.sha256(" ".join(sorted(keys.values())).encode()).hexdigest()[:32]
-                                        + ".json")
+    key = hashlib.sha256(" ".join(sorted(keys.values())).encode()).hexdigest()[:32]
+    path = cache_dir() / "stability" / f"{key}.json"
     if use_cache and path.is_file():
-        try:
-            return float(json.loads(path.read_text())["jacobi_hold_limit"])
-        except (OSError, ValueError, KeyError, TypeError):
+        try:  # served only as written for this key (a swapped or edited entry is computed again)
+            d = json.loads(path.read_text())
+            value = d["jacobi_hold_limit"]
+            if d.get("key") == key and d.get("sha256") == hashlib.sha256(f"{key} {value}".encode()).hexdigest():
+                return float(value)
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
             pass
-    limit = jacobi_hold_limit(scene)
+    from .stability import jacobi_hold_limit  # here: it imports scipy (start-up from cached FMUs)
+
+    try:
+        limit = jacobi_hold_limit(scene)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # a model the linearisation cannot take
+        progress = Progress()
+        progress(f"held-input Jacobi limit not computed ({exc}): DefaultExperiment stepSize = the scene's step")
+        return float("nan")
     if use_cache:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(f".{os.getpid()}.part")
-        tmp.write_text(json.dumps({"jacobi_hold_limit": limit if limit != float("inf") else "inf"}))
+        value = limit if limit != float("inf") else "inf"
+        tmp.write_text(json.dumps({"jacobi_hold_limit": value, "key": key,
+                                   "sha256": hashlib.sha256(f"{key} {value}".encode()).hexdigest()}))
         os.replace(tmp, path)
     return limit
 

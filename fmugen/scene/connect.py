@@ -80,6 +80,20 @@ def expand_connect(scene, pairs) -> tuple:
         kind, _ = scene._var(inst, var, where)
         return kind in ("state", "output")
 
+    # inputs already driven, and by what: a second driver is reported at the connect entry the user wrote (the
+    # generic fan-in check further on would name a connections[k] that exists in no file)
+    driven = {}
+    for k, (s, t, _) in enumerate(scene.spec.connections):
+        if isinstance(t, str) and "." in t:
+            driven.setdefault(tuple(t.split(".", 1)), f"[scene] connections[{k}] ({s} -> {t})")
+
+    def add(s, t, where):
+        key = tuple(t.split(".", 1))
+        if key in driven:
+            raise SceneError(f"{where}: input {t} is already driven by {driven[key]}")
+        driven[key] = where.split(": ", 1)[-1]
+        conns.append((s, t, None))
+
     for k, pair in enumerate(pairs):
         a, b = pair
         where = f"{src}: [scene] connect[{k}] ({a} <-> {b})"
@@ -91,7 +105,7 @@ def expand_connect(scene, pairs) -> tuple:
                 raise SceneError(f"{where}: {'both' if ca else 'neither'} {a} and {b} "
                                  f"{'compute' if ca else 'computes'} the signal; one must be a state or output, "
                                  f"the other an input")
-            conns.append((a, b, None) if ca else (b, a, None))
+            add(*((a, b) if ca else (b, a)), where)
             continue
         for end, inst, name, port in ((a, ia, na, pa), (b, ib, nb, pb)):
             if port is None:
@@ -121,7 +135,7 @@ def expand_connect(scene, pairs) -> tuple:
             if not ca and not cb:
                 raise SceneError(f"{where}: neither end computes {var} ({ia}.{va} and {ib}.{vb} are both inputs)")
             s, t = (f"{ia}.{va}", f"{ib}.{vb}") if ca else (f"{ib}.{vb}", f"{ia}.{va}")
-            conns.append((s, t, None))
+            add(s, t, where)
             signals.append((var, s, t))
         effort, flow = TYPES[ta]["power"]
         by_var = {v: s for v, s, _ in signals}

@@ -31,6 +31,7 @@ class InitialState:
     residual: float = 0.0  # max |f_i| * scale_i at the solution (equilibrium)
     iterations: int = 0
     changes: dict = field(default_factory=dict)  # state -> (guess, solution) for the report
+    unstable: list = field(default_factory=list)  # the state of rest's unstable modes (sentences), if any
 
     def report(self) -> str:
         if self.mode == "given":
@@ -39,6 +40,8 @@ class InitialState:
                  f"scaled residual {self.residual:.1e}"]
         for k, (a, b) in self.changes.items():
             lines.append(f"  {k}: {a:.6g} -> {b:.9g}")
+        for u in self.unstable:
+            lines.append(f"warning: the state of rest is unstable: {u}")
         return "\n".join(lines)
 
 
@@ -99,7 +102,39 @@ def solve_equilibrium(scene, model, x0, max_iter: int = 60, tol: float = 1e-10,
     _check_hydraulics(scene, model, x, where)
     values = {n: float(val) for n, val in zip(names, x)}
     changes = {n: (float(a), float(b)) for n, a, b in zip(names, x0, x) if abs(a - b) > 1e-12 * max(1, abs(a))}
-    return InitialState(model, values, "equilibrium", float(r), it, changes)
+    unstable = unstable_modes(ev.jacobians(t0, x, u)[0], names, nom)
+    return InitialState(model, values, "equilibrium", float(r), it, changes, unstable)
+
+
+def unstable_modes(A, names, nominal, top: int = 3) -> list:
+    """Sentences naming the modes of x' = A x with a growing amplitude (Re lambda > 0 beyond round-off), each
+    with its time to double and its dominant states (largest entries of the eigenvector in units of each
+    state's nominal).  A system that is unstable at rest runs away whatever couples it: a co-simulation that
+    diverges from it diverges by physics, not by its macro step."""
+    A = np.asarray(A, dtype=float)
+    if not A.size or not np.all(np.isfinite(A)):
+        return []
+    lam, V = np.linalg.eig(A)
+    big = float(np.max(np.abs(lam))) if len(lam) else 0.0
+    out = []
+    seen = set()
+    for k in np.argsort(-lam.real):
+        a = float(lam[k].real)
+        if a <= max(1e-9 * big, 1e-9):
+            break
+        key = (round(a, 9), round(abs(float(lam[k].imag)), 9))
+        if key in seen:  # the conjugate of a pair already named
+            continue
+        seen.add(key)
+        w = np.abs(V[:, k]) / np.asarray(nominal, dtype=float)
+        w = w / (w.max() or 1.0)
+        dom = [names[i] for i in np.argsort(-w)[:top] if w[i] > 1e-3]
+        b = float(lam[k].imag)
+        mode = f"lambda = {a:.4g}" + (f" +/- {abs(b):.4g}i" if abs(b) > 1e-12 * big else "")
+        out.append(f"mode {mode} 1/s (doubles every {np.log(2) / a:.3g} s), dominant states "
+                   f"{', '.join(dom)}: the system itself runs away from rest (check signs and gains of "
+                   f"its feedback loops)")
+    return out
 
 
 def _check_hydraulics(scene, model, x, where) -> None:

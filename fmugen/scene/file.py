@@ -14,7 +14,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional
 
-from ..components.assembly import COMPONENT_TYPES
 from ..cosim.settings import KEYS as COSIM_SETTING_KEYS, check_table
 from ..errors import read_text_file, toml_problem
 from .errors import SceneError, did_you_mean
@@ -23,7 +22,7 @@ SCENE_KEYS = {"name", "description", "parameter_set", "start", "stop", "step", "
               "initial", "prune", "connections", "monolithic", "connect", "record_bonds",
               "inputs"}
 COMMON_INSTANCE_KEYS = {"parameters", "fixed", "start", "hold"}
-ROBOT_KEYS = {"robot", "formulation", "locked", "outputs"}
+ROBOT_KEYS = {"robot", "formulation", "locked", "outputs", "mimic"}
 FACTORY_KEYS = {"factory", "options", "parameter_set"}
 GROUP_KEYS = {"members", "fmi_type", "solver", "tolerance", "jacobian"}
 SOLVERS = {"dopri5": 1, "rodas3": 2, "rk4": 3}
@@ -194,6 +193,8 @@ def _instance_keys(spec: dict) -> set:
         return ROBOT_KEYS | COMMON_INSTANCE_KEYS
     if "factory" in spec:
         return FACTORY_KEYS | COMMON_INSTANCE_KEYS
+    from ..components.assembly import COMPONENT_TYPES  # here: the component library imports sympy (start-up)
+
     typ = spec.get("type")
     opts = set(COMPONENT_TYPES[typ][1]) if isinstance(typ, str) and typ in COMPONENT_TYPES else set()
     return {"type", "parameter_set"} | opts | COMMON_INSTANCE_KEYS
@@ -369,7 +370,13 @@ def _instance(iname: str, spec, path: Path) -> InstanceSpec:
             if not (k.startswith("q[") and k.endswith("]") and k[2:-1].isdigit()):
                 raise SceneError(f"{where} locked: {k!r} is not a joint position 'q[i]'")
             locked[int(k[2:-1])] = _number(v, f"{where} locked.{k}")
-        return InstanceSpec(iname, "robot", str(rp.resolve()), {"formulation": form, "outputs": outs},
+        mimic = spec.get("mimic", "independent")
+        if mimic not in ("independent", "tied"):
+            raise SceneError(f"{where} mimic must be 'independent' or 'tied' (URDF mimic joints), got {mimic!r}")
+        opts = {"formulation": form, "outputs": outs}
+        if mimic != "independent":
+            opts["mimic"] = mimic  # only when set: the FMU cache keys of existing scenes stay the same
+        return InstanceSpec(iname, "robot", str(rp.resolve()), opts,
                             None, params, fixed, start, hold, locked)
     if "factory" in spec:
         ref = spec["factory"]
@@ -380,6 +387,8 @@ def _instance(iname: str, spec, path: Path) -> InstanceSpec:
         if not isinstance(opts, dict):
             raise SceneError(f"{where} options must be a table")
         return InstanceSpec(iname, "factory", ref, dict(opts), pset, params, fixed, start, hold)
+    from ..components.assembly import COMPONENT_TYPES
+
     typ = spec["type"]
     if isinstance(typ, str) and typ.startswith(FILE_TYPE_PREFIXES):
         return _file_instance(iname, typ, path, where, pset, params, fixed, start, hold)

@@ -99,7 +99,8 @@ def _robot_model(spec: InstanceSpec, where: str, outputs, strategy: str = "strai
     import fmugen
 
     try:
-        arm = fmugen.load_robot(spec.source, spec.options.get("formulation", "newton_euler"))
+        arm = fmugen.load_robot(spec.source, spec.options.get("formulation", "newton_euler"),
+                                mimic=spec.options.get("mimic", "independent"))
         if spec.locked:
             strategy = "straight"  # the looped dynamics have no locked joints
         return arm.state_space_model(outputs=tuple(outputs), name=spec.name, locked=spec.locked or None,

@@ -526,7 +526,8 @@ class Scene:
             _, v = self._var(inst, var, self.src)
             recorded.append(Recorded(r, self.group_of(inst), self.fmu_name(inst, var), v.unit))
         system = CosimSystem(self.name, tuple(units), tuple(couplings), tuple(recorded), self.spec.start,
-                             self.spec.stop, self.spec.step, self.gauss_seidel_order(), dict(self.spec.cosim))
+                             self.spec.stop, self.spec.step, self.gauss_seidel_order(), dict(self.spec.cosim),
+                             tuple(getattr(self.initial, "unstable", ())))
         if self.external:  # an SSP's components beside the scene's FMUs
             from .external import extend_system
 

@@ -42,7 +42,7 @@ def cmd_ssp(args) -> int:
     lim = r["jacobi_limit"]
     print(f"wrote {r['path']}: {len(r['fmus'])} FMU(s) ({', '.join(r['fmus'])}); libcosim's fixed step "
           f"{r['libcosim_step']:g} s (held-input Jacobi "
-          f"{'has no stability limit found' if lim == float('inf') else f'is stable below {lim:.3g} s'}); "
+          f"{'has no stability limit found' if lim == float('inf') else 'limit not computed' if lim != lim else f'is stable below {lim:.3g} s'}); "
           f"fmugen's run: {r['scheme']}/{r['extrapolation']} at {built.system.step:g} s")
     return 0
 
@@ -55,30 +55,60 @@ def scene_like(system):
                                                 cosim=dict(system.settings)))
 
 
-def system_from_args(args):
-    """The CosimSystem of ``args.scene`` (an .ssp) with ``--set component.variable=value`` applied."""
+def settable(system, name: str, where: str, error=None, hint: str = "") -> tuple:
+    """(component, variable, fmpy ScalarVariable) of ``name`` = 'component.variable' whose start value a
+    run may set: a parameter (fixed or tunable), an input, or a state (an output or local with an exact
+    start).  One check for ``--set`` on ``fmugen cosim/report x.ssp`` and for ``fmugen sweep x.ssp``."""
+    from fmpy import read_model_description
+
+    from ..errors import InputFileError
+
+    error = error or InputFileError
+    units = {u.name: u for u in system.units}
+    comp, _, var = name.partition(".")
+    if comp not in units or not var:
+        raise error(f"{where}: {name}: name a component's variable, 'component.variable' (components: "
+                    f"{', '.join(units)}){hint}")
+    v = {x.name: x for x in read_model_description(str(units[comp].path), validate=False).modelVariables}.get(var)
+    ok = v is not None and ((v.causality == "parameter" and v.variability in ("fixed", "tunable"))
+                            or v.causality == "input" or (v.initial == "exact" and v.causality in ("output", "local")))
+    if not ok:
+        raise error(f"{where}: {name}: {comp} has no parameter, input or state {var!r}")
+    return comp, var, v
+
+
+def with_sets(system, sets: dict, where: str, error=None):
+    """``system`` with ``--set`` applied: ``cosim.KEY`` run settings (as on a scene: over the archive's
+    annotation, under the flags; checked key by key) and ``component.variable`` start values."""
     from dataclasses import replace
 
     from ..errors import InputFileError
+
+    error = error or InputFileError
+    cosim = {k[len("cosim."):]: v for k, v in sets.items() if k.startswith("cosim.")}
+    if cosim:
+        from ..cosim.settings import check_table
+
+        settings = {**dict(system.settings), **cosim}
+        check_table(settings, f"{where}: --set cosim")
+        system = replace(system, settings=settings)
+    starts = {}
+    for name, value in sets.items():
+        if name.startswith("cosim."):
+            continue
+        comp, var, _ = settable(system, name, f"{where}: --set", error, ", or a run setting 'cosim.KEY'")
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise error(f"{where}: --set {name}={value!r}: a number is needed")
+        starts.setdefault(comp, {})[var] = value
+    if not starts:
+        return system
+    return replace(system, units=tuple(replace(u, start_values={**dict(u.start_values), **starts.get(u.name, {})})
+                                       for u in system.units))
+
+
+def system_from_args(args):
+    """The CosimSystem of ``args.scene`` (an .ssp) with ``--set`` applied (:func:`with_sets`)."""
     from ..scene import parse_sets
     from .loader import load_system
 
-    system = load_system(args.scene)
-    sets = parse_sets(getattr(args, "set", None))
-    if not sets:
-        return system
-    units = {u.name: u for u in system.units}
-    for name, value in sets.items():
-        comp, _, var = name.partition(".")
-        if comp not in units or not var:
-            raise InputFileError(f"{args.scene}: --set {name}: name a component's variable, 'component.variable' "
-                                 f"(components: {', '.join(units)})")
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise InputFileError(f"{args.scene}: --set {name}={value!r}: a number is needed")
-        from fmpy import read_model_description
-
-        v = {x.name: x for x in read_model_description(str(units[comp].path)).modelVariables}.get(var)
-        if v is None or v.causality not in ("parameter", "input") and v.initial != "exact":
-            raise InputFileError(f"{args.scene}: --set {name}: {comp} has no parameter, input or state {var!r}")
-        units[comp] = replace(units[comp], start_values={**dict(units[comp].start_values), var: value})
-    return replace(system, units=tuple(units[u.name] for u in system.units))
+    return with_sets(load_system(args.scene), parse_sets(getattr(args, "set", None)), str(args.scene))

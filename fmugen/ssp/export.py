@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import tempfile
 import zipfile
 from pathlib import Path
@@ -118,11 +119,13 @@ def ssd_xml(built, settings: dict, libcosim_step: float) -> tuple:
     if scene.spec.description:
         sysel.set("description", scene.spec.description)
     elements = etree.SubElement(sysel, f"{{{D}}}Elements")
+    stems = resource_stems([u.name for u in system.units])
     units, ssvs, mds = [], {}, {}
     for u in system.units:
         md = read_model_description(str(u.path))
         mds[u.name] = md
-        comp = etree.SubElement(elements, f"{{{D}}}Component", name=u.name, source=f"resources/{u.name}.fmu",
+        comp = etree.SubElement(elements, f"{{{D}}}Component", name=u.name,
+                                source=f"resources/{stems[u.name]}.fmu",
                                 type="application/x-fmu-sharedlibrary")
         conns = etree.SubElement(comp, f"{{{D}}}Connectors")
         for v in md.modelVariables:
@@ -136,7 +139,7 @@ def ssd_xml(built, settings: dict, libcosim_step: float) -> tuple:
         if len(conns) == 0:
             comp.remove(conns)
         b = etree.SubElement(etree.SubElement(comp, f"{{{D}}}ParameterBindings"), f"{{{D}}}ParameterBinding",
-                             source=f"resources/{u.name}.ssv")
+                             source=f"resources/{stems[u.name]}.ssv")
         b.set("type", "application/x-ssp-parameter-set")
         ssvs[u.name] = _ssv(u.name, md, dict(u.start_values))
     if system.couplings:
@@ -165,7 +168,7 @@ def ssd_xml(built, settings: dict, libcosim_step: float) -> tuple:
                            scheme=str(settings["scheme"]), extrapolation=str(settings["extrapolation"]),
                            step=_fmt(system.step), startTime=_fmt(system.start_time),
                            stopTime=_fmt(system.stop_time))
-    if not math.isinf(built.jacobi_limit):
+    if math.isfinite(built.jacobi_limit):
         run.set("jacobiHoldLimit", _fmt(built.jacobi_limit))
     run.set("jacobiHoldStep", _fmt(libcosim_step))
     if system.order:
@@ -213,14 +216,15 @@ def export_ssp(scene, output, fmus_dir=None, scheme: Optional[str] = None,
         built = scene.build(Path(fmus_dir) if fmus_dir else Path(tmp) / "fmus", progress=progress)
         step = built.default_step or built.system.step
         ssd, ssvs = ssd_xml(built, {"scheme": scheme, "extrapolation": extrapolation}, step)
+        stems = resource_stems([u.name for u in built.system.units])
         out.parent.mkdir(parents=True, exist_ok=True)
         part = out.with_name(f".{out.name}.{os.getpid()}.part")
         try:
             with zipfile.ZipFile(part, "w", zipfile.ZIP_DEFLATED) as zf:
                 zf.writestr(_info(SSD_NAME), ssd)
                 for u in built.system.units:
-                    zf.writestr(_info(f"resources/{u.name}.ssv"), ssvs[u.name])
-                    zf.writestr(_info(f"resources/{u.name}.fmu"), Path(u.path).read_bytes())
+                    zf.writestr(_info(f"resources/{stems[u.name]}.ssv"), ssvs[u.name])
+                    zf.writestr(_info(f"resources/{stems[u.name]}.fmu"), Path(u.path).read_bytes())
             os.replace(part, out)
         finally:
             if part.exists():
@@ -228,6 +232,25 @@ def export_ssp(scene, output, fmus_dir=None, scheme: Optional[str] = None,
     return {"path": out, "fmus": [u.name for u in built.system.units], "libcosim_step": step,
             "jacobi_limit": built.jacobi_limit, "scheme": scheme, "extrapolation": extrapolation,
             "built": built}
+
+
+def resource_stems(names) -> dict:
+    """The file stem under ``resources/`` of each component: its name when that is a plain file name, else
+    the name with every other character replaced by ``_`` (and a number when two collide).  A component of an
+    [external] SSP carries a name from someone else's file: ``../x`` or ``a/b`` must not become a member path
+    (zip slip in the archive we hand on) nor overwrite another component's FMU."""
+    out, used = {}, set()
+    for name in names:
+        stem = name if _PLAIN.fullmatch(name) else re.sub(r"[^A-Za-z0-9_-]", "_", name)[:64] or "component"
+        k, base = 2, stem
+        while stem.lower() in used:  # case-insensitive: the archive may be extracted on such a file system
+            stem, k = f"{base}_{k}", k + 1
+        used.add(stem.lower())
+        out[name] = stem
+    return out
+
+
+_PLAIN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}")
 
 
 def _info(name: str) -> zipfile.ZipInfo:

@@ -187,7 +187,12 @@ def _osp_step(ssd: Ssd) -> Optional[float]:
     if a is None:
         return None
     fs = a.find(f"{{{OSP_NS}}}FixedStepAlgorithm")
-    return float(fs.get("baseStepSize")) if fs is not None and fs.get("baseStepSize") else None
+    if fs is None or not fs.get("baseStepSize"):
+        return None
+    step = float(_number(fs.get("baseStepSize"), f"{ssd.path}: {OSP_ANNOTATION} FixedStepAlgorithm baseStepSize"))
+    if step <= 0:
+        raise InputFileError(f"{ssd.path}: {OSP_ANNOTATION} FixedStepAlgorithm baseStepSize {step} is not positive")
+    return step
 
 
 def load_system(path, record: Optional[list] = None, workdir=None):

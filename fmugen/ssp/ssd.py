@@ -170,8 +170,13 @@ def extract(ssp: Path, dest: Path) -> None:
             raise InputFileError(f"{where}: declares more than {MAX_TOTAL_BYTES} bytes uncompressed")
         root = dest.resolve()
         total = 0
+        seen = set()
         for info in infos:
             rel = _safe_member(info.filename, where)
+            key = PurePosixPath(*rel.parts).as_posix().rstrip("/")
+            if key in seen:  # else open(.., "xb") fails with an OSError naming the temporary folder
+                raise InputFileError(f"{where}: archive member {info.filename!r} appears twice: refused")
+            seen.add(key)
             mode = info.external_attr >> 16
             if stat.S_ISLNK(mode):
                 raise InputFileError(f"{where}: archive member {info.filename!r} is a symbolic link: refused")

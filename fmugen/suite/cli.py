@@ -69,7 +69,11 @@ def scene_case(path: Path, quick: bool, sets=None) -> Case:
         checks, stop, H = (), 1.0, 0.01
         name, title = model.name, f"{path.name}: free run from the start values"
     methods = QUICK_METHODS if quick else TOLERANCE_METHODS + RK4_METHODS
-    start.update(sets or {})
+    from ..values import as_number, check_model_values
+
+    sets = {k: as_number(v, f"--set {k}") for k, v in (sets or {}).items()}
+    check_model_values(model, sets, lambda k: f"--set {k}")  # the physical checks a file value gets
+    start.update(sets)
     return Case(name, title, lambda: model, start, stop, H, compare=compare, methods=methods,
                 quick_methods=methods, validity=checks, model_key=name)
 

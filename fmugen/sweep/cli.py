@@ -59,12 +59,6 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     from .execute import sweep
 
-    if str(args.scene).lower().endswith(".ssp"):
-        from .errors import SweepError
-
-        raise SweepError(f"{args.scene}: fmugen sweep takes a scene file; an SSP archive is run by fmugen cosim and "
-                         f"fmugen report (vary its parameters with --set component.variable=value)")
-
     if not args.grid and not args.sample:
         from .errors import SweepError
 

@@ -280,7 +280,12 @@ def sweep(scene, grid=None, sample=None, n: Optional[int] = None, seed: Optional
     show = sys.stderr.isatty() if progress is None else bool(progress)
     say = (lambda t: print(t, file=sys.stderr, flush=True)) if show else (lambda t: None)
     try:
-        plan = SweepPlan(scene, names, out / "fmus", sets=sets, allow_factories=allow_factories)
+        if str(scene).lower().endswith(".ssp"):  # an SSP archive: its FMUs as they are (fmugen/ssp/sweep.py)
+            from ..ssp.sweep import SspSweepPlan
+
+            plan = SspSweepPlan(scene, names, out / "fmus", sets=sets)
+        else:
+            plan = SweepPlan(scene, names, out / "fmus", sets=sets, allow_factories=allow_factories)
     except SceneError as exc:
         raise SweepError(str(exc)) from None
     # everything that can be refused is refused before the build

@@ -208,11 +208,16 @@ def make_points(grid: Optional[dict] = None, samples: Optional[dict] = None, n: 
     if both:
         raise SweepError(f"{', '.join(sorted(both))}: given both as --grid and --sample")
     total = math.prod(len(v) for v in grid.values()) if grid else 1
-    if samples and n is not None and not isinstance(n, bool) and isinstance(n, (int, float)) and n >= 1:
-        total *= int(n)
+    n_int = None
+    if samples and n is not None and not isinstance(n, bool) and isinstance(n, (int, float)) and n >= 1 \
+            and (isinstance(n, int) or math.isfinite(n)):
+        n_int = int(n)
+        total *= n_int
     if total > MAX_POINTS:  # estimated before a single point is made: the product would not fit in memory
-        sizes = " x ".join([str(len(v)) for v in grid.values()] + ([f"{int(n)} samples"] if samples else []))
-        raise SweepError(f"--grid/--sample: {sizes} = {total:.3g} points, more than {MAX_POINTS:.0e}; "
+        def big(k: int) -> str:
+            return f"{k:.3g}" if k < 10**300 else f"a {len(str(k))}-digit number of"
+        sizes = " x ".join([str(len(v)) for v in grid.values()] + ([f"{big(n_int)} samples"] if n_int else []))
+        raise SweepError(f"--grid/--sample: {sizes} = {big(total)} points, more than {MAX_POINTS:.0e}; "
                          f"split the study or use fewer values")
     rows = [dict(zip(grid, combo)) for combo in itertools.product(*grid.values())] if grid else [{}]
     if samples:

@@ -19,7 +19,7 @@ from typing import Mapping, Optional
 import sympy as sp
 
 from ...codegen.model import SymbolicModel
-from ...errors import InputFileError, check_identifier, read_text_file
+from ...errors import InputFileError, check_identifier, read_text_file, toml_problem
 from ...robot.expressions import ExpressionError
 from ..base import var
 from . import language
@@ -100,8 +100,8 @@ def read_component_file(path) -> ComponentFile:
     src = str(path)
     try:
         data = tomllib.loads(read_text_file(path, "component file"))
-    except tomllib.TOMLDecodeError as exc:
-        raise _err(src, f"not valid TOML: {exc}") from None
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        raise _err(src, toml_problem(exc)) from None
     extra = sorted(set(data) - TOP_KEYS)
     if extra:
         raise _err(src, f"unknown top-level key(s) {', '.join(extra)}; a component file has "
@@ -328,8 +328,8 @@ def component_model(cf: ComponentFile, name: Optional[str] = None, parameter_set
         if ps.endswith(".toml"):
             try:
                 tab = tomllib.loads(read_text_file(Path(ps), "parameter set")).get(cf.name)
-            except tomllib.TOMLDecodeError as exc:
-                raise InputFileError(f"{ps}: not valid TOML: {exc}") from None
+            except (tomllib.TOMLDecodeError, RecursionError) as exc:
+                raise InputFileError(f"{ps}: {toml_problem(exc)}") from None
             if not isinstance(tab, dict):
                 raise InputFileError(f"{ps}: no [{cf.name}] table of parameter values for component file {src}")
             values.update(_check_values(tab, params, f"{ps}: [{cf.name}]"))
