@@ -34,6 +34,16 @@ import tomllib
 from pathlib import Path
 
 
+def _file_arg(text: str) -> Path:
+    """The file a command names: a path, or ``lib:NAME`` for a shipped component file (as in a scene and
+    ``load_component``)."""
+    if text.startswith("lib:"):
+        from .components.equations import library_path
+
+        return library_path(text[4:])
+    return Path(text)
+
+
 def _kind(path: Path) -> str:
     # user errors are InputFileError (a ValueError): main() prints one line and exits 2
     from .errors import InputFileError, read_text_file, toml_problem
@@ -178,7 +188,7 @@ def _bytes(text: str) -> float:
 def _cmd_build(args) -> int:
     from .fmi.build import build_fmu
 
-    path = Path(args.file)
+    path = _file_arg(args.file)
     if _kind(path) == "scene":
         return _cmd_build_scene(args)
     from .arguments import output_file
@@ -209,7 +219,7 @@ def _cmd_build(args) -> int:
 
 
 def _cmd_info(args) -> int:
-    path = Path(args.file)
+    path = _file_arg(args.file)
     if _kind(path) == "scene":
         from .scene import load_scene
 
@@ -273,7 +283,7 @@ def _add_own_commands(sub) -> None:
     p.set_defaults(func=_cmd_equations)
 
     p = sub.add_parser("build", help="derive, generate, compile and zip an FMI 2.0 FMU")
-    p.add_argument("file", help="robot, assembly, component or scene TOML file")
+    p.add_argument("file", help="robot, assembly, component or scene TOML file (lib:NAME: a shipped component file)")
     p.add_argument("--fmi-type", default=None, choices=["me", "cs", "both"],
                    help="robot, assembly and component files (default both); a scene's FMUs take their group's fmi_type")
     p.add_argument("-o", "--output", help="path of the .fmu (default: <model name>.fmu); a folder for a scene")

@@ -590,3 +590,17 @@ def test_fmugen_linearize_a_component_file_flags_the_smoothed_coulomb_term(tmp_p
     assert main(args + [str(tmp_path / "b.npz"), "--set", "w_eps=1e12"]) == 0
     assert "warning" not in capsys.readouterr().out
     assert np.load(tmp_path / "b.npz")["A"][1, 1] == pytest.approx(-0.02 / 0.05, rel=1e-6)  # friction-free
+
+
+def test_commands_take_lib_names_like_scenes_and_the_api(tmp_path, capsys):
+    """``lib:NAME`` names a shipped component file on the command line as in a scene and in
+    load_component (fmugen info lib:stribeck said "no such TOML file")."""
+    from fmugen.cli import main
+
+    assert main(["info", "lib:stribeck", "--set", "J=0.25"]) == 0
+    assert "J [kg.m2] = 0.25" in capsys.readouterr().out
+    assert main(["linearize", "lib:stribeck", "--at", "w=0", "--at", "phi=0", "--trim", "tau", "--set", "w_eps=1e12",
+                 "--out", str(tmp_path / "a.npz")]) == 0
+    assert np.load(tmp_path / "a.npz")["A"][1, 1] == pytest.approx(-0.02 / 0.05, rel=1e-6)  # -b/J, friction-free
+    assert main(["info", "lib:nope"]) == 2
+    assert "no shipped component 'nope'" in capsys.readouterr().err

@@ -21,9 +21,8 @@ def _err(r, ref):
     return float(np.max(np.abs(r["joint.theta"] - ref["joint.theta"][idx])))
 
 
-@pytest.mark.parametrize("scheme,ext,H", [("jacobi", "hold", 2e-3), ("jacobi", "linear", 2e-3),
-                                          ("gauss-seidel", "hold", 1e-3), ("gauss-seidel", "linear", 4e-3),
-                                          ("newton", "linear", 1e-2), ("newton", "cubic", 2e-2)])
+@pytest.mark.parametrize("scheme,ext,H", [("jacobi", "hold", 2e-3), ("gauss-seidel", "linear", 4e-3),
+                                          ("newton", "cubic", 2e-2)])
 def test_the_estimate_is_within_10x_of_the_measured_error(ref, scheme, ext, H):
     r = run(split_system("default", "smooth", stop=2.0), scheme, ext, step=H)
     assert r.ok and r.summary.estimate_samples >= 1, r.summary
@@ -33,8 +32,7 @@ def test_the_estimate_is_within_10x_of_the_measured_error(ref, scheme, ext, H):
     assert est / 20 < err < 10 * est, (err, est)
 
 
-@pytest.mark.parametrize("scheme,ext,H", [("jacobi", "hold", 2e-3), ("gauss-seidel", "linear", 4e-3),
-                                          ("newton", "cubic", 2e-2)])
+@pytest.mark.parametrize("scheme,ext,H", [("gauss-seidel", "linear", 4e-3), ("newton", "cubic", 2e-2)])
 def test_the_shadow_windows_leave_the_run_bit_for_bit(scheme, ext, H):
     on = run(split_system("default", "smooth", stop=1.0), scheme, ext, step=H)
     off = run(split_system("default", "smooth", stop=1.0), scheme, ext, step=H, estimate=False)

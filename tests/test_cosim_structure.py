@@ -1,5 +1,5 @@
 """The master split into modules (schemes, interpolants, step-size controller, monitor, executor) gives the
-results of the single-module master it replaced bit for bit: 30 runs (tests/master_golden.py) with both
+results of the single-module master it replaced bit for bit: 29 runs (tests/master_golden.py) with both
 masters on the same FMUs -- the recorded arrays, every summary counter, the failure's time, cause, FMU and
 coupling.  The old master is kept unchanged in tests/legacy/master_59795fa.py (commit 59795fa).
 """

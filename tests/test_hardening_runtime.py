@@ -19,30 +19,14 @@ import pytest
 import sympy as sp
 from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import (FMU2Model, FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2Discard, fmi2Error, fmi2OK,
-                       fmi2Warning, fmi2LastSuccessfulTime)
+from fmpy.fmi2 import (FMU2Model, FMU2Slave, fmi2Discard, fmi2Error, fmi2OK, fmi2Warning, fmi2LastSuccessfulTime)
 
 from fmugen.codegen.model import SymbolicModel, Variable
 from fmugen.fmi import build_fmu, variable_layout
+from fmi_log import Log
 
 ROOT = Path(__file__).resolve().parents[1]
 RK4, DOPRI5, RODAS3 = 3, 1, 2
-
-
-class Log:
-    def __init__(self):
-        self.messages = []
-        self.callbacks = fmi2CallbackFunctions()
-        self.callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
-        self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
-        self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(fmpy.free)
-
-    def _log(self, env, name, status, category, message):
-        self.messages.append((status, message.decode()))
-
-    def text(self, status=None):
-        return "\n".join(m for s, m in self.messages if status is None or s == status)
 
 
 def symbol(name):

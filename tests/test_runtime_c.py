@@ -22,10 +22,11 @@ from scipy.integrate import solve_ivp
 import fmpy
 from fmpy import read_model_description, simulate_fmu
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import (FMU2Model, FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE,
-                       fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2Discard,
-                       fmi2Error, fmi2EventInfo, fmi2LastSuccessfulTime, fmi2Terminated, fmi2DoStepStatus)
+from fmpy.fmi2 import (FMU2Model, FMU2Slave, fmi2CallbackFunctions, fmi2Discard, fmi2Error, fmi2EventInfo,
+                       fmi2LastSuccessfulTime, fmi2Terminated, fmi2DoStepStatus)
 from fmpy.validation import validate_fmu
+
+from fmi_log import Log
 
 ROOT = Path(__file__).resolve().parents[1]
 RUNTIME = ROOT / "c_runtime"
@@ -73,23 +74,6 @@ def fmus(tmp_path_factory):
     return dict(vdp=_build(out, objects, "vdp"), stiff=_build(out, objects, "stiff"),
                 vdp_nojac=_build(out, objects, "vdp", ["FMUGEN_TEST_NO_JACOBIAN"]),
                 stiff_nojac=_build(out, objects, "stiff", ["FMUGEN_TEST_NO_JACOBIAN"]), out=out, objects=objects)
-
-
-class Log:
-    """Logger callbacks that record (status, category, message)."""
-
-    def __init__(self):
-        self.messages = []
-        self.callbacks = fmi2CallbackFunctions()
-        self.callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
-        self.callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
-        self.callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(fmpy.free)
-
-    def _log(self, env, name, status, category, message):
-        self.messages.append((status, category.decode(), message.decode()))
-
-    def last(self):
-        return self.messages[-1][2] if self.messages else ""
 
 
 def open_fmu(path, cls, tmp, name="inst", log=None):

@@ -1,6 +1,7 @@
 """Any SSP in: third-party FMUs (hand-written C, built here) run by fmugen's master, parameter bindings and a
 linear transformation honoured, Newton stable and accurate where held-input Jacobi diverges (against the
 matrix exponential and the report's self-convergence reference); unsafe or unsupported archives refused."""
+import math
 import shutil
 import subprocess
 import sys
@@ -84,6 +85,31 @@ def test_report_command_labels_the_reference(fmus, tmp_path):
     assert err["newton/linear"] < 0.1 * err["jacobi/hold"]
 
 
+def test_report_measures_an_unreliable_run_as_the_scene_report_does(fmus, monkeypatch):
+    """A run that reached the stop time with an "unreliable" verdict is measured and labelled with its
+    reason (the scene's report does so); it was listed as "failed" with no error."""
+    import dataclasses
+
+    import fmugen.ssp.report as rep
+
+    system = fmugen.load_system(write_ssp(Path(fmus["mass"]).parent / "two_unreliable.ssp", fmus, stop=0.05))
+    plain = rep.report_ssp(system, [0.005], [("newton", "linear")])
+    real = rep.run
+
+    def verdict(*a, **kw):
+        r = real(*a, **kw)
+        if kw.get("step") == 0.005:  # the measured run, not the reference's
+            r = dataclasses.replace(r, summary=dataclasses.replace(r.summary, status="unreliable",
+                                                                   reliability="a test verdict"))
+        return r
+
+    monkeypatch.setattr(rep, "run", verdict)
+    marked = rep.report_ssp(system, [0.005], [("newton", "linear")])
+    (_, _, _, err, status, _), = marked["rows"]
+    assert status == "unreliable: a test verdict"
+    assert err == plain["rows"][0][3] and 0 < err < 0.05  # the same run, measured (1.8e-2 at 5 ms)
+
+
 # ---------------------------------------------------------------------------- refusals
 def _archive(path, members: dict, links=()):
     with zipfile.ZipFile(path, "w") as zf:
@@ -118,6 +144,58 @@ def test_unsafe_or_invalid_archives_are_refused(tmp_path, members, links, match)
         fmugen.ssp.loader.load_system(p, workdir=work)
     assert not (tmp_path / "evil.txt").exists()
     assert not any(q.is_symlink() for q in work.rglob("*")) if work.exists() else True
+
+
+def test_binding_prefix_is_prepended_to_the_source_names(fmus, tmp_path):
+    """SSP 1.0, ParameterBinding/@prefix: "the specified prefix is prepended to all names in the parameter
+    source" (the schema's documentation).  The loader stripped it instead and dropped every other name."""
+    ssd = _ok_ssd().replace("<ssd:ParameterBinding>", '<ssd:ParameterBinding prefix="f">', 1) \
+        .replace('<ssv:Parameter name="m">', '<ssv:Parameter name="0">', 1)
+    a = {u.name: u for u in fmugen.load_system(write_ssp(tmp_path / "p.ssp", fmus, ssd=ssd)).units}["A"]
+    assert a.start_values["f0"] == M_A and "m" not in a.start_values and "0" not in a.start_values
+    ssd = _ok_ssd().replace("<ssd:ParameterBinding>", '<ssd:ParameterBinding prefix="sub.">', 1)
+    with pytest.raises(InputFileError, match="names 'sub.m'"):
+        fmugen.load_system(write_ssp(tmp_path / "q.ssp", fmus, ssd=ssd))
+
+
+def test_connections_without_a_transformation_convert_units(fmus, tmp_path):
+    """SSP 1.0: without a LinearTransformation an importer converts between the connectors' units unless
+    suppressUnitConversion.  A.v [m/s] -> B.v_in [mm/s] then couples with 1000, the factor the fixture
+    states (it was coupled with 1: a silent factor of 1000 off); different quantities are refused."""
+    def couplings(ssd, name):
+        return {(c.source, c.target): c.factor
+                for c in fmugen.load_system(write_ssp(tmp_path / name, fmus, ssd=ssd)).couplings}
+
+    stated = couplings(_ok_ssd(), "stated.ssp")
+    assert stated[("A", "v"), ("B", "v_in")] == 1000.0
+    plain = _ok_ssd().replace('<ssc:LinearTransformation factor="1000"/>', "")
+    assert couplings(plain, "implied.ssp") == stated
+    suppressed = plain.replace('endConnector="v_in"', 'endConnector="v_in" suppressUnitConversion="true"')
+    assert couplings(suppressed, "suppressed.ssp")[("A", "v"), ("B", "v_in")] == 1.0
+    wrong = plain.replace('startConnector="v" endElement="B"', 'startConnector="x" endElement="B"')
+    with pytest.raises(InputFileError, match=r"\[m\] and \[mm/s\] are different quantities"):
+        couplings(wrong, "wrong.ssp")
+
+
+def test_export_states_a_factor_of_one_between_different_units(fmus):
+    """A scene may state factor 1 between different units; the archive must say so (a LinearTransformation),
+    or an importer converts the units itself (SSP 1.0, and fmugen's loader) -- m/s to mm/s by 1000."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    from fmugen.ssp.export import ssd_xml
+    from fmugen.ssp.ssd import NS, parse_xml
+
+    system = fmugen.load_system(write_ssp(Path(fmus["mass"]).parent / "two_export.ssp", fmus))
+    system = dataclasses.replace(system, couplings=tuple(dataclasses.replace(c, factor=1.0)
+                                                         for c in system.couplings))
+    built = SimpleNamespace(scene=SimpleNamespace(name="t", spec=SimpleNamespace(description=""), groups={}),
+                            system=system, jacobi_limit=math.inf)
+    root = parse_xml(ssd_xml(built, {"scheme": "newton", "extrapolation": "linear"}, system.step)[0], "t")
+    lin = {(e.get("startConnector"), e.get("endConnector")): e.find("ssc:LinearTransformation", NS)
+           for e in root.iterfind("ssd:System/ssd:Connections/ssd:Connection", NS)}
+    assert lin[("v", "v_in")].get("factor") == "1.0"  # m/s -> mm/s, stated
+    assert lin[("F", "F")] is None  # N -> N: nothing to say
 
 
 def test_duplicate_members_are_refused_naming_the_archive(tmp_path):

@@ -49,6 +49,9 @@ class Variable:
     # parameters: their physical sign, ">0" (an inertia, a time constant) or ">=0" (a leakage); every
     # value given later (with_starts: --set, start tables, sweep points) is checked against it
     sign: str = ""
+    # a second FMI name for the same value (an FMI 2.0 alias: same value reference), e.g. a URDF joint's
+    # "shoulder_pan_joint.q" for q[1]; "" = none (fmi/model_description.py writes it)
+    alias: str = ""
 
 
 def physical_range(v: Variable) -> tuple:

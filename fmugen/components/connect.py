@@ -50,7 +50,7 @@ SEP = "__"  # C-safe separator of instance and variable in symbols
 
 def _renamed(inst: str, v: Variable, **changes) -> Variable:
     return replace(v, name=f"{inst}.{v.name}", symbol=sp.Symbol(f"{inst}{SEP}{v.symbol.name}", real=True),
-                   **changes)
+                   alias=f"{inst}.{v.alias}" if v.alias else "", **changes)
 
 
 def _split(endpoint, where: str):

@@ -173,8 +173,9 @@ def run(args) -> int:
     from .trim import trim
 
     from .. import arguments
+    from ..cli import _file_arg
 
-    path = Path(args.file)
+    path = _file_arg(args.file)  # a path, or lib:NAME (a shipped component file)
     # every argument first: named in its refusal, nothing derived or written before
     args.tol = arguments.tolerance(args.tol, "--tol")
     args.time = arguments.number(args.time, "--time")

@@ -23,6 +23,16 @@ import numpy as np
 from .names import FmugenError, signal_name
 
 
+
+def _first_per_vr(variables) -> list:
+    """``variables`` without FMI aliases: the first of each value reference."""
+    seen, out = set(), []
+    for v in variables:
+        if v.valueReference not in seen:
+            seen.add(v.valueReference)
+            out.append(v)
+    return out
+
 def _values(spec, names, what, fmu):
     """A vector in ``names`` order from an array, a mapping by name, or None (start values)."""
     if spec is None:
@@ -65,9 +75,11 @@ def linearize_fmu(path, x=None, u=None, t: float = 0.0,
     by_name = {v.name: v for v in md.modelVariables}
     der_vars = [d.variable for d in md.derivatives]
     state_vars = [d.derivative for d in der_vars]
-    input_vars = [v for v in md.modelVariables if v.causality == "input" and v.type == "Real"]
+    # one column per value: an FMI alias (a URDF joint's "<joint>.tau" for tau[i]) shares its value
+    # reference with the variable it names again and comes after it; keep the first name
+    input_vars = _first_per_vr(v for v in md.modelVariables if v.causality == "input" and v.type == "Real")
     state_vrs = {v.valueReference for v in state_vars}
-    out_vars = [o.variable for o in md.outputs]
+    out_vars = _first_per_vr(o.variable for o in md.outputs)
     if outputs == "computed":
         out_vars = [v for v in out_vars if v.valueReference not in state_vrs]
     elif outputs != "all":

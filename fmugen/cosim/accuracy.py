@@ -78,12 +78,12 @@ def coupling_tolerance(units) -> tuple:
 # grow without bound, long before the interface defect looks like a divergence.
 
 WINDOW_STEPS = 10  # macro steps a shadow window spans (at most)
+SAMPLES = 6  # windows per run at least (short runs)
+RISE = 2.0  # a window also when the interface defect has risen this much since the last one
 COST = 60  # the shadow windows cost about 1/COST of the run (plus a save and restore per window)
 GROWTH = 4.0  # the local error grew this much over the last half of the run: "growing"
 NOISE = 100.0  # local errors below NOISE x the FMUs' internal rtol (relative) are solver noise: no trend
 
-ESTIMATORS = {"sum": lambda e: e.est_sum, "max": lambda e: e.est_max}
-ESTIMATOR = "sum"
 
 # the scheme's order of accuracy (local error O(H^(p+1))): held inputs 1, the line 2, the parabola 3
 ORDERS = {"hold": 1, "linear": 2, "quadratic": 3, "cubic": 3}
@@ -98,17 +98,22 @@ class ErrorEstimate:
             p = 2  # a later FMU gets the line to its source's new value
         self.p = p
         # macro steps a shadow window spans (2 x window steps of H/2): fewer in short runs
-        self.window = int(max(2, min(WINDOW_STEPS, n_steps // 25)))
-        self.every = max(COST * 2 * self.window, 1)  # shadow steps cost about 1 / COST of the run's
+        self.window = int(max(2, min(WINDOW_STEPS, n_steps // 100)))
+        # windows every 2 x COST x window steps (the shadows cost 1/COST of a long run), but at least
+        # SAMPLES per run: a drift that starts mid-run must be seen (a short run pays more, up to ~15 %)
+        self.every = int(min(COST * 2 * self.window, max(n_steps // SAMPLES, 4 * self.window)))
         # over a window the errors are global: Richardson, e(H) = (y_H - y_H/2) 2^p / (2^p - 1)
         self.div = (2.0 ** p - 1.0) / 2.0 ** p
         self.columns = columns
         self.rtol = rtol or 0.0
         self.pending = None  # (t, H, shadow outputs, steps still to go)
         self.t, self.local = [], []  # sample times, local error per column (absolute)
+        self.gathers = []  # per sample and column: the error grew over the window (True) or settled
+        self.mid = None
         self.at = []  # the run's accepted-step count at each sample (each stands for the steps since the last)
         self.next_at = max(1, min(self.every, n_steps // 10))  # the first window early in the run
         self.shadow_steps = 0
+        self.level = self.trigger = 0.0  # defect at the last window, and the rise that calls the next
 
     # (the master calls only ``due`` when its step count reaches ``next_at``, and ``accepted`` while a
     # comparison is pending: nothing per ordinary step)
@@ -116,7 +121,16 @@ class ErrorEstimate:
         """A shadow window from t now? (two full windows' room left)."""
         return self.pending is None and t + self.window * H < stop - 1e-9 * H
 
+    def active(self, level, n) -> None:
+        """The interface defect of the last block (the divergence monitor's): a window now when it rose
+        RISE-fold since the last window -- the coupling is at work (a motion starts), which sparse windows
+        at fixed intervals would miss."""
+        if self.pending is None and level > self.trigger:
+            self.next_at = min(self.next_at, n)
+            self.level = level
+
     def started(self, t, H, Ys, n) -> None:
+        self.trigger = RISE * self.level
         self.pending = (t, H, Ys, self.window)
         self.shadow_steps += 1
         self.next_at = n + self.every
@@ -131,12 +145,18 @@ class ErrorEstimate:
         if H != Hs:  # the step changed (adaptive, or the last step): no longer the window's comparison
             self.pending = None
             return
+        if left == self.window - self.window // 2 + 1:  # the (window // 2)-th step of the window
+            self.mid = np.abs(Ys[0] - Y)  # halfway through the window
         if left > 1:
             self.pending = (t, Hs, Ys, left - 1)
             return
         self.pending = None
         self.t.append(t)
-        self.local.append(np.abs(Ys - Y) / self.div)
+        end = np.abs(Ys[1] - Y)
+        self.local.append(end / self.div)
+        # does the error gather over the window (integrated signals: it doubles or more from the middle to the
+        # end) or settle (fast, self-correcting ones: a pressure behind a stiff spring)?
+        self.gathers.append(end >= 1.5 * self.mid)
         self.at.append(n)
 
     def discard(self) -> None:
@@ -153,7 +173,10 @@ class ErrorEstimate:
         w[-1] += n - self.at[-1]  # the steps after the last sample count with it
         self.est_sum = (L * w[:, None]).sum(axis=0) / self.window
         self.est_max = L.max(axis=0)
-        est = ESTIMATORS[ESTIMATOR](self)
+        # a column whose error gathered over most windows adds up over the run; one whose error settles
+        # within a window is as large as its largest window's
+        gathers = np.mean(np.array(self.gathers, dtype=float), axis=0) >= 0.5
+        est = np.where(gathers, self.est_sum, self.est_max)
         scale = np.max(np.abs(values), axis=0) if len(values) else np.ones(len(cols))
         scale = np.where(scale > 0, scale, 1.0)
         rel_est = est / scale

@@ -236,6 +236,7 @@ class Master:
         self.DDDUset = np.zeros(max(nu, 1))  # input third derivatives passed at t_n (cubic Hermite inputs)
         self.DY = np.zeros(max(ny, 1))  # time derivatives of the coupling sources at t_n (Hermite inputs)
         self.dU0 = np.zeros(max(nu, 1))  # ... as coupled inputs
+        self.Uend = np.zeros(max(nu, 1))  # inputs at t_{n+1} of a held feedthrough FMU, set before its outputs are read
         self.unit_io = []
         for k, unit in enumerate(self.units):
             out_vrs = [unit.variables[v].valueReference for v in outs[k]]
@@ -257,6 +258,8 @@ class Master:
             unit.in_order2 = (ctypes.c_int * max(1, len(in_vrs)))(*([2] * len(in_vrs)))
             unit.in_order3 = (ctypes.c_int * max(1, len(in_vrs)))(*([3] * len(in_vrs)))
             unit.in_names, unit.out_names = list(ins[k]), list(outs[k])
+            unit.uend_ptr = dptr(self.Uend, u_off[k])
+            unit.feedthrough = bool(in_vrs) and _feedthrough(unit, outs[k])
         # which U entries belong to FMUs that cannot take input derivatives
         self.no_interp = np.array([not getattr(self.units[k], "can_interpolate", False) for k in owner_u], dtype=bool)
         # Gauss-Seidel: for the FMU at position i of the order, its inputs whose source steps earlier
@@ -528,6 +531,8 @@ class Master:
                     failure = monitor.observe(t, H, d_v, Unew_v)
                     if failure is not None:
                         break
+                    if est is not None and monitor.count == 0:  # a block ended: a window if the defect rose
+                        est.active(monitor.level, summ.macro_steps)
                 H = control.accept(H, err) if adaptive else min(H0, Hmax)
         except UnitFailure as e:
             failure = self._diagnose(e, t, H, d, scale0, monitor)
@@ -580,6 +585,11 @@ class Master:
         self._cubic = implicit and ext == 3
         self.input_kind = 3 if self._cubic else (2 if self.hermite else 1)
         self.any_no_interp = bool(self.no_interp.any())
+        # an FMU that holds its inputs at the step's midpoint value and whose outputs depend on its inputs: its
+        # outputs at t_{n+1} are read with the inputs at t_{n+1} (see _do)
+        for u in self.units:
+            u.end_inputs = (not self.hold_only and getattr(u, "feedthrough", False)
+                            and not getattr(u, "can_interpolate", True))
         if self.scheme == "jacobi":
             return Jacobi(self)
         if self.scheme == "gauss-seidel":
@@ -652,7 +662,10 @@ class Master:
         nu, H2, ok, ts = self.nu, 0.5 * H, True, t
         Us, Gs = np.zeros(max(nu, 1)), np.zeros_like(G)
         try:
-            for _ in range(2 * est.window):
+            Ymid = None
+            for i in range(2 * est.window):
+                if i == 2 * (est.window // 2):  # the shadow halfway through the window, for the estimate
+                    Ymid = self.Y[self.rec_idx].copy()
                 self.Uset[:nu] = mine.U0
                 P = mine.predict(H2)
                 if shadow.implicit:
@@ -678,7 +691,7 @@ class Master:
         for b, c in zip(bufs, copies):
             b[:] = c
         if ok:
-            est.started(t, H, Ys, summ.macro_steps)
+            est.started(t, H, (Ymid, Ys), summ.macro_steps)
         else:
             est.skipped(summ.macro_steps)
         return calls
@@ -719,6 +732,17 @@ class Master:
         u.do_steps += 1
         if st > 1:
             raise UnitFailure(u.name, f"fmi2DoStep(t = {t:.9g}, H = {H:.4g})", st, u.messages())
+        if u.end_inputs:
+            # the FMU stepped with its inputs held at the midpoint value; its outputs at t_{n+1} depend on its
+            # inputs, so they are read with the inputs' value at t_{n+1} (the midpoint would put an O(H) error,
+            # a lag of H/2, into every output read: first order, unstable on stiff feedthrough couplings)
+            sl = u.in_sl
+            DU = self.DUset[sl]
+            np.add(self.Uset[sl], 0.5 * H * DU + 0.5 * H * H * self.DDUset[sl], out=self.Uend[sl])
+            st = u._setReal(u.c, u.in_vr, u.n_in, u.uend_ptr)
+            if st > 1:
+                raise UnitFailure(u.name, "fmi2SetReal", st, u.messages())
+            calls += 1
         if u.n_out:
             st = u._getReal(u.c, u.out_vr, u.n_out, u.y_ptr)
             if st > 1:
@@ -734,6 +758,18 @@ class Master:
                 raise UnitFailure(u.name, "fmi2SetFMUstate", st, u.messages())
         return len(self.units)
 
+
+
+def _feedthrough(unit, names) -> bool:
+    """Whether any of the outputs ``names`` read from ``unit`` depends on its inputs at the same instant (its
+    ModelStructure; an output without ``dependencies`` depends on every known, FMI 2.0 section 2.2.8)."""
+    declared = {o.variable.name: o for o in getattr(unit.md, "outputs", None) or ()}
+    for name in names:
+        o = declared.get(name)
+        if o is not None and (o.dependencies is None
+                              or any(getattr(d, "causality", "") == "input" for d in o.dependencies)):
+            return True
+    return False
 
 
 def run(system, scheme: Optional[str] = None, extrapolation: Optional[str] = None, step: Optional[float] = None,

@@ -141,6 +141,7 @@ class DivergenceMonitor:
         self.peak = np.abs(U0).copy()  # slowly forgetting peak |U| per coupling
         self.flat = np.arange(WINDOW) * nu  # row starts in a flattened block
         self.nu = nu
+        self.level = 0.0
         self.decay = PEAK_DECAY ** WINDOW  # the peak's forgetting over one block
         self.rest = REST * scale0  # below this a coupling counts as at rest
 
@@ -206,6 +207,7 @@ class DivergenceMonitor:
                 f"{self.what}: the coupled values grew more than 4x on each of 4 macro steps with a "
                 f"defect as large as the signal ({self._stability_limit(H)})",
                 coupling=self.labels[int(jd[-1])])
+        self.level = max(dn)  # the block's largest scaled defect (the error estimate samples when it rises)
         k = dn.index(max(dn))  # the first largest, as argmax
         _push_window(windows, dn[k], max(sn), rel[k])
         div = _diverging(windows)

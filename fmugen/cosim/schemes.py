@@ -4,7 +4,8 @@ U is the vector of all coupled inputs, Y the outputs they come from (U = F * Y[S
 
 * :class:`Jacobi`: every FMU steps from the values at t_n (they could all run at once: the executor);
 * :class:`GaussSeidel`: the FMUs step one after another in ``order``; an input whose source has already
-  stepped is its value at t_{n+1} (held) or the line from U_n to it (with extrapolation);
+  stepped is its value at t_{n+1} (held) or the line from U_n to it (with extrapolation; its midpoint, held, for
+  an FMU that cannot interpolate);
 * :class:`FixedPoint` and :class:`Newton` (the *iterated* or *implicit* schemes, waveform relaxation over one
   step): all FMUs are saved (fmi2GetFMUstate), the end values V = U_{n+1} are predicted, every FMU steps with
   its inputs interpolated between U_n and V (:func:`~fmugen.cosim.interpolants.interpolate_to`), and V is
@@ -63,9 +64,12 @@ class GaussSeidel(Jacobi):
             idx = m.gs_new[k]
             if len(idx):
                 new = F[idx] * Y[S[idx]]
-                if ext == 0 or not getattr(u, "can_interpolate", False):
+                if ext == 0:
                     Uset[idx] = new  # the source's value at t_{n+1}, held
                     DUset[idx] = 0.0
+                elif not getattr(u, "can_interpolate", False):  # the line's midpoint, held (as every extrapolant)
+                    DUset[idx] = (new - U0[idx]) / H
+                    Uset[idx] = U0[idx] + 0.5 * H * DUset[idx]
                 else:  # the line from U_n to the source's U_{n+1} (a parabola through U_{n-1} as well
                     # destabilises the PUMA's wrist coupling at 2 ms: measured, so it stays a line)
                     Uset[idx] = U0[idx]
@@ -166,8 +170,8 @@ def algebraic_columns(m, u, rows, Jg) -> int:
         st = u._dirDer(u.c, unknowns, len(rows), u.in_vr, u.n_in, dptr(seed), dptr(dv))
         if st > 1:
             raise UnitFailure(u.name, "fmi2GetDirectionalDerivative", st, u.messages())
-        # a held midpoint input (no interpolation) moves by half the end value's change
-        Jg[rows, j] = m.F[rows] * dv * (0.5 if m.no_interp[j] else 1.0)
+        # outputs are read with the inputs at the step's end, also from an FMU that held their midpoint (_do)
+        Jg[rows, j] = m.F[rows] * dv
     return u.n_in
 
 
@@ -208,8 +212,8 @@ def interface_jacobian(m, t, H, U0, Zg, G, states, scale):
             Zp = Zg.copy()
             Zp[c] += delta
             interpolate_to(Zp, U0, m.dU0, H, nu, m.input_kind, m.DUset, m.DDUset, m.DDDUset)
-            if m.no_interp[j]:
-                Uset[j] = 0.5 * (U0[j] + Vg[j] + delta)
+            if m.no_interp[j]:  # every input of this FMU held at its midpoint, as in the step (not only column j)
+                midpoint_values(Uset[:nu], m.DUset[:nu], m.no_interp[:nu], H)
             calls += 1 + m._do(u, t, H, 0)
             calls += m._gather(Up, Gp, (u,))
             Jg[rows, c] = (Gp[rows] - G[rows]) / delta

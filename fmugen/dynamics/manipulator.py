@@ -66,6 +66,31 @@ def _frame_tag(name: str) -> str:
     return "ee_frame" if tag == "ee" else tag
 
 
+def _joint_aliases(bodies, joints) -> dict:
+    """FMI 2.0 alias names of the joint variables of a URDF robot: ``{i: "<joint>"}``.
+
+    The URDF joint name made an FMI identifier (every character outside
+    ``[A-Za-z0-9_]`` becomes ``_``, a leading digit gets a ``_`` before it), so
+    ``<joint>.q``, ``<joint>.qd``, ``<joint>.tau`` are structured names; two
+    joints whose names clean to the same identifier get ``_2``, ``_3`` ...
+    DH robots (no joint names) get none: their q[i] are the file's own names.
+    """
+    out, used = {}, set()
+    for i in joints:
+        name = bodies[i].joint_name
+        if not name:
+            continue
+        tag = re.sub(r"[^A-Za-z0-9_]", "_", name)
+        if not re.match(r"[A-Za-z_]", tag):
+            tag = "_" + tag
+        base, k = tag, 2
+        while tag in used:
+            tag, k = f"{base}_{k}", k + 1
+        used.add(tag)
+        out[i] = tag
+    return out
+
+
 def _ee_label(robot) -> str:
     """Where p_ee is, in words: "frame 6" (DH), or the frame's name."""
     if robot.links and robot.end_frame == f"frame{robot.n}":
@@ -476,8 +501,10 @@ class Manipulator:
         of q (lower, upper) and of tau (+-effort).
         """
         states, qds, inputs = [], [], []
+        aliases = _joint_aliases(self.robot.bodies, joints)
         for i in joints:
             L = self.robot.bodies[i]
+            tag = aliases.get(i)
             rev = L.joint == REVOLUTE
             lim = L.limits
             lo = None if lim is None else lim.lower
@@ -489,15 +516,17 @@ class Manipulator:
             name = _joint_label(L)
             states.append(Variable(f"q[{i + 1}]", self.q[i], "rad" if rev else "m",
                                    f"position of joint {i + 1} ({name}, {L.joint})", start=start, output=True,
-                                   min=lo, max=hi))
+                                   min=lo, max=hi, alias=f"{tag}.q" if tag else ""))
             qds.append(Variable(f"qd[{i + 1}]", self.qd[i], "rad/s" if rev else "m/s",
-                                f"velocity of joint {i + 1} ({name})", start=0.0, output=True))
+                                f"velocity of joint {i + 1} ({name})", start=0.0, output=True,
+                                alias=f"{tag}.qd" if tag else ""))
             effort = None if lim is None else lim.effort
             inputs.append(Variable(f"tau[{i + 1}]", self.tau[i], "N.m" if rev else "N",
                                    f"{'torque' if rev else 'force'} applied by actuator {i + 1} ({name})"
                                    if L.joint_name else
                                    f"{'torque' if rev else 'force'} applied by actuator {i + 1}", start=0.0,
-                                   min=None if effort is None else -effort, max=effort))
+                                   min=None if effort is None else -effort, max=effort,
+                                   alias=f"{tag}.tau" if tag else ""))
         return states + qds, inputs
 
     def _wrench_inputs(self) -> list:

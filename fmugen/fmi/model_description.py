@@ -173,8 +173,9 @@ class ScalarVariable:
     min: Optional[float] = None
     max: Optional[float] = None
     derivative: Optional[int] = None  # index of the state, for der(x)
-    kind: str = ""  # state, derivative, input, output, parameter, runtime
+    kind: str = ""  # state, derivative, input, output, parameter, runtime, alias
     symbol: Optional[sp.Symbol] = None
+    alias_of: Optional[int] = None  # for an alias: the index of the variable it names again
 
 
 @dataclass
@@ -242,6 +243,19 @@ def variable_layout(model: SymbolicModel) -> VariableLayout:
         add(name=r.name, value_reference=(first_rt + r.offset) if r.type == "Real" else r.offset, type=r.type,
             causality=r.causality, variability=r.variability, initial=r.initial, start=r.start, unit=r.unit,
             description=r.description, min=r.min, max=r.max, kind="runtime")
+    # FMI 2.0 aliases (sec. 2.2.7: the same value reference, only one of a set with a start value), last so
+    # that no value reference or index above moves: a state's alias is initial="calculated" without a start
+    # (the state holds it); an input's repeats the input's start, because FMI 2.0 requires a start for
+    # every input (the same value, so the two cannot disagree)
+    for v in [v for v in out.variables if v.kind in ("state", "input") and v.symbol is not None]:
+        src = next(s for s in (model.states if v.kind == "state" else model.inputs) if s.symbol == v.symbol)
+        if not src.alias:
+            continue
+        add(name=src.alias, value_reference=v.value_reference, type="Real", causality=v.causality,
+            variability=v.variability, initial="calculated" if v.kind == "state" else None,
+            start=v.start if v.kind == "input" else None, unit=v.unit,
+            description=f"alias of {v.name}: {v.description}", nominal=v.nominal, min=v.min, max=v.max,
+            kind="alias", alias_of=v.index)
     names = [v.name for v in out.variables]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
@@ -419,6 +433,9 @@ def model_description_xml(
     ms = ET.SubElement(root, "ModelStructure")
     output_entries = [(v.index, {v.symbol}, v.symbol) for v in states if v.causality == "output"]
     output_entries += [(v.index, d_run["outputs"][i], model.output_exprs[i]) for i, v in enumerate(outs)]
+    aliases = [v for v in layout.by_kind("alias") if v.causality == "output"]
+    by_index = {v.index: v for v in layout.variables}
+    output_entries += [(v.index, {by_index[v.alias_of].symbol}, by_index[v.alias_of].symbol) for v in aliases]
     output_entries.sort(key=lambda e: e[0])
     if output_entries:
         o = ET.SubElement(ms, "Outputs")
@@ -430,6 +447,7 @@ def model_description_xml(
             unknown(d, v.index, d_run["derivatives"][i], model.derivatives[i])
     init = [(v.index, d_init["derivatives"][i]) for i, v in enumerate(ders)]
     init += [(v.index, d_init["outputs"][i]) for i, v in enumerate(outs)]
+    init += [(v.index, {by_index[v.alias_of].symbol}) for v in aliases]  # the state it names, known at init
     if init:
         iu = ET.SubElement(ms, "InitialUnknowns")
         for i, deps_ in sorted(init, key=lambda e: e[0]):

@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 import warnings
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import numpy as np
 import sympy as sp
@@ -95,7 +96,9 @@ def robot_to_urdf(robot: Robot, values: dict | None = None) -> str:
         return out
 
     root = ET.Element("robot", name=robot.name)
-    root.append(ET.Comment(f" {robot.name}: written by fmugen export-urdf from {robot.source or 'a Robot'} "))
+    # the source's file name only: a machine path would leak into a file that may be shipped
+    source = Path(str(robot.source)).name if robot.source else "a Robot"
+    root.append(ET.Comment(f" {robot.name}: written by fmugen export-urdf from {source} "))
     # a URDF robot's root link is a frame on the base (-1) at the identity: it names the base link
     root_frame = next((f for f in robot.frames if f.parent < 0 and all(num(x) == 0 for x in f.translation)
                        and np.array_equal(mat(f.rotation), np.eye(3))), None)

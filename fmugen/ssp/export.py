@@ -148,7 +148,10 @@ def ssd_xml(built, settings: dict, libcosim_step: float) -> tuple:
             (su, sv), (tu, tv) = c.source, c.target
             e = etree.SubElement(ce, f"{{{D}}}Connection", startElement=su, startConnector=sv, endElement=tu,
                                  endConnector=tv)
-            if c.factor != 1.0:
+            # a stated factor, or a factor of 1 between different unit strings (a scene's stated factor 1,
+            # "rad" to "1"): written out, else an importer converts the units itself (SSP 1.0) or refuses them
+            units_differ = _var_unit(mds, su, sv) != _var_unit(mds, tu, tv)
+            if c.factor != 1.0 or units_differ:
                 etree.SubElement(e, f"{{{C}}}LinearTransformation", factor=_fmt(c.factor), offset="0.0")
     if units:
         ue = etree.SubElement(root, f"{{{D}}}Units")
@@ -232,6 +235,10 @@ def export_ssp(scene, output, fmus_dir=None, scheme: Optional[str] = None,
     return {"path": out, "fmus": [u.name for u in built.system.units], "libcosim_step": step,
             "jacobi_limit": built.jacobi_limit, "scheme": scheme, "extrapolation": extrapolation,
             "built": built}
+
+
+def _var_unit(mds: dict, unit: str, name: str) -> str:
+    return next((v.unit or "" for v in mds[unit].modelVariables if v.name == name), "")
 
 
 def resource_stems(names) -> dict:

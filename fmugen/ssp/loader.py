@@ -9,7 +9,8 @@ master runs it:
   bindings (parameters, and inputs: SSP binds inputs' start values too);
 * each connection between components is a :class:`Coupling` with the
   LinearTransformation's factor (an offset is refused: the master's
-  couplings are ``target = factor * source``);
+  couplings are ``target = factor * source``), or without one the
+  conversion between the connectors' units (:func:`_unit_conversion`);
 * recorded: every output connector as ``component.connector``.
 
 An archive that fmugen wrote carries fmugen's run annotation
@@ -135,6 +136,7 @@ def to_system(ssd: Ssd, record: Optional[list] = None):
     for e in ssd.connections:
         (su, sv), (tu, tv) = e.start, e.end
         cw = f"{where}: connection {su}.{sv} -> {tu}.{tv}"
+        ends = []
         for comp, conn, kind in ((su, sv, "output"), (tu, tv, "input")):
             if comp not in ssd.components:
                 raise InputFileError(f"{cw}: no component {comp!r}")
@@ -145,10 +147,14 @@ def to_system(ssd: Ssd, record: Optional[list] = None):
                 raise InputFileError(f"{cw}: {comp}.{conn} is {v.type}; only Real connections are supported")
             if v.causality != kind:
                 raise InputFileError(f"{cw}: {comp}.{conn} is {v.causality}, not {kind}")
+            ends.append(v)
         if e.offset != 0.0:
             raise InputFileError(f"{cw}: a LinearTransformation with an offset is not supported (factor only)")
-        unit = {x.name: x for x in mds[tu].modelVariables}[tv].unit or ""
-        couplings.append(Coupling((su, sv), (tu, tv), e.factor, unit))
+        unit = ends[1].unit or ""
+        factor = e.factor
+        if not e.transformed and not e.suppress_unit_conversion:
+            factor = _unit_conversion(ends[0].unit or "", unit, ssd.units, cw)
+        couplings.append(Coupling((su, sv), (tu, tv), factor, unit))
     if run and run["record"] and record is None:
         recorded = tuple(Recorded(*r) for r in run["record"])
     else:
@@ -178,6 +184,44 @@ def to_system(ssd: Ssd, record: Optional[list] = None):
             step = (stop - start) / 1000.0
     return CosimSystem(ssd.system or ssd.name, tuple(units), tuple(couplings), recorded, start, stop, float(step),
                        order, settings)
+
+
+def _unit(name: str, defined: dict, where: str):
+    """(base-unit exponents, factor, offset) of unit ``name``: the archive's own definition (SSD ``Units``),
+    else fmugen's reading of the Modelica unit syntax; None when neither knows it."""
+    from ..fmi.units import BASE, base_units
+
+    d = defined.get(name)
+    if d:
+        try:
+            return (tuple(int(d.get(b, 0)) for b in BASE), float(d.get("factor", 1.0)),
+                    float(d.get("offset", 0.0)))
+        except ValueError:
+            raise InputFileError(f"{where}: unit {name!r}: its BaseUnit is not numbers: {d}") from None
+    try:
+        u = base_units(name)
+    except ValueError:
+        return None
+    return tuple(getattr(u, b) for b in BASE), u.factor, u.offset
+
+
+def _unit_conversion(source: str, target: str, defined: dict, where: str) -> float:
+    """The factor a connection without a LinearTransformation converts by (SSP 1.0: an importer converts
+    between the connectors' units unless suppressUnitConversion): 1 for equal units; refused when the
+    units are different quantities, unknown, or need an offset (degC) -- a stated factor is then needed."""
+    if not source or not target or source == target:
+        return 1.0
+    a, b = _unit(source, defined, where), _unit(target, defined, where)
+    if a is None or b is None:
+        raise InputFileError(f"{where}: cannot convert [{source}] to [{target}] (unit {source if a is None else target!r} "
+                             f"unknown): state a LinearTransformation or suppressUnitConversion=\"true\"")
+    if a[0] != b[0]:
+        raise InputFileError(f"{where}: [{source}] and [{target}] are different quantities: state a "
+                             f"LinearTransformation or suppressUnitConversion=\"true\"")
+    if a[2] != 0.0 or b[2] != 0.0:
+        raise InputFileError(f"{where}: converting [{source}] to [{target}] needs an offset, which the master's "
+                             f"couplings (target = factor x source) do not have")
+    return a[1] / b[1]
 
 
 def _osp_step(ssd: Ssd) -> Optional[float]:

@@ -84,9 +84,16 @@ def report_ssp(system, steps, schemes, repeats: int = 1, stop=None, workers: int
                     status, err = f"refused: {exc}", None
                     break
                 walls.append(r.summary.wall_time)
-                if not r.ok:
-                    status = r.summary.failure.kind if hasattr(r.summary.failure, "kind") else "failed"
+                s = r.summary
+                # as the scene's report: a run that reached the stop time is measured, an unreliable one
+                # labelled with its verdict; a failed one says why (it was "failed", and no error, for both)
+                finished = r.ok or (s.failure is None and len(r.time) > 0
+                                    and r.time[-1] >= stop - 1e-9 * max(1.0, abs(stop)))
+                if not finished:
+                    status = "failed: " + (str(s.failure).splitlines()[0] if s.failure else s.status)
                     break
+                if not r.ok:
+                    status = f"unreliable: {s.reliability}" if getattr(s, "reliability", "") else s.status
                 err = _error(r, ref, cols)
             rows.append((scheme, ext, h, err, status, statistics.median(walls) if walls else math.nan))
             if progress:

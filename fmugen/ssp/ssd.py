@@ -82,6 +82,7 @@ class Connection:
     factor: float = 1.0
     offset: float = 0.0
     transformed: bool = False  # a LinearTransformation was given
+    suppress_unit_conversion: bool = False  # the connection's suppressUnitConversion
 
 
 @dataclass
@@ -308,9 +309,9 @@ def read_ssd(folder: Path, origin: Path) -> Ssd:
                 inline = b.find("ssd:ParameterValues/ssv:ParameterSet", NS)
                 values = _parameter_set(inline, bw) if inline is not None else {}
             for k, v in values.items():
-                if prefix and not k.startswith(prefix):
-                    continue
-                params[k[len(prefix):]] = v
+                # SSP 1.0 (SystemStructureDescription.xsd, ParameterBinding/@prefix): "the specified prefix is
+                # prepended to all names in the parameter source" -- not stripped from them
+                params[prefix + k] = v
         components[name] = Component(name, c.get("source"), ctype, tuple(conns), params)
     connections = []
     for e in system.iterfind("ssd:Connections/ssd:Connection", NS):
@@ -325,11 +326,10 @@ def read_ssd(folder: Path, origin: Path) -> Ssd:
                                                             "IntegerMappingTransformation",
                                                             "EnumerationMappingTransformation")):
             raise InputFileError(f"{cw}: mapping transformations are not supported (LinearTransformation is)")
-        if e.get("suppressUnitConversion", "false") in ("true", "1"):
-            pass  # fmugen converts no units on its own: only stated factors
         f = _float(lin, "factor", cw, 1.0) if lin is not None else 1.0
         o = _float(lin, "offset", cw, 0.0) if lin is not None else 0.0
-        connections.append(Connection((se, sc), (ee, ec), f, o, lin is not None))
+        connections.append(Connection((se, sc), (ee, ec), f, o, lin is not None,
+                                      e.get("suppressUnitConversion", "false") in ("true", "1")))
     units = {}
     for u in root.iterfind("ssd:Units/ssc:Unit", NS):
         b = u.find("ssc:BaseUnit", NS)
