@@ -88,3 +88,20 @@ def test_a_horizontal_base_axis_is_swept_too(tmp_path):
     assert need[1].tau_g == pytest.approx(1.5 * 9.81 * 0.7 / 2, rel=1e-12)
     arm = fmugen.load_robot(ROOT / "robots/puma_thesis_com.toml")  # vertical base axis: q1 stays 0
     assert set(arm_sizing.pose_grid(arm, 3)[:, 0]) == {0.0}
+
+
+def test_symbolic_parameters_take_set_values(tmp_path):
+    """Horn's arm keeps m, l, g symbolic: fmugen size takes them by --set (it had no way to, and its message
+    named a Python keyword); the worst torques are the closed forms 2 m g l and m g l/2 (arm horizontal)."""
+    import subprocess
+    import sys
+
+    need = arm_sizing.requirements(ROOT / "robots/horn_2link.toml", params={"m": 1.5, "l": 0.7, "g": 9.81})
+    assert [n.tau_g for n in need] == pytest.approx([2 * 1.5 * 9.81 * 0.7, 1.5 * 9.81 * 0.7 / 2], rel=1e-12)
+    cmd = [sys.executable, "-m", "fmugen.cli", "size", "robots/horn_2link.toml", "--out", str(tmp_path / "s")]
+    out = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 2 and "need a value: --set m=VALUE" in out.stderr
+    out = subprocess.run(cmd + ["--set", "m=1.5", "--set", "l=0.7", "--set", "g=9.81"], capture_output=True,
+                         text=True, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    assert "worst gravity torque 20.6," in (tmp_path / "s" / "joint1.toml").read_text()  # 2 m g l = 20.601

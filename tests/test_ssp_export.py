@@ -59,8 +59,8 @@ def test_archive_layout_schema_and_bindings(exported):
 
 
 def test_libcosim_runs_the_archive_unchanged(exported):
-    """libcosim's fixed step comes from the archive (1 ms, below the 4.0 ms Jacobi/held limit of the
-    shared note); its results equal fmugen's Jacobi/held at that step to round-off."""
+    """libcosim's fixed step comes from the archive (1 ms, below the 4.0 ms Jacobi/held limit of
+    docs/actuator-chain.md); its results equal fmugen's Jacobi/held at that step to round-off."""
     libcosimpy = pytest.importorskip("libcosimpy")  # noqa: F841
     from libcosimpy.CosimEnums import CosimVariableType
     from libcosimpy.CosimExecution import CosimExecution

@@ -66,7 +66,7 @@ def _arm(robot):
     return fmugen.load_robot(robot) if isinstance(robot, (str, Path)) else robot
 
 
-def pose_grid(arm, n_grid: int = 5, max_poses: int = 4096, seed: int = 0) -> np.ndarray:
+def pose_grid(arm, n_grid: int = 5, max_poses: int = 4096, seed: int = 0, params=None) -> np.ndarray:
     """Poses: a grid of ``n_grid`` values per joint (the first joint left at 0 when it changes no gravity
     torque -- a vertical base axis, or any prismatic one: gravity is uniform -- which is checked on
     random poses, not assumed), sampled at random down to ``max_poses`` when the grid is larger."""
@@ -80,7 +80,7 @@ def pose_grid(arm, n_grid: int = 5, max_poses: int = 4096, seed: int = 0) -> np.
             hi = lim.upper if lim.upper is not None else hi
         ranges.append(np.linspace(lo, hi, n_grid))
     rng = np.random.default_rng(seed)
-    if not _first_joint_moves_gravity(arm, ranges, rng):
+    if not _first_joint_moves_gravity(arm, ranges, rng, params=params):
         ranges[0] = np.array([0.0])
     n = int(np.prod([len(r) for r in ranges]))
     if n <= max_poses:
@@ -88,35 +88,60 @@ def pose_grid(arm, n_grid: int = 5, max_poses: int = 4096, seed: int = 0) -> np.
     return np.array([[rng.choice(r) for r in ranges] for _ in range(max_poses)])
 
 
-def _first_joint_moves_gravity(arm, ranges, rng, poses: int = 4) -> bool:
+def _first_joint_moves_gravity(arm, ranges, rng, poses: int = 4, params=None) -> bool:
     """Whether turning (or sliding) the first joint changes the gravity torques h(q, 0) of some pose."""
-    zero = np.zeros(arm.n)
+    zero, params = np.zeros(arm.n), dict(params or {})
     for _ in range(poses):
         q = np.array([rng.uniform(r[0], r[-1]) for r in ranges])
         q[0] = 0.0
-        ref = np.asarray(arm.bias(q, zero), dtype=float)
+        ref = np.asarray(arm.bias(q, zero, **params), dtype=float)
         scale = max(float(np.max(np.abs(ref))), 1e-300)
         for a in (ranges[0][0], 0.5 * (ranges[0][0] + ranges[0][-1]) + 0.3, ranges[0][-1]):
             q[0] = a
-            if np.max(np.abs(np.asarray(arm.bias(q, zero), dtype=float) - ref)) > 1e-9 * scale:
+            if np.max(np.abs(np.asarray(arm.bias(q, zero, **params), dtype=float) - ref)) > 1e-9 * scale:
                 return True
     return False
 
 
+def _checked_params(arm, params) -> dict:
+    """``params`` (name -> value) as finite floats for parameters the robot file has, the file's own checks
+    applied to the new values; a symbolic parameter without a value is named with the flag that gives one."""
+    from ..scene.errors import did_you_mean
+    from ..values import as_number, robot_value_problem
+
+    names = {p.name: p for p in arm.robot.parameters}
+    out = {}
+    for k, v in dict(params or {}).items():
+        if k not in names:
+            raise FmugenError(f"{arm.robot.name}: --set {k}: the robot file has no parameter {k!r}"
+                              f"{did_you_mean(k, names)}; parameters: {', '.join(names) or '-'}")
+        out[k] = as_number(v, f"{arm.robot.name}: --set {k}")
+    missing = [k for k, p in names.items() if p.value is None and k not in out]
+    if missing:
+        raise FmugenError(f"{arm.robot.name}: symbolic parameter(s) {', '.join(missing)} need a value: "
+                          f"--set {missing[0]}=VALUE")
+    problem = robot_value_problem(arm.robot, out) if out else None
+    if problem:
+        raise FmugenError(f"{arm.robot.name}: --set: {problem}")
+    return out
+
+
 def requirements(robot, poses: Optional[np.ndarray] = None, trajectory: Optional[tuple] = None,
-                 n_grid: int = 5, speed: float = 1.0) -> list:
+                 n_grid: int = 5, speed: float = 1.0, params=None) -> list:
     """[JointNeed] per joint (module doc).  ``trajectory``: (times, q[n_samples, n]);
-    ``speed``: the required joint speed [rad/s or m/s] when there is no trajectory and no velocity limit."""
+    ``speed``: the required joint speed [rad/s or m/s] when there is no trajectory and no velocity limit;
+    ``params``: values of the robot file's parameters (its symbolic ones need one), checked as the file's."""
     arm = _arm(robot)
+    params = _checked_params(arm, params)
     n = arm.n
-    P = pose_grid(arm, n_grid) if poses is None else np.atleast_2d(np.asarray(poses, dtype=float))
+    P = pose_grid(arm, n_grid, params=params) if poses is None else np.atleast_2d(np.asarray(poses, dtype=float))
     if P.shape[1] != n:
         raise FmugenError(f"sizing: poses have {P.shape[1]} joints, the arm {n}")
     zero = np.zeros(n)
     tau_g, J = np.zeros(n), np.zeros(n)
     for q in P:
-        tau_g = np.maximum(tau_g, np.abs(np.asarray(arm.bias(q, zero), dtype=float)))
-        J = np.maximum(J, np.diag(np.asarray(arm.mass_matrix(q), dtype=float)))
+        tau_g = np.maximum(tau_g, np.abs(np.asarray(arm.bias(q, zero, **params), dtype=float)))
+        J = np.maximum(J, np.diag(np.asarray(arm.mass_matrix(q, **params), dtype=float)))
     tau_peak = w_peak = None
     if trajectory is not None:
         t, Q = np.asarray(trajectory[0], dtype=float), np.atleast_2d(np.asarray(trajectory[1], dtype=float))
@@ -124,7 +149,7 @@ def requirements(robot, poses: Optional[np.ndarray] = None, trajectory: Optional
             raise FmugenError(f"sizing: the trajectory needs increasing times and q of shape (samples, {n})")
         Qd = np.gradient(Q, t, axis=0, edge_order=2)
         Qdd = np.gradient(Qd, t, axis=0, edge_order=2)
-        tau_peak = np.max(np.abs([np.asarray(arm.inverse_dynamics(q, qd, qdd), dtype=float)
+        tau_peak = np.max(np.abs([np.asarray(arm.inverse_dynamics(q, qd, qdd, **params), dtype=float)
                                   for q, qd, qdd in zip(Q, Qd, Qdd)]), axis=0)
         w_peak = np.max(np.abs(Qd), axis=0)
     out = []
@@ -250,6 +275,8 @@ def add_parser(sub) -> None:
     p.add_argument("--margin", type=float, default=None, help="torque margin (default 2 hydraulic, 1.5 electric)")
     p.add_argument("--alpha", type=float, default=100.0,
                    help="joint acceleration the actuator must give the worst inertia [rad/s^2] (default 100)")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="a value of a parameter of the robot file (repeatable; its symbolic ones need one), e.g. m=1.5")
     p.add_argument("--out", required=True, help="folder for joint<k>.toml")
     p.set_defaults(func=run)
 
@@ -272,7 +299,10 @@ def run(args) -> int:
     margin = args.margin if args.margin is not None else (2.0 if args.kind == "hydraulic" else 1.5)
     if not 1 <= args.grid <= 50 or not all(math.isfinite(x) and x > 0 for x in (args.speed, args.alpha, margin)):
         raise FmugenError("size: --grid must be 1..50; --speed, --alpha and --margin positive numbers")
-    needs = requirements(args.robot, trajectory=traj, n_grid=args.grid, speed=args.speed)
+    from ..scene import parse_sets
+
+    needs = requirements(args.robot, trajectory=traj, n_grid=args.grid, speed=args.speed,
+                         params=parse_sets(args.set))
     if args.kind == "hydraulic":
         sets = hydraulic_sets(needs, margin=margin, alpha_ref=args.alpha)
     else:

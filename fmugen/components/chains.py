@@ -1,4 +1,4 @@
-"""Ready-made assemblies: the one-joint hydraulic test rig of the shared note.
+"""Ready-made assemblies: the one-joint hydraulic test rig of docs/actuator-chain.md.
 
 amplifier -> current driver -> servo valve -> actuator -> joint inertia
 (actuator-chain.md, "Equations (one joint)"), closed by the position
