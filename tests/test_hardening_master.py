@@ -102,3 +102,26 @@ def test_broken_fmus_give_one_line_naming_the_fmu(lag, tmp_path):
                        (tmp_path / "none.fmu", "the file does not exist")):
         with pytest.raises(CosimError, match=said):
             run(chain(lag, path), scheme="jacobi")
+
+
+def test_an_fmu_that_unzips_beyond_the_bound_is_refused_before_unzipping(lag, tmp_path, monkeypatch):
+    """The master extracts an FMU (fmpy.extract, no size bound of its own): an FMU declaring more than
+    MAX_UNZIPPED_BYTES (sources/ aside) is refused, naming the FMU, before a byte is written."""
+    import zipfile
+
+    import fmugen.cosim.loading as loading
+
+    declared = sum(i.file_size for i in zipfile.ZipFile(lag).infolist()
+                   if not i.filename.startswith(("sources/", "documentation/")))
+    monkeypatch.setattr(loading, "MAX_UNZIPPED_BYTES", declared - 1)
+    with pytest.raises(CosimError, match=r"^FMU 'A' \(.*lag.fmu\): unzips to 0 MB, more than the 0 MB"):
+        run(chain(lag), scheme="jacobi")
+    monkeypatch.setattr(loading, "MAX_UNZIPPED_BYTES", declared)
+    assert run(chain(lag, _copy(lag, tmp_path / "fits.fmu")), scheme="jacobi").ok
+
+
+def _copy(src, dst):
+    import shutil
+
+    shutil.copy(src, dst)
+    return dst

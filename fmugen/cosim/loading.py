@@ -2,7 +2,8 @@
 
 A third-party FMU may be anything: not a zip, an empty file, a FIFO, FMI 1.0,
 a modelDescription.xml that is not XML (or 300 MB of it), a model
-identifier without its binary, a binary for another platform only.  fmpy
+identifier without its binary, a binary for another platform only, a zip that
+unzips to more than :data:`MAX_UNZIPPED_BYTES`.  fmpy
 and the zip/XML libraries each raise their own exceptions for these, whose
 text names neither the FMU nor what to do.  :func:`read_description` checks
 what can be checked before parsing, parses under one guard, and raises
@@ -24,12 +25,18 @@ from pathlib import Path
 
 from .errors import CosimError
 
-__all__ = ["MAX_DESCRIPTION_BYTES", "read_description", "load_failure", "platform_binary"]
+__all__ = ["MAX_DESCRIPTION_BYTES", "MAX_UNZIPPED_BYTES", "read_description", "load_failure", "platform_binary"]
 
 #: largest modelDescription.xml read (uncompressed): a generated PUMA arm's is
 #: ~100 KB; 64 MB holds a model with some 100 000 variables, and bounds the
 #: memory and time a hostile file can make the parser spend
 MAX_DESCRIPTION_BYTES = 64 * 1024 * 1024
+#: most the master unzips of one FMU (binaries, resources, the description; not sources/ nor
+#: documentation/, which it skips) and most members: a zip bomb inside an SSP's FMU would otherwise
+#: fill the disk (the SSP's own extraction is bounded, fmpy's extraction of the FMU is not).  The
+#: sizes are the ones the zip declares: Python's zipfile stops a member at its declared size.
+MAX_UNZIPPED_BYTES = 2 << 30
+MAX_MEMBERS = 65536
 
 
 def _label(name: str, path: Path) -> str:
@@ -61,7 +68,15 @@ def read_description(name: str, path, interface: str):
         raise CosimError(f"{where}: the file is empty; an FMU is a zip file")
     try:
         with zipfile.ZipFile(path) as z:
-            names = set(z.namelist())
+            infos = z.infolist()
+            names = {i.filename for i in infos}
+            if len(infos) > MAX_MEMBERS:
+                raise CosimError(f"{where}: {len(infos)} members in the zip, more than the {MAX_MEMBERS} this "
+                                 f"master unzips")
+            unzipped = sum(i.file_size for i in infos if not i.filename.startswith(("sources/", "documentation/")))
+            if unzipped > MAX_UNZIPPED_BYTES:
+                raise CosimError(f"{where}: unzips to {unzipped / 2**20:.0f} MB, more than the "
+                                 f"{MAX_UNZIPPED_BYTES // 2**20} MB this master extracts")
             try:
                 info = z.getinfo("modelDescription.xml")
             except KeyError:
