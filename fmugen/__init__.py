@@ -40,19 +40,22 @@ def __dir__():
     return sorted(list(globals()) + list(_LAZY))
 
 
-def load_robot(path, formulation: str = "newton_euler", mimic: str = "independent") -> "Manipulator":
+def load_robot(path, formulation: str = "newton_euler", mimic: str = "independent",
+               armature: dict | None = None) -> "Manipulator":
     """Read a robot file (TOML or URDF) and return its :class:`Manipulator`.
 
     ``formulation`` chooses the default derivation: "newton_euler" (DYNAMAN's
     nested bodies) or "lagrange" (the thesis's recursive Lagrange); every
     numeric evaluator also takes ``formulation=`` per call.  ``mimic``
     (URDF): "independent" (default, as Pinocchio) or "tied" (a mimic joint
-    follows its leader in the state-space model).
+    follows its leader in the state-space model).  ``armature`` (URDF):
+    ``{joint name: rotor inertia}`` added to M_ii as Pinocchio's
+    ``model.armature`` (parameters ``Ia_<joint>``; URDF has no field for it).
     """
     from .dynamics.manipulator import Manipulator
     from .robot.loader import load_robot_description
 
-    return Manipulator(load_robot_description(path, mimic=mimic), formulation)
+    return Manipulator(load_robot_description(path, mimic=mimic, armature=armature), formulation)
 
 
 def load_scene(path, set=None, allow_factories: bool = False):

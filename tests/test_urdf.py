@@ -499,6 +499,45 @@ def test_a_joint_that_moves_nothing_is_refused(tmp_path):
     refused(text, "joint 'elbow': moves no mass", tmp_path)
 
 
+def test_armature_makes_a_joint_that_moves_nothing_buildable(tmp_path):
+    """The refusal names the fix, a rotor (armature) inertia; with it (API and scene) the dynamics equal
+    Pinocchio's with the same model.armature (as examples/urdf_table.py builds Romeo's hands)."""
+    from fmugen.scene import load_scene
+
+    text = arm_urdf(tool_mass="0.0", tcp="").replace('<mass value="1.2"/>', '<mass value="0"/>').replace(
+        '<inertia ixx="0.002" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/>', '').replace(
+        '<inertia ixx="0.001" ixy="0.0001" ixz="0" iyy="0.002" iyz="0" izz="0.0015"/>', '')
+    refused(text, r"armature = \{ elbow = 1e-3 \}", tmp_path)
+    with pytest.raises(RobotFileError, match="armature.*'elbw'.*no moving joint of that name; joints: shoulder, elbow"):
+        robot_from_urdf(text, "x.urdf", armature={"elbw": 1e-3})
+    with pytest.raises(RobotFileError, match="must be a finite number >= 0"):
+        robot_from_urdf(text, "x.urdf", armature={"elbow": -1.0})
+    robot = robot_from_urdf(text, "x.urdf", armature={"elbow": 2e-3})
+    ia = {p.name: p for p in robot.parameters}["Ia_elbow"]
+    assert (ia.value, ia.unit) == (2e-3, "kg.m2")
+    arm = Manipulator(robot)
+    model = pin.buildModelFromXML(text)
+    model.armature[model.joints[model.getJointId("elbow")].idx_v] = 2e-3
+    data = model.createData()
+    zero = {p.name: 0.0 for p in robot.parameters if p.name.startswith(("b_", "fc_"))}
+    q, qd, tau = np.array([0.3, -0.4]), np.array([0.5, 0.2]), np.array([1.0, 0.01])
+    ref = pin.aba(model, data, q, qd, tau)
+    assert np.abs(arm.forward_dynamics(q, qd, tau, **zero) - ref).max() <= 1e-12 * np.abs(ref).max()
+
+    (tmp_path / "arm.urdf").write_text(text)
+    (tmp_path / "s.toml").write_text("""
+[scene]
+name = "armature"
+[instances.arm]
+robot = "arm.urdf"
+armature = { elbow = 2e-3 }
+[fmus.arm]
+members = ["arm"]
+""")
+    m, _ = load_scene(tmp_path / "s.toml").instance_model("arm")
+    assert {v.name: v.start for v in m.parameters}["Ia_elbow"] == 2e-3
+
+
 def test_mimic_joints_tied_to_their_leader(tmp_path):
     """mimic="tied": the elbow follows the shoulder (q2 = -0.5 q1 + 0.1); the model keeps one joint and its
     acceleration is the projection G^T M G qdd = G^T (tau - h) of the full arm's M and h (numpy)."""

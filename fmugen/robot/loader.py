@@ -93,18 +93,21 @@ def is_urdf(path) -> bool:
     return name.endswith((".urdf", ".xacro"))
 
 
-def load_robot_description(path, mimic: str = "independent") -> Robot:
+def load_robot_description(path, mimic: str = "independent", armature: dict | None = None) -> Robot:
     """Read, check and convert the robot file at ``path`` (TOML, or URDF: :mod:`fmugen.robot.urdf`).
 
     Raises :class:`RobotFileError` naming the file, link and field of the
     first problem found; warns (:class:`UnrealisableInertiaWarning`) for an
     unrealisable inertia the file explicitly allows.
     """
+    if armature and not is_urdf(path):
+        raise RobotFileError(f"{path}: armature is for URDF robots; a TOML robot gives each joint's "
+                             f"rotor_inertia in its file")
     path = Path(path)
     if is_urdf(path):
         from .urdf import load_urdf
 
-        return load_urdf(path, mimic=mimic)
+        return load_urdf(path, mimic=mimic, armature=armature)
     try:
         text = read_text_file(path, "robot file")
     except InputFileError as exc:

@@ -93,7 +93,7 @@ class MimicJointWarning(UserWarning):
     """The URDF has mimic joints; fmugen reads them as independent joints."""
 
 
-def load_urdf(path, mimic: str = "independent") -> Robot:
+def load_urdf(path, mimic: str = "independent", armature: dict | None = None) -> Robot:
     """Read, check and convert the URDF file at ``path``.
 
     ``mimic``: "independent" (every mimic joint is a joint of its own, with a
@@ -114,17 +114,18 @@ def load_urdf(path, mimic: str = "independent") -> Robot:
         text = read_text_file(path, "URDF file")
     except InputFileError as exc:
         raise RobotFileError(str(exc)) from None
-    return robot_from_urdf(text, source=str(path), stem=path.stem, mimic=mimic)
+    return robot_from_urdf(text, source=str(path), stem=path.stem, mimic=mimic, armature=armature)
 
 
-def robot_from_urdf(text: str, source: str = "<string>", stem: str = "robot", mimic: str = "independent") -> Robot:
+def robot_from_urdf(text: str, source: str = "<string>", stem: str = "robot", mimic: str = "independent",
+                    armature: dict | None = None) -> Robot:
     """Like :func:`load_urdf` for the text of a URDF file; ``source`` names it in messages."""
     if mimic not in ("independent", "tied"):
         raise ValueError(f"mimic must be 'independent' or 'tied', not {mimic!r}")
     if len(text.encode("utf-8", "surrogatepass")) > MAX_BYTES:
         raise RobotFileError(f"{source}: more than {MAX_BYTES} bytes; a URDF file is read up to that size")
     root = _parse(text, source)
-    return _Reader(source, mimic).robot(root, stem)
+    return _Reader(source, mimic, armature).robot(root, stem)
 
 
 # ------------------------------------------------------------------ parsing
@@ -199,9 +200,10 @@ def _smatrix(R: np.ndarray) -> sp.Matrix:
 
 
 class _Reader:
-    def __init__(self, source: str, mimic: str = "independent"):
+    def __init__(self, source: str, mimic: str = "independent", armature: dict | None = None):
         self.file = source
         self.mimic = mimic
+        self.armature = dict(armature or {})
         self.params: dict = {}  # name -> Parameter
         self.taken: set = set()
 
@@ -375,9 +377,10 @@ class _Reader:
                 axis=j["axis"], mass=mass, com=com, inertia_com=inertia,
                 damping=j["damping"], friction=friction, friction_velocity=v_c if friction != 0 else _Z,
                 joint_name=j["name"], limits=j["limits"]))
+        out = self._armature(out)
         used = set()
         for b in out:
-            for e in (b.mass, b.damping, b.friction, b.friction_velocity, *b.com, *b.translation,
+            for e in (b.mass, b.rotor_inertia, b.damping, b.friction, b.friction_velocity, *b.com, *b.translation,
                       *(x for row in b.inertia_com for x in row)):
                 used |= sp.sympify(e).free_symbols
         for f in frames:
@@ -392,6 +395,32 @@ class _Reader:
             name=name, convention=JOINTS, links=(), gravity=gravity, parameters=params,
             description=f"{name}: read from a URDF file",  # the file's own text never reaches C or XML
             source=self.file, bodies=tuple(out), frames=tuple(frames), end_frame=out[-1].name)
+
+    def _armature(self, bodies) -> list:
+        """Rotor (armature) inertia of the joints named in ``armature`` (URDF has no field for it).
+
+        Added to M_ii as ``model.armature`` is in Pinocchio (and ``rotor_inertia``
+        in fmugen's TOML robots); a named FMU parameter ``Ia_<joint>`` (kg.m2, or
+        kg on a prismatic joint) that ``--set`` changes.  It is what makes a joint
+        that moves no mass (Romeo's hands: links without <inertial>) buildable.
+        """
+        moving = {b.joint_name: i for i, b in enumerate(bodies)}
+        out = list(bodies)
+        for joint, value in self.armature.items():
+            what = f"armature {{ {_short(str(joint))} = ... }}"
+            if joint not in moving:
+                raise self._err(what, f"no moving joint of that name; joints: {', '.join(list(moving)[:8])}"
+                                + (" ..." if len(moving) > 8 else ""))
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                    or value < 0:
+                raise self._err(what, f"must be a finite number >= 0, got {value!r}")
+            i = moving[joint]
+            rev = out[i].joint == REVOLUTE
+            ia = self._param("Ia_{}", joint, float(value), "kg.m2" if rev else "kg",
+                             f"rotor (armature) inertia of joint {joint}, added to M_ii (not in the URDF: "
+                             f"given as armature)")
+            out[i] = replace(out[i], rotor_inertia=ia)
+        return out
 
     def _tie(self, bodies) -> list:
         """Body.mimic = (leader index, multiplier, offset) for every mimic joint (leaders must move freely)."""
@@ -444,11 +473,15 @@ class _Reader:
         for i, b in enumerate(bodies):
             k = np.array([num(x) for x in b.axis])
             m, h, I = comp[i]
-            mii = k @ I @ k if b.joint == REVOLUTE else m
+            mii = (k @ I @ k if b.joint == REVOLUTE else m) + num(b.rotor_inertia)
             if mii <= 1e-12 * scale:
+                unit = "kg.m2" if b.joint == REVOLUTE else "kg"
                 raise self._err(f"joint {b.joint_name!r}", "moves no mass and no inertia about its axis (the links "
-                                "it carries have no <inertial>): the mass matrix is singular; give them inertials "
-                                "or make the joint fixed")
+                                "it carries have no <inertial>): the mass matrix is singular; give them inertials, "
+                                "make the joint fixed, or give it a rotor (armature) inertia Ia_<joint> "
+                                f"[{unit}]: armature = {{ {b.joint_name} = 1e-3 }} in a scene's robot instance, "
+                                f"fmugen.load_robot(..., armature={{{b.joint_name!r}: 1e-3}}) "
+                                "(Pinocchio: model.armature)")
 
     def _joint(self, el, links) -> dict:
         name = self._name(el, "<joint>")

@@ -43,7 +43,7 @@ def ports(scene, inst: str) -> dict:
     if spec.kind == "robot":  # joint[k], and the joint's own name (URDF joint, DH link) for the same port
         import fmugen
 
-        bodies = fmugen.load_robot(spec.source).robot.bodies
+        bodies = fmugen.load_robot(spec.source, armature=spec.options.get("armature")).robot.bodies
         raw = {}
         for v in model.states:
             if v.name.startswith("q[") and v.name.endswith("]"):

@@ -22,7 +22,7 @@ SCENE_KEYS = {"name", "description", "parameter_set", "start", "stop", "step", "
               "initial", "prune", "connections", "monolithic", "connect", "record_bonds",
               "inputs"}
 COMMON_INSTANCE_KEYS = {"parameters", "fixed", "start", "hold"}
-ROBOT_KEYS = {"robot", "formulation", "locked", "outputs", "mimic"}
+ROBOT_KEYS = {"robot", "formulation", "locked", "outputs", "mimic", "armature"}
 FACTORY_KEYS = {"factory", "options", "parameter_set"}
 GROUP_KEYS = {"members", "fmi_type", "solver", "tolerance", "jacobian"}
 SOLVERS = {"dopri5": 1, "rodas3": 2, "rk4": 3}
@@ -376,6 +376,12 @@ def _instance(iname: str, spec, path: Path) -> InstanceSpec:
         opts = {"formulation": form, "outputs": outs}
         if mimic != "independent":
             opts["mimic"] = mimic  # only when set: the FMU cache keys of existing scenes stay the same
+        armature = spec.get("armature", {})
+        if not isinstance(armature, dict):
+            raise SceneError(f"{where} armature must be a table of URDF joint names and rotor inertias, "
+                             f"like {{ LHand = 1e-3 }}")
+        if armature:  # only when set, as mimic; the reader checks the joint names (URDF robots only)
+            opts["armature"] = {str(k): _number(v, f"{where} armature.{k}", nonneg=True) for k, v in armature.items()}
         return InstanceSpec(iname, "robot", str(rp.resolve()), opts,
                             None, params, fixed, start, hold, locked)
     if "factory" in spec:

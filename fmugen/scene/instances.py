@@ -100,7 +100,8 @@ def _robot_model(spec: InstanceSpec, where: str, outputs, strategy: str = "strai
 
     try:
         arm = fmugen.load_robot(spec.source, spec.options.get("formulation", "newton_euler"),
-                                mimic=spec.options.get("mimic", "independent"))
+                                mimic=spec.options.get("mimic", "independent"),
+                                armature=spec.options.get("armature"))
         if spec.locked:
             strategy = "straight"  # the looped dynamics have no locked joints
         return arm.state_space_model(outputs=tuple(outputs), name=spec.name, locked=spec.locked or None,

@@ -168,7 +168,8 @@ class SweepPlan:
                 import fmugen
 
                 if inst not in self._arms:
-                    self._arms[inst] = fmugen.load_robot(self.scene.spec.instances[inst].source).robot
+                    spec = self.scene.spec.instances[inst]
+                    self._arms[inst] = fmugen.load_robot(spec.source, armature=spec.options.get("armature")).robot
                 full = {v.name: v.start for v in m.parameters if v.start is not None}
                 full.update(given)
                 problem = robot_value_problem(self._arms[inst], full)
