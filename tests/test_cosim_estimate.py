@@ -49,3 +49,24 @@ def test_an_estimate_above_the_users_tolerance_is_unreliable_not_ok(ref):
     assert "exceeds the tolerance" in tight.summary.reliability
     # the same trajectory: only the verdict differs
     assert np.array_equal(loose.values, tight.values)
+
+
+def test_without_a_tolerance_an_estimate_as_large_as_the_signal_is_unreliable():
+    """A coupling that wrecked the answer early and then levelled off has no growing trend; its estimate,
+    as large as the signal itself, still says that no digit is known (accuracy.NO_DIGIT)."""
+    from fmugen.cosim.accuracy import NO_DIGIT, ErrorEstimate
+
+    def finished(local_error, tol=None):
+        e = ErrorEstimate("jacobi", "hold", n_steps=1200, columns=["q"], rtol=1e-8)
+        for k in range(12):  # twelve windows, each of the same (steady) local error: no trend
+            t = 0.1 * k
+            e.started(t, 1e-3, (np.zeros(1), np.zeros(1)), 100 * k)
+            for n in range(e.window):
+                e.accepted(1e-3, np.full(1, local_error if n == e.window - 1 else 0.0), 100 * k + n + 1)
+        values = np.ones((10, 1))  # the signal's largest value is 1
+        return e.finish(values, tol, 1200)
+
+    estimate, rel, trend, growth, verdict = finished(2.0 * NO_DIGIT)
+    assert trend != "growing" and rel > NO_DIGIT and "no digit" in verdict
+    assert finished(2.0 * NO_DIGIT, tol=1e3)[4] is None  # the user's own tolerance rules when given
+    assert finished(1e-4)[4] is None  # an estimate well below the signal: ok
