@@ -358,26 +358,17 @@ static int spd_inverse(int n, double *A, double *T, double *Minv)
     return FMUGEN_OK;
 }
 
-int fmugen_chain_fd_jacobian(int n, const int *jt, const double *lc, const double *g, const double *q,
-                             const double *qd, const double *tau, int ne, const int *ext_link,
-                             const double *ext, double *qdd, double *dqdd, double *dp_ee, double *work)
+/* Recursive Newton-Euler at (q, qd, qdd) -- S, I, fx from kinematics() and external_forces() -- and
+ * what its analytical derivatives need (see fmugen_chain_fd_jacobian): v, a, h, f, dv, w, uu (6n
+ * each), al (12n), P, Q (6n), ev (3n, with external wrenches), the subtree sums ICn, Kn (36n), HCn,
+ * Fn (6n), XS (16n), the lower triangle of M (n x n, rotor inertia included) and, when tauF is not
+ * NULL, S_i . (the subtree's force) per joint. */
+static void rnea_passes(int n, const int *jt, const double *lc, const double *g, const double *qd,
+                        const double *qdd, const double *fxp, const double *cft, double *S, const double *I,
+                        double *v, double *a, double *h, double *f, double *dv, double *w, double *uu, double *al,
+                        double *P, double *Q, double *ev, double *ICn, double *Kn, double *HCn, double *Fn,
+                        double *XS, double *M, double *tauF)
 {
-    size_t nn = (size_t)n * n, n15 = (size_t)15 * n;
-    double *R = work, *p = R + 9 * n, *S = p + 3 * n, *I = S + 6 * n, *IA = I + 36 * n, *v = IA + 36 * n;
-    double *a = v + 6 * n, *h = a + 6 * n, *f = h + 6 * n, *dv = f + 6 * n, *w = dv + 6 * n;
-    double *uu = w + 6 * n, *al = uu + 6 * n, *P = al + 12 * n, *Q = P + 6 * n;
-    double *c = Q + 6 * n, *pA = c + 6 * n, *U = pA + 6 * n, *D = U + 6 * n, *u = D + n, *acc = u + n;
-    double *fx = acc + 6 * n, *cft = fx + 6 * n, *ev = cft + 9 * n, *d = ev + 3 * n;
-    double *ICn = d + n, *Kn = ICn + 36 * n, *HCn = Kn + 36 * n, *Fn = HCn + 6 * n, *XS = Fn + 6 * n;
-    double *M = XS + 16 * n, *T = M + nn, *Mi = T + nn, *Hn = Mi + nn, *Gb = Hn + 6 * nn;
-    int *gb = (int *)(Gb + 15 * nn), *freeb = gb + n, *path = freeb + n;
-    double p_ee[3];
-    kinematics(n, jt, lc, g, q, R, p, S, I, p_ee);
-    const double *fxp = external_forces(n, ne, ext_link, ext, lc, R, p, fx, cft);
-    /* forward dynamics first: the derivatives are those of ID at qdd = FD */
-    memcpy(IA, I, (size_t)36 * n * sizeof(double));
-    int st = aba(n, jt, lc, g, qd, tau, fxp, S, IA, v, c, pA, U, D, u, acc, qdd);
-    if (st != FMUGEN_OK) return st;
     /* forward: v_i, a_i, momenta h_i = I_i v_i, forces f_i = I_i a_i + v_i x* h_i, and per joint j
      * (parent pj) dv_j = S_j x v_pj, w_j = S_j x a_pj - dv_j x v_pj, u_j = 2 v_pj x S_j */
     const double a0[6] = {0.0, 0.0, 0.0, -g[0], -g[1], -g[2]};
@@ -392,7 +383,8 @@ int fmugen_chain_fd_jacobian(int n, const int *jt, const double *lc, const doubl
             w[6 * i + k] = t[k] - t2[k];
             uu[6 * i + k] = -2.0 * dv[6 * i + k];
         }
-        crm(vi, Si, t); /* v_i as the ABA left it */
+        for (int k = 0; k < 6; k++) vi[k] = vp[k] + Si[k] * qd[i];
+        crm(vi, Si, t);
         for (int k = 0; k < 6; k++) ai[k] = ap[k] + Si[k] * qdd[i] + t[k] * qd[i];
         mv6(I + 36 * i, vi, h + 6 * i);
         mv6(I + 36 * i, ai, t);
@@ -405,10 +397,11 @@ int fmugen_chain_fd_jacobian(int n, const int *jt, const double *lc, const doubl
      * for the joints j on the path from i to the base, the vectors P_i, Q_i those
      * of column i for the joints before i; and M (lower) */
     memset(ICn, 0, (size_t)100 * n * sizeof(double)); /* ICn, Kn, HCn, Fn, XS */
-    memset(M, 0, nn * sizeof(double));
+    memset(M, 0, (size_t)n * n * sizeof(double));
     for (int i = n - 1; i >= 0; i--) {
         const double *L = lc + FMUGEN_CHAIN_NC * i;
-        double *Si = S + 6 * i, *Ii = I + 36 * i, t[6], t2[6], t3[6];
+        double *Si = S + 6 * i, t[6], t2[6], t3[6];
+        const double *Ii = I + 36 * i;
         double *IC = ICn + 36 * i, *K = Kn + 36 * i, *HC = HCn + 6 * i, *F = Fn + 6 * i;
         int par = jt[n + i];
         for (int k = 0; k < 36; k++) IC[k] += Ii[k];
@@ -417,6 +410,7 @@ int fmugen_chain_fd_jacobian(int n, const int *jt, const double *lc, const doubl
             HC[k] += h[6 * i + k];
             F[k] += f[6 * i + k];
         }
+        if (tauF) tauF[i] = dot6(Si, F); /* tau_i of recursive Newton-Euler, but rotor and friction */
         double *ali = al + 12 * i, *bgi = ali + 6, KS[6];
         mv6(IC, Si, ali);
         mv6(K, Si, KS);
@@ -481,6 +475,30 @@ int fmugen_chain_fd_jacobian(int n, const int *jt, const double *lc, const doubl
                 for (int k = 0; k < 16; k++) xp[k] += xs[k];
         }
     }
+}
+
+int fmugen_chain_fd_jacobian(int n, const int *jt, const double *lc, const double *g, const double *q,
+                             const double *qd, const double *tau, int ne, const int *ext_link,
+                             const double *ext, double *qdd, double *dqdd, double *dp_ee, double *work)
+{
+    size_t nn = (size_t)n * n, n15 = (size_t)15 * n;
+    double *R = work, *p = R + 9 * n, *S = p + 3 * n, *I = S + 6 * n, *IA = I + 36 * n, *v = IA + 36 * n;
+    double *a = v + 6 * n, *h = a + 6 * n, *f = h + 6 * n, *dv = f + 6 * n, *w = dv + 6 * n;
+    double *uu = w + 6 * n, *al = uu + 6 * n, *P = al + 12 * n, *Q = P + 6 * n;
+    double *c = Q + 6 * n, *pA = c + 6 * n, *U = pA + 6 * n, *D = U + 6 * n, *u = D + n, *acc = u + n;
+    double *fx = acc + 6 * n, *cft = fx + 6 * n, *ev = cft + 9 * n, *d = ev + 3 * n;
+    double *ICn = d + n, *Kn = ICn + 36 * n, *HCn = Kn + 36 * n, *Fn = HCn + 6 * n, *XS = Fn + 6 * n;
+    double *M = XS + 16 * n, *T = M + nn, *Mi = T + nn, *Hn = Mi + nn, *Gb = Hn + 6 * nn;
+    int *gb = (int *)(Gb + 15 * nn), *freeb = gb + n, *path = freeb + n;
+    double p_ee[3];
+    kinematics(n, jt, lc, g, q, R, p, S, I, p_ee);
+    const double *fxp = external_forces(n, ne, ext_link, ext, lc, R, p, fx, cft);
+    /* forward dynamics first: the derivatives are those of ID at qdd = FD */
+    memcpy(IA, I, (size_t)36 * n * sizeof(double));
+    int st = aba(n, jt, lc, g, qd, tau, fxp, S, IA, v, c, pA, U, D, u, acc, qdd);
+    if (st != FMUGEN_OK) return st;
+    rnea_passes(n, jt, lc, g, qd, qdd, fxp, cft, S, I, v, a, h, f, dv, w, uu, al, P, Q, ev, ICn, Kn, HCn, Fn, XS,
+                M, NULL);
     st = spd_inverse(n, M, T, Mi);
     if (st != FMUGEN_OK) return st;
     /* dqdd/dq = -Minv dID/dq, dqdd/dqd = -Minv dID/dqd, column by column, without forming dID:
@@ -601,6 +619,94 @@ int fmugen_chain_fd_jacobian(int n, const int *jt, const double *lc, const doubl
             double t[3], *Sj = S + 6 * j;
             cross3(Sj, p_ee, t);
             for (int r = 0; r < 3; r++) dp_ee[r * n + j] = Sj[3 + r] + t[r];
+        }
+    }
+    return FMUGEN_OK;
+}
+
+int fmugen_chain_id(int n, const int *jt, const double *lc, const double *g, const double *q, const double *qd,
+                    const double *qdd, int ne, const int *ext_link, const double *ext, double *tau, double *work)
+{
+    double *R = work, *p = R + 9 * n, *S = p + 3 * n, *I = S + 6 * n, *v = I + 36 * n, *a = v + 6 * n;
+    double *f = a + 6 * n, *fx = f + 6 * n, *cft = fx + 6 * n;
+    kinematics(n, jt, lc, g, q, R, p, S, I, NULL);
+    const double *fxp = external_forces(n, ne, ext_link, ext, lc, R, p, fx, cft);
+    const double a0[6] = {0.0, 0.0, 0.0, -g[0], -g[1], -g[2]};
+    for (int i = 0; i < n; i++) { /* base to leaves: v, a, f = I a + v x* I v - f_ext */
+        int par = jt[n + i];
+        const double *vp = par >= 0 ? v + 6 * par : ZERO6, *ap = par >= 0 ? a + 6 * par : a0, *Si = S + 6 * i;
+        double *vi = v + 6 * i, *ai = a + 6 * i, t[6], hh[6];
+        for (int k = 0; k < 6; k++) vi[k] = vp[k] + Si[k] * qd[i];
+        crm(vi, Si, t);
+        for (int k = 0; k < 6; k++) ai[k] = ap[k] + Si[k] * qdd[i] + t[k] * qd[i];
+        mv6(I + 36 * i, vi, hh);
+        crf(vi, hh, f + 6 * i);
+        mv6(I + 36 * i, ai, t);
+        for (int k = 0; k < 6; k++) f[6 * i + k] += t[k] - (fxp ? fxp[6 * i + k] : 0.0);
+    }
+    for (int i = n - 1; i >= 0; i--) { /* leaves to base: tau_i = S_i . (subtree force) + Ia qdd + friction */
+        const double *L = lc + FMUGEN_CHAIN_NC * i;
+        int par = jt[n + i];
+        tau[i] = dot6(S + 6 * i, f + 6 * i) + L[FMUGEN_CHAIN_ROTOR] * qdd[i] + joint_friction(L, qd[i], NULL);
+        if (par >= 0)
+            for (int k = 0; k < 6; k++) f[6 * par + k] += f[6 * i + k];
+    }
+    for (int i = 0; i < n; i++)
+        if (!isfinite(tau[i])) return FMUGEN_NOT_FINITE;
+    return FMUGEN_OK;
+}
+
+int fmugen_chain_id_jacobian(int n, const int *jt, const double *lc, const double *g, const double *q,
+                             const double *qd, const double *qdd, int ne, const int *ext_link, const double *ext,
+                             double *tau, double *dtau, double *work)
+{
+    double *R = work, *p = R + 9 * n, *S = p + 3 * n, *I = S + 6 * n, *v = I + 36 * n;
+    double *a = v + 6 * n, *h = a + 6 * n, *f = h + 6 * n, *dv = f + 6 * n, *w = dv + 6 * n;
+    double *uu = w + 6 * n, *al = uu + 6 * n, *P = al + 12 * n, *Q = P + 6 * n;
+    double *fx = Q + 6 * n, *cft = fx + 6 * n, *ev = cft + 9 * n;
+    double *ICn = ev + 3 * n, *Kn = ICn + 36 * n, *HCn = Kn + 36 * n, *Fn = HCn + 6 * n, *XS = Fn + 6 * n;
+    double *M = XS + 16 * n;
+    kinematics(n, jt, lc, g, q, R, p, S, I, NULL);
+    const double *fxp = external_forces(n, ne, ext_link, ext, lc, R, p, fx, cft);
+    rnea_passes(n, jt, lc, g, qd, qdd, fxp, cft, S, I, v, a, h, f, dv, w, uu, al, P, Q, ev, ICn, Kn, HCn, Fn, XS,
+                M, tau);
+    size_t k3 = 3 * (size_t)n + 6 * (size_t)(ne > 0 ? ne : 0);
+    memset(dtau, 0, (size_t)n * k3 * sizeof(double));
+    for (int i = 0; i < n; i++) {
+        const double *L = lc + FMUGEN_CHAIN_NC * i, *ali = al + 12 * i;
+        double slope, *row = dtau + i * k3;
+        tau[i] += L[FMUGEN_CHAIN_ROTOR] * qdd[i] + joint_friction(L, qd[i], &slope);
+        for (int j = i; j >= 0; j = jt[n + j]) { /* j on the path from i to the base (see the FD Jacobian) */
+            double sq = 0.0, sd = 0.0;
+            for (int k = 0; k < 6; k++) {
+                sq -= ali[k] * w[6 * j + k] + ali[6 + k] * dv[6 * j + k];
+                sd += ali[k] * uu[6 * j + k] + ali[6 + k] * S[6 * j + k];
+            }
+            if (fxp) sq += ev[3 * i] * S[6 * j] + ev[3 * i + 1] * S[6 * j + 1] + ev[3 * i + 2] * S[6 * j + 2];
+            row[j] = sq;
+            row[n + j] = sd + (j == i ? slope : 0.0);
+            row[2 * n + j] = M[(size_t)i * n + j];
+            if (j != i) { /* i lies beyond joint j: the upper entries of row j */
+                double *rj = dtau + j * k3;
+                rj[i] = dot6(S + 6 * j, Q + 6 * i);
+                rj[n + i] = dot6(S + 6 * j, P + 6 * i);
+                rj[2 * n + i] = M[(size_t)i * n + j];
+            }
+        }
+        if (!isfinite(tau[i])) return FMUGEN_NOT_FINITE;
+    }
+    /* dtau/dext: tau_i = ... - S_i . [t + c x f; f] for the joints i on the path from body k to the base */
+    for (int e = 0; e < ne; e++) {
+        int k = ext_link[e];
+        const double *ck = cft + 9 * k;
+        for (int i = k; i >= 0; i = jt[n + i]) {
+            const double *Si = S + 6 * i;
+            double x[3], *row = dtau + i * k3 + 3 * (size_t)n + 6 * (size_t)e;
+            cross3(Si, ck, x);
+            for (int comp = 0; comp < 3; comp++) {
+                row[comp] = -(x[comp] + Si[3 + comp]);
+                row[3 + comp] = -Si[comp];
+            }
         }
     }
     return FMUGEN_OK;

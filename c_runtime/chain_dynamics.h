@@ -75,4 +75,18 @@ FMUGEN_MODEL_HIDDEN int fmugen_chain_fd_jacobian(int n, const int *joint, const 
                                                  int ne, const int *ext_link, const double *ext,
                                                  double *qdd, double *dqdd, double *dp_ee, double *work);
 
+/* tau = ID(q, qd, qdd, ext) = M qdd + h (+ rotor inertia, damping, friction) by recursive Newton-Euler,
+ * O(n); work: FMUGEN_CHAIN_FD_WORK(n) doubles. */
+FMUGEN_MODEL_HIDDEN int fmugen_chain_id(int n, const int *joint, const double *lc, const double *g,
+                                        const double *q, const double *qd, const double *qdd,
+                                        int ne, const int *ext_link, const double *ext, double *tau, double *work);
+
+/* tau and its exact Jacobian dtau (n x (3n + 6 ne), row-major) = [dID/dq, dID/dqd, M, dID/dext],
+ * the same analytical derivatives as the forward dynamics' Jacobian without the solve;
+ * work: FMUGEN_CHAIN_WORK(n) doubles. */
+FMUGEN_MODEL_HIDDEN int fmugen_chain_id_jacobian(int n, const int *joint, const double *lc, const double *g,
+                                                 const double *q, const double *qd, const double *qdd,
+                                                 int ne, const int *ext_link, const double *ext,
+                                                 double *tau, double *dtau, double *work);
+
 #endif

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import ctypes
+from dataclasses import replace
 import os
 import statistics
 import subprocess
@@ -210,7 +211,7 @@ def arm_speed(path: Path, repeat: int, strategy: str, fold: bool = True) -> dict
     import warnings
 
     import pinocchio as pin
-    from fmugen.codegen.benchmarks import inverse_dynamics_model, pinocchio_urdf_map, to_pinocchio
+    from fmugen.codegen.benchmarks import pinocchio_urdf_map, to_pinocchio
     from fmugen.codegen.c_code import generate_c
     from fmugen.codegen.c_harness import CompiledModel
     from fmugen.dynamics.manipulator import Manipulator
@@ -229,7 +230,8 @@ def arm_speed(path: Path, repeat: int, strategy: str, fold: bool = True) -> dict
     zero = {p.name: 0.0 for p in robot.parameters if p.name.startswith(("b_", "fc_"))}
     t0 = time.process_time()
     fd_model = arm.state_space_model(outputs=(), strategy=strategy).without_jacobian()
-    id_model = inverse_dynamics_model(arm)
+    id_model = replace(arm.inverse_dynamics_model(strategy="straight"), jacobian=None, dfdx=None, dfdu=None,
+                       dgdx=None, dgdu=None)
 
     def folded(m):  # the URDF's numbers as constants (fmugen build --fold all), like Pinocchio's
         m = m.with_starts({k: x for k, x in zero.items() if k in {p.name for p in m.parameters}})

@@ -104,6 +104,21 @@ def test_jacobi_limit_of_the_split_rig_is_the_notes():
         assert abs(limit - ref) <= 0.01 * ref + half_digit, (name, limit)
 
 
+def test_default_step_is_the_largest_1_2_5_step_below_the_safety_limit():
+    """The archive's step (DefaultExperiment, libcosim's): the scene's step when below 0.8 x the limit,
+    else the largest 1-2-5 x 10^k below 0.8 x the limit -- by hand: the PUMA's 64 us limit gives 50 us."""
+    import math
+
+    from fmugen.scene.build import STABLE_SAFETY
+    from fmugen.scene.stability import stable_step
+
+    assert STABLE_SAFETY == 0.8
+    cases = [(64e-6, 1e-3, 5e-5), (4.03e-3, 1e-3, 1e-3), (1.2e-3, 1e-3, 5e-4), (2.4e-3, 1e-2, 1e-3),
+             (math.inf, 1e-2, 1e-2), (0.3e-3, 1e-3, 2e-4)]
+    for limit, step, expected in cases:
+        assert stable_step(limit, step, STABLE_SAFETY) == expected, (limit, step)
+
+
 def test_fmpy_simulate_ssp_is_held_jacobi_from_zero(exported):
     """FMPy's loop steps every FMU with held inputs from connectors that start at 0 and records the
     values after each step at the step's start time: on the split rig at rest at zero that is fmugen's

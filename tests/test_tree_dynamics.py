@@ -153,25 +153,38 @@ def test_tree_robot_through_the_generated_model():
     rbodies = tuple(Body(name=f"b{i}", joint=REVOLUTE if revolute[i] else PRISMATIC, parent=parents[i],
                          rotation=FM(b["R"]), translation=F(b["p"]), axis=F(b["axis"]), mass=sp.Float(b["mass"]),
                          com=F(b["com"]), inertia_com=FM(b["inertia"]), rotor_inertia=sp.Float(b["rotor_inertia"]),
-                         offset=sp.Float(offsets[i]))
+                         damping=sp.Float(b["damping"]), offset=sp.Float(offsets[i]))
                     for i, b in enumerate(bodies))
     tool = np.array([0.05, 0.1, -0.2])
     robot = Robot(name="tree", convention=JOINTS, links=(), gravity=F([0, 0, -9.81]), bodies=rbodies,
                   frames=(Frame("tool", 5, FM(np.eye(3)), F(tool)),), end_frame="tool")
     m = Manipulator(robot).state_space_model(outputs=("p_ee",), strategy="loops")
     data = model.createData()
+    b = np.array([body["damping"] for body in bodies])
     with CompiledModel.build(generate_c(m).source) as cm:
         p = np.array([v.start for v in m.parameters], float)
         for _ in range(2):
             q, qd, tau = rng.uniform(-np.pi, np.pi, n), rng.uniform(-2, 2, n), rng.uniform(-10, 10, n)
             dx, y = cm.evaluate(p, 0.0, np.r_[q, qd], tau)
             qp = q + offsets  # Pinocchio's joints have no offset: the motion is by q + offset
-            assert rel(dx[n:], pin.aba(model, data, qp, qd, tau)) < RTOL
+            assert rel(dx[n:], pin.aba(model, data, qp, qd, tau - b * qd)) < RTOL  # and no damping
             pin.forwardKinematics(model, data, qp)
             assert np.max(np.abs(y[:3] - data.oMi[6].act(tool))) < 1e-12
             dfdx, dfdu, _, _ = cm.jacobian(p, 0.0, np.r_[q, qd], tau)
-            pin.computeABADerivatives(model, data, qp, qd, tau)
-            assert rel(dfdx[n:, :n], data.ddq_dq) < RTOL and rel(dfdx[n:, n:], data.ddq_dv) < RTOL
+            pin.computeABADerivatives(model, data, qp, qd, tau - b * qd)
+            minv = np.triu(data.Minv) + np.triu(data.Minv, 1).T
+            assert rel(dfdx[n:, :n], data.ddq_dq) < RTOL and rel(dfdx[n:, n:], data.ddq_dv - minv * b[None, :]) < RTOL
+    # the inverse dynamics in the loops: tau and d tau / d(q, qd, qdd) against rnea and its derivatives
+    idm = Manipulator(robot).inverse_dynamics_model(strategy="loops")
+    with CompiledModel.build(generate_c(idm).source) as ci:
+        q, qd, qdd = rng.uniform(-np.pi, np.pi, n), rng.uniform(-2, 2, n), rng.uniform(-3, 3, n)
+        _, tau = ci.evaluate([], 0.0, [], np.r_[q, qd, qdd])
+        qp = q + offsets
+        assert rel(tau, pin.rnea(model, data, qp, qd, qdd) + b * qd) < RTOL
+        _, _, _, dgdu = ci.jacobian([], 0.0, [], np.r_[q, qd, qdd])
+        pin.computeRNEADerivatives(model, data, qp, qd, qdd)
+        M = np.triu(data.M) + np.triu(data.M, 1).T
+        assert rel(dgdu, np.c_[data.dtau_dq, data.dtau_dv + np.diag(b), M]) < RTOL
 
 
 def test_loops_equal_straight_line_code_on_a_tree_with_damping_and_friction():

@@ -69,21 +69,23 @@ NG = 6
 
 def chain_work_doubles(n: int, kind: str) -> int:
     """Work space of the runtime call, in doubles (``FMUGEN_CHAIN_FD_WORK``, ``FMUGEN_CHAIN_WORK`` of chain_dynamics.h)."""
-    return n * (312 + 24 * n) + 64 if kind == "jacobian" else 104 * n + 16
+    return n * (312 + 24 * n) + 64 if kind in ("jacobian", "id_jacobian") else 104 * n + 16
 
 
 @dataclass(frozen=True)
 class ChainDynamics(SolveSPD):
-    """``X = chain(B)``: the forward dynamics (``kind="fd"``) or its Jacobian of an n-body tree or chain.
+    """``X = chain(B)``: the forward dynamics (``kind="fd"``) or the inverse dynamics (``"id"``) of an
+    n-body tree or chain, or their Jacobians (``"jacobian"``, ``"id_jacobian"``).
 
-    ``B`` (column) = [q (n), qd (n), tau (n), body constants (n x NC, row by
-    row), global constants (NG), external wrenches (6 per entry of
-    ``external``: force at the body's centre of mass, torque; base
-    coordinates)]; ``A`` is empty.  ``X`` (column):
+    ``B`` (column) = [q (n), qd (n), tau (n; qdd for the inverse dynamics), body constants (n x NC,
+    row by row), global constants (NG), external wrenches (6 per entry of ``external``: force at
+    the body's centre of mass, torque; base coordinates)]; ``A`` is empty.  ``X`` (column):
 
-    * ``fd``:        [qdd (n), p_ee (3)]
-    * ``jacobian``:  [qdd (n), dqdd (n x (3n + 6e), row-major: d/dq, d/dqd, d/dtau, d/dext),
-                      dp_ee/dq (3 x n)]
+    * ``fd``:          [qdd (n), p_ee (3)]
+    * ``jacobian``:    [qdd (n), dqdd (n x (3n + 6e), row-major: d/dq, d/dqd, d/dtau, d/dext),
+                        dp_ee/dq (3 x n)]
+    * ``id``:          [tau (n)]
+    * ``id_jacobian``: [tau (n), dtau (n x (3n + 6e), row-major: d/dq, d/dqd, d/dqdd = M, d/dext)]
 
     ``revolute`` holds one bool per joint (False: prismatic); ``parent`` the
     parent of each body (-1: the base; parents are numbered first; empty:
@@ -99,6 +101,8 @@ class ChainDynamics(SolveSPD):
     ee_body: Optional[int] = None
 
     def __post_init__(self):
+        if self.kind not in ("fd", "jacobian", "id", "id_jacobian"):
+            raise ValueError(f"chain dynamics: unknown kind {self.kind!r}")
         n = len(self.revolute)
         par = self.parents
         if len(par) != n or any(not (-1 <= p < i) for i, p in enumerate(par)):
@@ -124,7 +128,8 @@ class ChainDynamics(SolveSPD):
 
     def outputs_size(self) -> int:
         n, e = self.n, len(self.external)
-        return n + 3 if self.kind == "fd" else n + n * (3 * n + 6 * e) + 3 * n
+        return {"fd": n + 3, "jacobian": n + n * (3 * n + 6 * e) + 3 * n, "id": n,
+                "id_jacobian": n + n * (3 * n + 6 * e)}[self.kind]
 
 
 def link_constants(chain, gravity: Sequence) -> list:
@@ -225,8 +230,9 @@ def chain_call_lines(st: ChainDynamics, index: int, b_code: list, ind: str) -> t
     joint = ", ".join(str(j) for j in st.joint_array())
     nb = 3 * n + NC * n + NG + 6 * ne
     nx = st.outputs_size()
-    lines = [f"{ind}/* {'forward dynamics' if st.kind == 'fd' else 'Jacobian of the forward dynamics'} "
-             f"of the {n}-body {'chain' if st.parents == tuple(range(-1, n - 1)) else 'tree'}: "
+    what = {"fd": "forward dynamics", "jacobian": "Jacobian of the forward dynamics", "id": "inverse dynamics",
+            "id_jacobian": "inverse dynamics and its Jacobian"}[st.kind]
+    lines = [f"{ind}/* {what} of the {n}-body {'chain' if st.parents == tuple(range(-1, n - 1)) else 'tree'}: "
              f"loops of c_runtime/chain_dynamics.c */",
              f"{ind}/* joint types (1 revolute, 0 prismatic), parents (-1 base), end-effector body */",
              f"{ind}static const int {tag}_jt[{2 * n + 1}] = {{{joint}}};"]
@@ -237,16 +243,22 @@ def chain_call_lines(st: ChainDynamics, index: int, b_code: list, ind: str) -> t
     q, lc, g = f"{tag}_in", f"{tag}_in + {3 * n}", f"{tag}_in + {3 * n + NC * n}"
     ext = f"{ne}, {tag}_ext, {tag}_in + {3 * n + NC * n + NG}" if ne else "0, NULL, NULL"
     args = f"{n}, {tag}_jt, {lc}, {g}, {q}, {q} + {n}, {q} + {2 * n}, {ext}"
-    if st.kind == "fd":
+    if st.kind in ("fd", "id"):
+        call = (f"fmugen_chain_fd({args}, {tag}_x, {tag}_x + {n}, {tag}_w)" if st.kind == "fd"
+                else f"fmugen_chain_id({args}, {tag}_x, {tag}_w)")
         lines += [f"{ind}double {tag}_x[{nx}], {tag}_w[{chain_work_doubles(n, 'fd')}];",
-                  f"{ind}status = fmugen_chain_fd({args}, {tag}_x, {tag}_x + {n}, {tag}_w);",
+                  f"{ind}status = {call};",
                   f"{ind}if (status != FMUGEN_OK) return status;"]
         return lines, f"{tag}_x", 0, None
     w = chain_work_doubles(n, "jacobian")
+    if st.kind == "jacobian":
+        call = (f"fmugen_chain_fd_jacobian({args}, {tag}_w + {w}, {tag}_w + {w + n}, "
+                f"{tag}_w + {w + n + n * (3 * n + 6 * ne)}, {tag}_w)")
+    else:
+        call = f"fmugen_chain_id_jacobian({args}, {tag}_w + {w}, {tag}_w + {w + n}, {tag}_w)"
     lines += [f"{ind}double *{tag}_w = (double *)malloc(sizeof(double) * {w + nx});",
               f"{ind}if ({tag}_w == NULL) return FMUGEN_NOT_FINITE; /* out of memory */",
-              f"{ind}status = fmugen_chain_fd_jacobian({args}, {tag}_w + {w}, {tag}_w + {w + n}, "
-              f"{tag}_w + {w + n + n * (3 * n + 6 * ne)}, {tag}_w);",
+              f"{ind}status = {call};",
               f"{ind}if (status != FMUGEN_OK) {{ free({tag}_w); return status; }}"]
     return lines, f"{tag}_w", w, f"{ind}free({tag}_w);"
 
@@ -271,13 +283,20 @@ def chain_ops(n: int, kind: str, ne: int = 0):
     """
     from .c_code import OpCount
 
+    tri = n * (n + 1) // 2
+    if kind in ("id", "id_jacobian"):
+        # kinematics, then per body the forward (126 mul / 110 add) and backward (6 / 11) passes
+        rnea = OpCount(mul=(137 + 132) * n + 12 * ne, add=(107 + 121) * n + 18 * ne, calls=(("cos", n), ("sin", n)))
+        if kind == "id":
+            return rnea
+        # the derivative passes, and per pair on one path three 12- or 6-vector products
+        return rnea + OpCount(mul=(180 + 348) * n + 30 * tri, add=(144 + 483) * n + 28 * tri)
     fd = OpCount(mul=366 * n + 12 * ne, add=348 * n + 18 * ne, div=2 * n, calls=(("cos", n), ("sin", n)))
     if kind == "fd":
         return fd
     if ne:
         fd = fd + OpCount(mul=40 * n + 9 * n * n + 6 * ne * n * (n + 1) // 2,
                           add=40 * n + 9 * n * n + 6 * ne * n * (n + 1) // 2)
-    tri = n * (n + 1) // 2
     chol = (n ** 3 - n) // 6
     linv = (n - 1) * n * (n + 1) // 6
     minv = n * (n + 1) * (n + 2) // 6
@@ -300,6 +319,12 @@ int py_chain_jac(int n, const int *r, const double *lc, const double *g, const d
                  const double *tau, int ne, const int *xl, const double *x, double *out, double *work)
 { return fmugen_chain_fd_jacobian(n, r, lc, g, q, qd, tau, ne, xl, x, out, out + n,
                                   out + n + n * (3 * n + 6 * ne), work); }
+int py_chain_id(int n, const int *r, const double *lc, const double *g, const double *q, const double *qd,
+                const double *qdd, int ne, const int *xl, const double *x, double *out, double *work)
+{ return fmugen_chain_id(n, r, lc, g, q, qd, qdd, ne, xl, x, out, work); }
+int py_chain_id_jac(int n, const int *r, const double *lc, const double *g, const double *q, const double *qd,
+                    const double *qdd, int ne, const int *xl, const double *x, double *out, double *work)
+{ return fmugen_chain_id_jacobian(n, r, lc, g, q, qd, qdd, ne, xl, x, out, out + n, work); }
 """
 _lib = None
 _lock = threading.Lock()
@@ -321,7 +346,7 @@ def _library():
                 raise RuntimeError(f"cannot compile the chain dynamics for Python: {' '.join(cmd)}\n{r.stderr}")
             lib = ctypes.CDLL(str(work / "chain.so"))
             dp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
-            for f in (lib.py_chain_fd, lib.py_chain_jac):
+            for f in (lib.py_chain_fd, lib.py_chain_jac, lib.py_chain_id, lib.py_chain_id_jac):
                 f.argtypes = [ctypes.c_int, ip] + [dp] * 5 + [ctypes.c_int, ip, dp, dp, dp]
                 f.restype = ctypes.c_int
             _lib = lib
@@ -337,7 +362,7 @@ def evaluate_chain(kind: str, revolute: Sequence[bool], b: Sequence[float], exte
     b = np.ascontiguousarray(np.asarray(b, dtype=float))
     if b.size != 3 * n + NC * n + NG + 6 * ne:
         raise ValueError(f"chain dynamics of {n} links: {b.size} inputs, expected {3 * n + NC * n + NG + 6 * ne}")
-    out = np.zeros(n + 3 if kind == "fd" else n + n * (3 * n + 6 * ne) + 3 * n)
+    out = np.zeros(st.outputs_size())
     work = np.zeros(chain_work_doubles(n, kind))
     joint = st.joint_array()
     rev = (ctypes.c_int * len(joint))(*joint)
@@ -347,7 +372,9 @@ def evaluate_chain(kind: str, revolute: Sequence[bool], b: Sequence[float], exte
     def at(k):
         return ctypes.cast(b.ctypes.data + 8 * k, dp)
 
-    fn = _library().py_chain_fd if kind == "fd" else _library().py_chain_jac
+    lib = _library()
+    fn = {"fd": lib.py_chain_fd, "jacobian": lib.py_chain_jac, "id": lib.py_chain_id,
+          "id_jacobian": lib.py_chain_id_jac}[kind]
     status = fn(n, rev, at(3 * n), at(3 * n + NC * n), at(0), at(n), at(2 * n), ne, xl,
                 at(3 * n + NC * n + NG) if ne else None, out.ctypes.data_as(dp), work.ctypes.data_as(dp))
     if status == 1:

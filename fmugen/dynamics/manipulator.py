@@ -543,14 +543,24 @@ class Manipulator:
                                     f"external torque on link {k + 1}, base {'xyz'[c]}", start=0.0))
         return out
 
-    def inverse_dynamics_model(self, formulation=None, name=None) -> SymbolicModel:
+    def inverse_dynamics_model(self, formulation=None, name=None, strategy: str = "auto") -> SymbolicModel:
         """tau = ID(q, qd, qdd, w_ext) as a state-free model (e.g. for computed-torque control).
 
         Inputs q[i], qd[i], qdd[i] (and external wrenches), outputs tau[i]
         (direct feedthrough), with the exact Jacobian d tau / d inputs.
+        ``strategy``: straight-line code, or the runtime's loops
+        (``c_runtime/chain_dynamics.c``: recursive Newton-Euler and its
+        analytical derivatives); "auto" takes the loops from
+        ``LOOP_MIN_LINKS`` joints on, as :meth:`state_space_model` does.
         """
+        if strategy not in ("auto", "straight", "loops"):
+            raise ValueError(f"strategy must be 'auto', 'straight' or 'loops', not {strategy!r}")
         robot = self.robot
-        P, tau = self.inverse_dynamics_program(formulation)
+        looped = strategy == "loops" or (strategy == "auto" and self.n >= LOOP_MIN_LINKS)
+        if looped:
+            P, tau, D = self._looped_inverse_dynamics()
+        else:
+            P, tau = self.inverse_dynamics_program(formulation)
         inputs = []
         for group, stem, units, what in ((self.q, "q", ("rad", "m"), "position"),
                                          (self.qd, "qd", ("rad/s", "m/s"), "velocity"),
@@ -564,8 +574,12 @@ class Manipulator:
             Variable(f"tau[{i + 1}]", _real(f"tau_out_{i + 1}"), "N.m" if L.joint == REVOLUTE else "N",
                      f"{'torque' if L.joint == REVOLUTE else 'force'} that joint {i + 1} needs")
             for i, L in enumerate(robot.bodies))
-        Jp = Program("_j")
-        D = differentiate([P], tau, [v.symbol for v in inputs], Jp)
+        if looped:
+            Jp = D[1]
+            D = D[0]
+        else:
+            Jp = Program("_j")
+            D = differentiate([P], tau, [v.symbol for v in inputs], Jp)
         params = robot_parameters(robot)
         return SymbolicModel(
             name=name or f"{robot.name}_inverse_dynamics",
@@ -573,8 +587,26 @@ class Manipulator:
             states=(), inputs=tuple(inputs), parameters=params, outputs=outputs,
             program=P, derivatives=(), output_exprs=tuple(tau),
             jacobian=Jp, dfdx=sp.zeros(0, 0), dfdu=sp.zeros(0, len(inputs)), dgdx=sp.zeros(len(tau), 0), dgdu=D,
-            provenance=f"{robot.source or robot.name}; {formulation or self.formulation} formulation",
+            provenance=f"{robot.source or robot.name}; "
+                       + ("recursive Newton-Euler in the runtime's loops" if looped
+                          else f"{formulation or self.formulation} formulation"),
         )
+
+    def _looped_inverse_dynamics(self) -> tuple:
+        """``(program, tau, (dtau/dinputs, Jacobian program))``: two calls of the runtime's loops."""
+        n = self.n
+        rev, parents, ee_body, constants = robot_tree(self.robot)
+        ne = len(self.external_links)
+        B = sp.Matrix(self.q + self.qd + self.qdd + constants + self.ext_symbols)
+        tree = dict(revolute=rev, external=tuple(self.external_links), parent=parents, ee_body=ee_body)
+        P = Program("_w")
+        X = sp.Matrix([P.fresh("tau") for _ in range(n)])
+        P.steps.append(ChainDynamics(X, sp.zeros(0, 0), B, kind="id", **tree))
+        Jp = Program("_j")
+        nu = 3 * n + 6 * ne
+        XJ = sp.Matrix([Jp.fresh("jd") for _ in range(n + n * nu)])
+        Jp.steps.append(ChainDynamics(XJ, sp.zeros(0, 0), B, kind="id_jacobian", **tree))
+        return P, list(X), (sp.Matrix(n, nu, list(XJ[n:])), Jp)
 
     # ------------------------------------------------------------------
     # numeric evaluators
