@@ -105,3 +105,22 @@ def test_symbolic_parameters_take_set_values(tmp_path):
                          text=True, cwd=ROOT)
     assert out.returncode == 0, out.stderr
     assert "worst gravity torque 20.6," in (tmp_path / "s" / "joint1.toml").read_text()  # 2 m g l = 20.601
+
+
+def test_a_prismatic_joint_gets_a_linear_cylinder(tmp_path):
+    """The Stanford arm's joint 3 slides: its set sizes the linear cylinder's A_p and the moving mass M (the
+    set used to carry only D_m [m3/rad] and J [kg.m2], which a linear cylinder and a prismatic joint ignore,
+    so they ran on the default's A_p and M).  The cylinder built from the set has stall force P_s A_p
+    >= 2 x the worst gravity force and M = the worst mass along the joint."""
+    from fmugen.components import joint_inertia
+
+    needs = arm_sizing.requirements(ROOT / "robots/stanford_arm.toml", n_grid=3)
+    assert [n.revolute for n in needs] == [True, True, False, True, True, True]
+    sets = arm_sizing.hydraulic_sets(needs)
+    paths = arm_sizing.write_sets(sets, tmp_path, "stanford")
+    cyl = {v.name: v.start for v in hydraulic_actuator(kind="linear", parameter_set=str(paths[2])).parameters}
+    P_s = load_parameter_set("default").sections["servo_valve"]["P_s"]
+    assert P_s * cyl["A_p"] >= 2 * needs[2].tau_g > 0
+    mass = {v.name: v.start for v in joint_inertia(kind="prismatic", parameter_set=str(paths[2])).parameters}
+    assert mass["M"] == pytest.approx(needs[2].J, abs=1e-4)
+    assert "prismatic: a linear cylinder" in paths[2].read_text() and "A_p" not in paths[1].read_text().split("[")[0]

@@ -20,8 +20,9 @@ margins stated in each file's header:
   default set's Q_N, V_t, K_c0, C_tm, C_im scaled by f = D_m/D_m(default)
   (same no-load speed K_q0/D_m, same leakage per displacement), Q_N raised
   further when that speed is below 1.25x the required joint speed; B_m with
-  J.  The hydraulic natural frequency, damping and the P loop's velocity gain
-  are reported.
+  J (a prismatic joint: the same numbers as the linear cylinder's A_p and the
+  moving mass M, B_p).  The hydraulic natural frequency, damping and the P
+  loop's velocity gain are reported.
 * electric (:func:`electric_sets`, RobotR3-style ``dc_motor``): the default
   motor (k_t, J_m) with a current limit i_max and a top speed w_m_max (both
   stated assumptions); gear ratio |n| >= margin max(tau_g, tau_peak, J alpha_ref)
@@ -183,6 +184,11 @@ def hydraulic_sets(needs: Sequence[JointNeed], base="default", margin: float = 2
         J = round(nd.J, 4)
         s["joint_inertia"]["J"] = J
         s["joint_inertia"]["B_m"] = b["joint_inertia"]["B_m"] * J / b["joint_inertia"]["J"]
+        if not nd.revolute:  # a prismatic joint: the linear cylinder (kind="linear") and a moving mass, the
+            # same numbers in their own names (force/pressure is an area; the mass along the joint)
+            ha["A_p"] = D_m
+            s["joint_inertia"]["M"] = J
+            s["joint_inertia"]["B_p"] = b["joint_inertia"]["B_p"] * J / b["joint_inertia"]["M"]
         w_nl = sv["Q_N"] * math.sqrt(P_s / sv["dp_N"]) / D_m  # no-load speed, valve fully open
         if w_nl < 1.25 * nd.w_peak:
             sv["Q_N"] *= 1.25 * nd.w_peak / w_nl
@@ -192,7 +198,7 @@ def hydraulic_sets(needs: Sequence[JointNeed], base="default", margin: float = 2
         z_h = (sv["K_c0"] + ha["C_tm"]) / D_m * math.sqrt(ha["beta_e"] * J / ha["V_t"]) \
             + s["joint_inertia"]["B_m"] / (4 * D_m) * math.sqrt(ha["V_t"] / (ha["beta_e"] * J))
         K_v = s["amplifier"]["K_a"] * s["current_driver"]["G_i"] * K_q0 / sv["i_rated"] / D_m
-        notes = dict(joint=nd.joint, kind="hydraulic", effort=nd.effort, tau_g=nd.tau_g, tau_peak=nd.tau_peak, J=J,
+        notes = dict(joint=nd.joint, kind="hydraulic", revolute=nd.revolute, effort=nd.effort, tau_g=nd.tau_g, tau_peak=nd.tau_peak, J=J,
                      w_peak=nd.w_peak, stall=P_s * D_m, D_m=D_m, f=f, no_load_speed=w_nl, omega_h=w_h,
                      zeta_h=z_h, K_v=K_v, margin=_margin(P_s * D_m, nd))
         out.append((s, notes))
@@ -241,8 +247,14 @@ def write_sets(sets: list, directory, robot_name: str = "arm") -> list:
                 f"{'-' if n['tau_peak'] is None else format(n['tau_peak'], '.4g')}, inertia {n['J']:.4g}, "
                 f"required speed {n['w_peak']:.4g}"]
         if n["kind"] == "hydraulic":
-            head.append(f"#   stall torque P_s D_m = {n['stall']:.4g} ({_margin_text(n['margin'])}), "
-                        f"D_m = {n['D_m']:.3g} m3/rad, no-load speed {n['no_load_speed']:.3g}")
+            if n.get("revolute", True):
+                head.append(f"#   stall torque P_s D_m = {n['stall']:.4g} ({_margin_text(n['margin'])}), "
+                            f"D_m = {n['D_m']:.3g} m3/rad, no-load speed {n['no_load_speed']:.3g}")
+            else:
+                head.append(f"#   prismatic: a linear cylinder (hydraulic_actuator kind = \"linear\", joint_inertia kind = "
+                            f"\"prismatic\"); stall force P_s A_p = {n['stall']:.4g} ({_margin_text(n['margin'])}), "
+                            f"A_p = {n['D_m']:.3g} m2, moving mass M = {n['J']:.4g} kg, no-load speed "
+                            f"{n['no_load_speed']:.3g} m/s")
             head.append(f"#   omega_h = {n['omega_h']:.4g} rad/s, zeta_h = {n['zeta_h']:.3f}, K_v = {n['K_v']:.4g} 1/s "
                         f"(a P loop needs K_v < 2 zeta_h omega_h = {2 * n['zeta_h'] * n['omega_h']:.4g})")
         else:
