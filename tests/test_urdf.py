@@ -643,3 +643,10 @@ def test_fmu_variables_have_urdf_joint_name_aliases(tmp_path):
                          start_values={names[0]: 4.0, names[1]: -2.0}, output=list(names[2:]))
         runs.append(np.column_stack([r[n] for n in names[2:]]))
     assert np.abs(runs[0]).max() > 1e-3 and np.array_equal(runs[0], runs[1])
+    # a system made of it (SSP connectors, start values, recorded columns) sees each value once, by its
+    # indexed name: the aliases are left out
+    from fmugen.ssp.ssd import without_aliases
+
+    kept = [v.name for v in without_aliases(read_model_description(str(fmu)))]
+    assert "q[1]" in kept and "tau[2]" in kept and not any(n.endswith((".q", ".qd", ".tau")) for n in kept)
+    assert len(kept) == len({(v.type, v.valueReference) for v in by.values()})

@@ -34,7 +34,8 @@ from typing import Optional
 
 from .. import __version__
 from ..errors import FmugenError
-from .ssd import FMUGEN_ANNOTATION, FMUGEN_NS, NS, OSP_ANNOTATION, OSP_NS, SSD_NAME, parse_xml, validate
+from .ssd import (FMUGEN_ANNOTATION, FMUGEN_NS, NS, OSP_ANNOTATION, OSP_NS, SSD_NAME, parse_xml, validate,
+                  without_aliases)
 
 #: what an SSP cannot say and other importers therefore do not do (written into the annotation)
 NOT_EXPRESSIBLE = (
@@ -81,7 +82,7 @@ def _ssv(name: str, md, bound: dict) -> bytes:
     root = etree.Element(f"{{{NS['ssv']}}}ParameterSet", nsmap={"ssv": NS["ssv"], "ssc": NS["ssc"]},
                          version="1.0", name=name)
     params = etree.SubElement(root, f"{{{NS['ssv']}}}Parameters")
-    for v in md.modelVariables:
+    for v in without_aliases(md):
         if v.causality not in ("parameter", "input") or v.start is None:
             continue
         if v.variability == "constant":
@@ -128,7 +129,7 @@ def ssd_xml(built, settings: dict, libcosim_step: float) -> tuple:
                                 source=f"resources/{stems[u.name]}.fmu",
                                 type="application/x-fmu-sharedlibrary")
         conns = etree.SubElement(comp, f"{{{D}}}Connectors")
-        for v in md.modelVariables:
+        for v in without_aliases(md):
             if v.causality in ("input", "output") and v.type == "Real":
                 k = etree.SubElement(conns, f"{{{D}}}Connector", name=v.name, kind=v.causality)
                 r = etree.SubElement(k, f"{{{C}}}Real")

@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Optional
 
 from ..errors import InputFileError
-from .ssd import FMUGEN_ANNOTATION, FMUGEN_NS, Ssd, open_ssp
+from .ssd import FMUGEN_ANNOTATION, FMUGEN_NS, Ssd, open_ssp, without_aliases
 
 _F = f"{{{FMUGEN_NS}}}"
 
@@ -160,7 +160,7 @@ def to_system(ssd: Ssd, record: Optional[list] = None):
     else:
         recorded = []
         for name, md in mds.items():
-            for v in md.modelVariables:
+            for v in without_aliases(md):
                 if v.causality == "output" and v.type == "Real":
                     recorded.append(Recorded(f"{name}.{v.name}", name, v.name, v.unit or ""))
         if record is not None:

@@ -375,3 +375,16 @@ def is_ssp(path) -> bool:
 
 __all__ = ["Ssd", "Component", "Connector", "Connection", "open_ssp", "read_ssd", "extract", "parse_xml",
            "validate", "schema", "NS", "FMUGEN_NS", "FMUGEN_ANNOTATION", "OSP_NS", "OSP_ANNOTATION", "is_ssp"]
+
+
+def without_aliases(model_description) -> list:
+    """The FMU's variables with FMI 2.0 aliases left out: the first variable of each (type, valueReference)
+    stands for its set (a URDF arm's ``shoulder_pan_joint.q`` is ``q[1]``), so a system gets one
+    connector, one start value and one recorded column per value, not one per name."""
+    seen, out = set(), []
+    for v in model_description.modelVariables:
+        key = (v.type, v.valueReference)
+        if key not in seen:
+            seen.add(key)
+            out.append(v)
+    return out
