@@ -23,14 +23,14 @@ import fmpy
 import pytest
 import sympy as sp
 from fmpy import read_model_description
-from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (FMU2Slave, fmi2Discard, fmi2Error, fmi2OK, fmi2LastSuccessfulTime)
 
 from fmugen import load_robot
 from fmugen.codegen.model import POSITIVE_MIN, SymbolicModel, Variable
 from fmugen.fmi import build_fmu
 from fmugen.fmi.model_description import model_description_xml
-from fmi_log import Log
+import fmi_log
+from fmi_log import start, status_of, step
 
 RK4, DOPRI5, RODAS3 = 3, 1, 2
 
@@ -55,38 +55,7 @@ def fmus(tmp_path_factory):
 
 
 def open_fmu(fmus, name, tag):
-    path = str(fmus[name])
-    md = read_model_description(path)
-    unzip = fmpy.extract(path, unzipdir=str(fmus["dir"] / f"{name}_{tag}"))
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.coSimulation.modelIdentifier,
-                    instanceName=name)
-    fmu.log = Log()
-    fmu.instantiate(callbacks=fmu.log.callbacks)
-    fmu.vr = {v.name: v.valueReference for v in md.modelVariables}
-    fmu.md = md
-    return fmu
-
-
-def start(fmu, ints=None, reals=None):
-    fmu.setupExperiment(startTime=0.0)
-    fmu.enterInitializationMode()
-    if ints:
-        fmu.setInteger([fmu.vr[k] for k in ints], list(ints.values()))
-    if reals:
-        fmu.setReal([fmu.vr[k] for k in reals], list(reals.values()))
-    fmu.exitInitializationMode()
-
-
-def status_of(call):
-    try:
-        r = call()
-        return fmi2OK if r is None else r
-    except FMICallException as e:
-        return e.status
-
-
-def step(fmu, t, h):
-    return status_of(lambda: fmu.fmi2DoStep(fmu.component, t, h, fmpy.fmi2.fmi2True))
+    return fmi_log.open_fmu(fmus[name], fmus["dir"] / f"{name}_{tag}", name)
 
 
 # --------------------------------------------------------------------------

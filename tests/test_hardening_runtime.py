@@ -18,12 +18,12 @@ import fmpy
 import pytest
 import sympy as sp
 from fmpy import read_model_description
-from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (FMU2Model, FMU2Slave, fmi2Discard, fmi2Error, fmi2OK, fmi2Warning, fmi2LastSuccessfulTime)
 
 from fmugen.codegen.model import SymbolicModel, Variable
 from fmugen.fmi import build_fmu, variable_layout
-from fmi_log import Log
+import fmi_log
+from fmi_log import Log, start, status_of, step
 
 ROOT = Path(__file__).resolve().parents[1]
 RK4, DOPRI5, RODAS3 = 3, 1, 2
@@ -54,38 +54,7 @@ def fmus(tmp_path_factory):
 
 
 def open_fmu(fmus, name, cls=FMU2Slave, tag="a"):
-    model, path = fmus[name]
-    md = read_model_description(str(path))
-    unzip = fmpy.extract(str(path), unzipdir=str(fmus["dir"] / f"{name}_{cls.__name__}_{tag}"))
-    fmu = cls(guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.coSimulation.modelIdentifier,
-              instanceName=name)
-    log = Log()
-    fmu.instantiate(callbacks=log.callbacks)
-    fmu.log = log
-    fmu.md = md
-    fmu.vr = {v.name: v.valueReference for v in md.modelVariables}
-    return fmu
-
-
-def start(fmu, t0=0.0, ints=None, reals=None):
-    fmu.setupExperiment(startTime=t0)
-    fmu.enterInitializationMode()
-    if ints:
-        fmu.setInteger([fmu.vr[k] for k in ints], list(ints.values()))
-    if reals:
-        fmu.setReal([fmu.vr[k] for k in reals], list(reals.values()))
-    fmu.exitInitializationMode()
-
-
-def status_of(call):
-    try:
-        return call()
-    except FMICallException as e:
-        return e.status
-
-
-def step(fmu, t, h, flag=fmpy.fmi2.fmi2True):
-    return status_of(lambda: fmu.fmi2DoStep(fmu.component, t, h, flag))
+    return fmi_log.open_fmu(fmus[name][1], fmus["dir"] / f"{name}_{cls.__name__}_{tag}", name, cls)
 
 
 # --------------------------------------------------------------------------
