@@ -43,6 +43,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # examples/: the benchmarks' shared timing helper
+from bench_timing import c_loop, pinocchio_per_call  # noqa: E402
 
 #: the build, in a fresh process: prints one JSON line of its own measurements
 BUILD = r"""
@@ -112,29 +114,17 @@ def speed(n: int, strategy: str, states: int, repeat: int, pin) -> dict:
             refj = np.c_[pd.ddq_dq, pd.ddq_dv, minv]
             err_j = max(err_j, np.max(np.abs(np.c_[A[n:], B[n:]] - refj)) / np.max(np.abs(refj)))
         x, u = np.r_[q, qd], tau
-        empty = pin.Model()
-        ed, z = empty.createData(), np.zeros(0)
-
-        def py(fn, args, k):
-            t = time.process_time()
-            for _ in range(k):
-                fn(*args)
-            return (time.process_time() - t) / k
-
         def cloop(which, k):
-            t = time.process_time()
-            cm.time_per_call(p, x, u, which, n=k)
-            return (time.process_time() - t) / k
+            return c_loop(cm, p, x, u, which, k)
 
         k_fd = max(2000, int(0.02 / max(cloop("evaluate", 200), 1e-9)))
         k_j = max(200, int(0.02 / max(cloop("jacobian", 20), 1e-9)))
         rounds = {"fd": [], "jac": [], "aba": [], "abad": []}
         for _ in range(repeat):
             rounds["fd"].append(cloop("evaluate", k_fd))
-            rounds["aba"].append(py(pin.aba, (pm, pd, q, qd, tau), 2000) - py(pin.aba, (empty, ed, z, z, z), 2000))
+            rounds["aba"].append(pinocchio_per_call(pin.aba, (pm, pd, q, qd, tau), 2000))
             rounds["jac"].append(cloop("jacobian", k_j))
-            rounds["abad"].append(py(pin.computeABADerivatives, (pm, pd, q, qd, tau), 300)
-                                  - py(pin.computeABADerivatives, (empty, ed, z, z, z), 300))
+            rounds["abad"].append(pinocchio_per_call(pin.computeABADerivatives, (pm, pd, q, qd, tau), 300))
     med = {k: statistics.median(v) for k, v in rounds.items()}
     return {"err_fd": err_fd, "err_j": err_j, **med,
             "r_fd": statistics.median(np.array(rounds["fd"]) / np.array(rounds["aba"])),

@@ -41,6 +41,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # examples/: the benchmarks' shared timing helper
+from bench_timing import c_loop, pinocchio_per_call  # noqa: E402
 ROBOTS = ["talos_data/robots/talos_full_v2.urdf", "tiago_description/robots/tiago_dual.urdf"]
 ARMS = ["ur_description/urdf/ur5_robot.urdf", "panda_description/urdf/panda.urdf"]
 
@@ -179,24 +181,14 @@ def measure(path: Path, states: int, repeat: int, so) -> dict:
     work = np.zeros(chain_work_doubles(n, "jacobian"))
     dp = ctypes.POINTER(ctypes.c_double)
     ptrs = [a.ctypes.data_as(dp) for a in keep] + [out.ctypes.data_as(dp), work.ctypes.data_as(dp)]
-    empty = pin.Model()
-    ed, z = empty.createData(), np.zeros(0)
-
-    def py(fn, args, k):
-        t = time.process_time()
-        for _ in range(k):
-            fn(*args)
-        return (time.process_time() - t) / k
-
     k_fd = max(1000, int(0.02 / max(so.time_calls(0, 100, n, jt, *ptrs), 1e-9)))
     k_j = max(50, int(0.02 / max(so.time_calls(1, 10, n, jt, *ptrs), 1e-9)))
     r = {"fd": [], "aba": [], "jac": [], "abad": []}
     for _ in range(repeat):
         r["fd"].append(so.time_calls(0, k_fd, n, jt, *ptrs))
-        r["aba"].append(py(pin.aba, (model, data, q, qd, tau), 1000) - py(pin.aba, (empty, ed, z, z, z), 1000))
+        r["aba"].append(pinocchio_per_call(pin.aba, (model, data, q, qd, tau), 1000))
         r["jac"].append(so.time_calls(1, k_j, n, jt, *ptrs))
-        r["abad"].append(py(pin.computeABADerivatives, (model, data, q, qd, tau), 100)
-                         - py(pin.computeABADerivatives, (empty, ed, z, z, z), 100))
+        r["abad"].append(pinocchio_per_call(pin.computeABADerivatives, (model, data, q, qd, tau), 100))
     med = {k: statistics.median(v) for k, v in r.items()}
     branches = sum(1 for i in range(n) if sum(1 for p in parents if p == i) > 1)
     return {"n": n, "branch points": branches, "err_fd": err_fd, "err_j": err_j, **med,
@@ -246,22 +238,8 @@ def arm_speed(path: Path, repeat: int, strategy: str, fold: bool = True) -> dict
     a = to_pinocchio(model, mp, None, qdd)
     taup = np.zeros(model.nv)
     taup[iv] = tau
-    empty = pin.Model()
-    ed, z = empty.createData(), np.zeros(0)
-
-    def py(fn, args, k):
-        t = time.process_time()
-        for _ in range(k):
-            fn(*args)
-        return (time.process_time() - t) / k
-
     p_fd = [] if fold else [v.start for v in fd_model.parameters]
     p_id = [] if fold else [v.start for v in id_model.parameters]
-
-    def cloop(cm, p, x, u, k):  # CPU time of a C loop (the harness's own figure is wall time)
-        t = time.process_time()
-        cm.time_per_call(p, x, u, "evaluate", k)
-        return (time.process_time() - t) / k
 
     with CompiledModel.build(generate_c(fd_model).source) as cf, \
             CompiledModel.build(generate_c(id_model).source) as ci:
@@ -273,10 +251,10 @@ def arm_speed(path: Path, repeat: int, strategy: str, fold: bool = True) -> dict
         err_id = np.max(np.abs(y - ref)) / np.max(np.abs(ref))
         r = {"fd": [], "aba": [], "id": [], "rnea": []}
         for _ in range(repeat):
-            r["fd"].append(cloop(cf, p_fd, np.r_[th, qd], tau, 100000))
-            r["aba"].append(py(pin.aba, (model, data, q, v, taup), 20000) - py(pin.aba, (empty, ed, z, z, z), 20000))
-            r["id"].append(cloop(ci, p_id, [], np.r_[th, qd, qdd], 100000))
-            r["rnea"].append(py(pin.rnea, (model, data, q, v, a), 20000) - py(pin.rnea, (empty, ed, z, z, z), 20000))
+            r["fd"].append(c_loop(cf, p_fd, np.r_[th, qd], tau, "evaluate", 100000))
+            r["aba"].append(pinocchio_per_call(pin.aba, (model, data, q, v, taup), 20000))
+            r["id"].append(c_loop(ci, p_id, [], np.r_[th, qd, qdd], "evaluate", 100000))
+            r["rnea"].append(pinocchio_per_call(pin.rnea, (model, data, q, v, a), 20000))
     med = {k: statistics.median(v) for k, v in r.items()}
     return {"n": n, "derive": t_derive, "err_fd": err_fd, "err_id": err_id, **med,
             "r_fd": statistics.median(np.array(r["fd"]) / np.array(r["aba"])),

@@ -54,6 +54,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # examples/: the benchmarks' shared timing helper
+from bench_timing import c_loop, pinocchio_per_call  # noqa: E402
 
 
 #: rotor (armature) inertia, kg.m2, given to the joints that move only massless links (the refusal names
@@ -176,25 +178,14 @@ def measure(path: Path, args) -> dict:
             e_j = max(e_j, np.abs(J - Jp).max())
         row.update(fd_err=e_fd, m_err=e_m, fk_err=e_fk, j_err=e_j)
 
-        empty = pin.Model()
-        ed, z = empty.createData(), np.zeros(0)
-
-        def py(fn, a, k):
-            t = time.process_time()
-            for _ in range(k):
-                fn(*a)
-            return (time.process_time() - t) / k
-
         def cloop(k):
-            t = time.process_time()
-            cm.time_per_call(p, np.r_[q, qd], tau, "evaluate", n=k)
-            return (time.process_time() - t) / k
+            return c_loop(cm, p, np.r_[q, qd], tau, "evaluate", k)
 
         k = max(2000, int(0.02 / max(cloop(200), 1e-9)))
         fd, aba = [], []
         for _ in range(args.repeat):
             fd.append(cloop(k))
-            aba.append(py(pin.aba, (model, data, qp, vp, taup), 2000) - py(pin.aba, (empty, ed, z, z, z), 2000))
+            aba.append(pinocchio_per_call(pin.aba, (model, data, qp, vp, taup), 2000))
         row.update(fd_us=statistics.median(fd) * 1e6, aba_us=statistics.median(aba) * 1e6,
                    ratio=statistics.median(np.array(fd) / np.array(aba)))
         ok = e_fd <= 1e-9 and e_m <= 1e-9 and e_fk <= 1e-12 and e_j <= 1e-12
