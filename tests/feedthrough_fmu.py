@@ -10,43 +10,37 @@ Two masses joined by a stiff spring-damper, split across two Co-Simulation FMUs;
   x_in [m], v_in [m/s] (``dependencies`` names both inputs); output x2 [m] (a state).
 
 Each FMU integrates with classical RK4 on sub-steps of at most 1e-5 s, gets and sets its state, and has no
-directional derivatives or output derivatives.  ``interpolate=False``: ``canInterpolateInputs="false"``, the
+directional derivatives or output derivatives (the FMI part: ``third_party_fmu.rk4_source``).  ``interpolate=False``: ``canInterpolateInputs="false"``, the
 inputs are held over a step (fmi2SetRealInputDerivatives refuses); ``interpolate=True``: the inputs follow the
 polynomial the master sends (orders 1-3, from the time they were set), and an output read after a step uses
 the inputs at the step's end.  The system is linear: the exact solution is expm(A t) x0.
 """
 from __future__ import annotations
 
-import subprocess
-import zipfile
 from pathlib import Path
 
 import numpy as np
 
+from third_party_fmu import compile_fmu, model_description, rk4_source
+
 M_A, C_A, M_B, C_B, K, D, F0, W = 1.0, 20.0, 2.0, 40.0, 4.0e4, 5.0, 100.0, 20.0
 
-C_SOURCE = r"""
-#include <math.h>
-#include <stdlib.h>
-#include <string.h>
-#include "fmi2Functions.h"
-
-/* A: 0 x, 1 v, 2 m, 3 c, 4 F (in), 5 f0.  B: 0 F (out), 1 x2, 2 m2, 3 c2, 4 x_in, 5 v_in, 6 d, 7 k */
-#define NR 8
-#define NY 4
-typedef struct { double r[NR]; double du[3][NR]; double tin[NR]; double y[NY]; double time; } Comp;
-
-/* an input at time t: the value set, continued by the derivatives the master sent (zero when it sent none) */
-static double in(const Comp *c, int vr, double t) {
-    double s = t - c->tin[vr];
-    return c->r[vr] + s * (c->du[0][vr] + s * (c->du[1][vr] / 2 + s * c->du[2][vr] / 6));
-}
-
+# A: 0 x, 1 v, 2 m, 3 c, 4 F (in), 5 f0.  B: 0 F (out), 1 x2, 2 m2, 3 c2, 4 x_in, 5 v_in, 6 d, 7 k
+NR, NY = 8, 4
+MODEL_C = r"""
 #ifdef SPRING
 static double force(const Comp *c, const double *y, double t) {  /* direct feedthrough of x_in, v_in */
     return c->r[7] * (y[0] - in(c, 4, t)) + c->r[6] * (y[1] - in(c, 5, t));
 }
 #endif
+
+static void start(Comp *c) {
+#ifdef SPRING
+    c->r[2] = MB; c->r[3] = CB; c->r[6] = DD; c->r[7] = KK;
+#else
+    c->r[2] = MA; c->r[3] = CA; c->r[5] = F0;
+#endif
+}
 
 static void rhs(const Comp *c, double t, const double *y, double *dy) {
 #ifdef SPRING
@@ -61,6 +55,9 @@ static void rhs(const Comp *c, double t, const double *y, double *dy) {
 #endif
 }
 
+static void load(Comp *c, double *y) { (void)c; (void)y; }
+static void store(Comp *c, const double *y) { (void)c; (void)y; }
+
 static void outputs(Comp *c) {
 #ifdef SPRING
     c->r[0] = force(c, c->y, c->time);
@@ -70,185 +67,39 @@ static void outputs(Comp *c) {
     c->r[1] = c->y[1];
 #endif
 }
-
-const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
-const char *fmi2GetVersion(void) { return fmi2Version; }
-fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const fmi2String cat[]) { return fmi2OK; }
-
-fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, fmi2String loc,
-                              const fmi2CallbackFunctions *cb, fmi2Boolean vis, fmi2Boolean log) {
-    Comp *c = calloc(1, sizeof(Comp));
-    if (!c) return NULL;
-#ifdef SPRING
-    c->r[2] = MB; c->r[3] = CB; c->r[6] = DD; c->r[7] = KK;
-#else
-    c->r[2] = MA; c->r[3] = CA; c->r[5] = F0;
-#endif
-    return c;
-}
-void fmi2FreeInstance(fmi2Component c) { free(c); }
-fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean td, fmi2Real tol, fmi2Real t0, fmi2Boolean sd,
-                               fmi2Real t1) { ((Comp *)c)->time = t0; return fmi2OK; }
-fmi2Status fmi2EnterInitializationMode(fmi2Component c) { return fmi2OK; }
-fmi2Status fmi2ExitInitializationMode(fmi2Component c) { outputs(c); return fmi2OK; }
-fmi2Status fmi2Terminate(fmi2Component c) { return fmi2OK; }
-fmi2Status fmi2Reset(fmi2Component c) { return fmi2Error; }
-
-fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[]) {
-    Comp *s = c;
-    outputs(s);
-    for (size_t i = 0; i < n; i++) {
-        if (vr[i] >= NR) return fmi2Error;
-        v[i] = s->r[vr[i]];
-    }
-    return fmi2OK;
-}
-fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real v[]) {
-    Comp *s = c;
-    for (size_t i = 0; i < n; i++) {
-        if (vr[i] >= NR) return fmi2Error;
-        s->r[vr[i]] = v[i];
-        s->tin[vr[i]] = s->time;  /* a new value: its derivatives start again from it */
-        s->du[0][vr[i]] = s->du[1][vr[i]] = s->du[2][vr[i]] = 0;
-    }
-    return fmi2OK;
-}
-fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n,
-                                       const fmi2Integer o[], const fmi2Real v[]) {
-#ifdef INTERP
-    Comp *s = c;
-    for (size_t i = 0; i < n; i++) {
-        if (vr[i] >= NR || o[i] < 1 || o[i] > 3) return fmi2Error;
-        s->du[o[i] - 1][vr[i]] = v[i];
-    }
-    return fmi2OK;
-#else
-    return fmi2Error;
-#endif
-}
-fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer v[]) { return n ? fmi2Error : fmi2OK; }
-fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Boolean v[]) { return n ? fmi2Error : fmi2OK; }
-fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String v[]) { return n ? fmi2Error : fmi2OK; }
-fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer v[]) { return n ? fmi2Error : fmi2OK; }
-fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Boolean v[]) { return n ? fmi2Error : fmi2OK; }
-fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String v[]) { return n ? fmi2Error : fmi2OK; }
-
-fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *st) {
-    Comp *copy = *st ? (Comp *)*st : malloc(sizeof(Comp));
-    if (!copy) return fmi2Error;
-    memcpy(copy, c, sizeof(Comp));
-    *st = copy;
-    return fmi2OK;
-}
-fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate st) {
-    if (!st) return fmi2Error;
-    memcpy(c, st, sizeof(Comp));
-    return fmi2OK;
-}
-fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *st) { free(*st); *st = NULL; return fmi2OK; }
-fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate st, size_t *n) { return fmi2Error; }
-fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate st, fmi2Byte b[], size_t n) { return fmi2Error; }
-fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t n, fmi2FMUstate *st) { return fmi2Error; }
-fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference u[], size_t nu,
-                                        const fmi2ValueReference z[], size_t nz, const fmi2Real dv[],
-                                        fmi2Real dz[]) { return fmi2Error; }
-fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n,
-                                        const fmi2Integer o[], fmi2Real v[]) { return fmi2Error; }
-
-fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet) {
-    Comp *s = c;
-    if (!(h > 0)) return fmi2Error;
-    int n = (int)ceil(h / 1e-5 - 1e-9);
-    double dt = h / n, y[NY], k1[NY], k2[NY], k3[NY], k4[NY], tmp[NY];
-    memcpy(y, s->y, sizeof y);
-    for (int i = 0; i < n; i++) {
-        double ti = t + i * dt;
-        rhs(s, ti, y, k1);
-        for (int j = 0; j < NY; j++) tmp[j] = y[j] + 0.5 * dt * k1[j];
-        rhs(s, ti + 0.5 * dt, tmp, k2);
-        for (int j = 0; j < NY; j++) tmp[j] = y[j] + 0.5 * dt * k2[j];
-        rhs(s, ti + 0.5 * dt, tmp, k3);
-        for (int j = 0; j < NY; j++) tmp[j] = y[j] + dt * k3[j];
-        rhs(s, ti + dt, tmp, k4);
-        for (int j = 0; j < NY; j++) y[j] += dt / 6 * (k1[j] + 2 * k2[j] + 2 * k3[j] + k4[j]);
-    }
-    for (int j = 0; j < NY; j++) if (!isfinite(y[j])) return fmi2Error;
-    memcpy(s->y, y, sizeof y);
-    s->time = t + h;
-    return fmi2OK;
-}
-fmi2Status fmi2CancelStep(fmi2Component c) { return fmi2Error; }
-fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind k, fmi2Status *v) { return fmi2Error; }
-fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k, fmi2Real *v) {
-    if (k != fmi2LastSuccessfulTime) return fmi2Error;
-    *v = ((Comp *)c)->time;
-    return fmi2OK;
-}
-fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind k, fmi2Integer *v) { return fmi2Error; }
-fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind k, fmi2Boolean *v) { return fmi2Error; }
-fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind k, fmi2String *v) { return fmi2Error; }
 """
 
-# (name, vr, causality, variability, initial, start): the XML's order is the index dependencies refer to
+# (name, vr, causality, variability, initial, start, unit): the XML's order is the index dependencies refer to
 VARIABLES = {
-    "mass": [("x", 0, "output", "continuous", None, None), ("v", 1, "output", "continuous", None, None),
-             ("m", 2, "parameter", "fixed", "exact", M_A), ("c", 3, "parameter", "fixed", "exact", C_A),
-             ("F", 4, "input", "continuous", None, 0.0), ("f0", 5, "parameter", "fixed", "exact", F0)],
-    "spring": [("F", 0, "output", "continuous", None, None), ("x2", 1, "output", "continuous", None, None),
-               ("m", 2, "parameter", "fixed", "exact", M_B), ("c", 3, "parameter", "fixed", "exact", C_B),
-               ("x_in", 4, "input", "continuous", None, 0.0), ("v_in", 5, "input", "continuous", None, 0.0),
-               ("d", 6, "parameter", "fixed", "exact", D), ("k", 7, "parameter", "fixed", "exact", K)],
+    "mass": [("x", 0, "output", "continuous", None, None, None), ("v", 1, "output", "continuous", None, None, None),
+             ("m", 2, "parameter", "fixed", "exact", M_A, None), ("c", 3, "parameter", "fixed", "exact", C_A, None),
+             ("F", 4, "input", "continuous", None, 0.0, None), ("f0", 5, "parameter", "fixed", "exact", F0, None)],
+    "spring": [("F", 0, "output", "continuous", None, None, None), ("x2", 1, "output", "continuous", None, None, None),
+               ("m", 2, "parameter", "fixed", "exact", M_B, None), ("c", 3, "parameter", "fixed", "exact", C_B, None),
+               ("x_in", 4, "input", "continuous", None, 0.0, None), ("v_in", 5, "input", "continuous", None, 0.0, None),
+               ("d", 6, "parameter", "fixed", "exact", D, None), ("k", 7, "parameter", "fixed", "exact", K, None)],
 }
 # ModelStructure/Outputs: (index, dependencies): the spring's force depends on both inputs (feedthrough)
 OUTPUTS = {"mass": [(1, ""), (2, "")], "spring": [(1, "5 6"), (2, "")]}
 
 
 def _xml(ident: str, interpolate: bool) -> str:
-    sv = []
-    for name, vr, caus, var, init, start in VARIABLES[ident]:
-        attrs = f'name="{name}" valueReference="{vr}" causality="{caus}" variability="{var}"'
-        if init:
-            attrs += f' initial="{init}"'
-        real = "<Real" + (f' start="{start!r}"' if start is not None else "") + "/>"
-        sv.append(f"    <ScalarVariable {attrs}>{real}</ScalarVariable>")
-    outs = "".join(f'<Unknown index="{i}" dependencies="{d}"/>' for i, d in OUTPUTS[ident])
-    return f"""<?xml version="1.0" encoding="UTF-8"?>
-<fmiModelDescription fmiVersion="2.0" modelName="{ident}" guid="{{feedthrough-{ident}}}"
-    generationTool="hand-written C (test)" variableNamingConvention="flat" numberOfEventIndicators="0">
-  <CoSimulation modelIdentifier="{ident}" canHandleVariableCommunicationStepSize="true"
-      canInterpolateInputs="{str(interpolate).lower()}" maxOutputDerivativeOrder="0"
-      canGetAndSetFMUstate="true" canSerializeFMUstate="false" providesDirectionalDerivative="false"/>
-  <ModelVariables>
-{chr(10).join(sv)}
-  </ModelVariables>
-  <ModelStructure><Outputs>{outs}</Outputs></ModelStructure>
-</fmiModelDescription>
-"""
+    return model_description(ident, f"{{feedthrough-{ident}}}", VARIABLES[ident], OUTPUTS[ident],
+                             co_simulation=f'\n      canInterpolateInputs="{str(interpolate).lower()}" '
+                                           'maxOutputDerivativeOrder="0"')
 
 
 def build_system(folder: Path, interpolate: bool, stop: float = 0.2):
     """Compile the two FMUs into ``folder`` and return the CosimSystem coupling them
     (A.x -> B.x_in, A.v -> B.v_in, B.F -> A.F), recording A.x, A.v, B.F, B.x2."""
     from fmugen.cosim.system import CosimSystem, Coupling, Recorded, Unit
-    from fmugen.fmi.build import fmi_headers_dir, platform_binary
 
-    platform, suffix = platform_binary()
-    folder.mkdir(parents=True, exist_ok=True)
-    src = folder / "feedthrough.c"
-    src.write_text(C_SOURCE)
     flags = ["-DINTERP"] if interpolate else []
     defs = {"mass": ["-DMA=%r" % M_A, "-DCA=%r" % C_A, "-DF0=%r" % F0, "-DW=%r" % W],
             "spring": ["-DSPRING", "-DMB=%r" % M_B, "-DCB=%r" % C_B, "-DKK=%r" % K, "-DDD=%r" % D]}
-    paths = {}
-    for ident, d in defs.items():
-        lib = folder / f"{ident}{suffix}"
-        subprocess.run(["cc", "-O2", "-shared", "-fPIC", "-std=c99", f"-I{fmi_headers_dir()}", *flags, *d,
-                        "-o", str(lib), str(src), "-lm"], check=True, capture_output=True)
-        fmu = folder / f"{ident}.fmu"
-        with zipfile.ZipFile(fmu, "w") as zf:
-            zf.writestr("modelDescription.xml", _xml(ident, interpolate))
-            zf.write(lib, f"binaries/{platform}/{ident}{suffix}")
-        paths[ident] = fmu
+    source = rk4_source(NR, NY, MODEL_C)
+    paths = {ident: compile_fmu(folder, ident, source, _xml(ident, interpolate), ["-O2", "-std=c99", *flags, *d],
+                                source_name="feedthrough.c") for ident, d in defs.items()}
     units = (Unit("A", paths["mass"], "cs", provides_directional_derivative=False),
              Unit("B", paths["spring"], "cs", provides_directional_derivative=False))
     couplings = (Coupling(("A", "x"), ("B", "x_in")), Coupling(("A", "v"), ("B", "v_in")),

@@ -6,6 +6,17 @@ input ``u``, one output ``y``, a parameter ``T``.  Its modelDescription
 declares ``canGetAndSetFMUstate="false"`` and its fmi2GetFMUstate refuses,
 as many exported tool FMUs do.  :func:`build_lag` compiles it; :func:`broken_fmus`
 writes the broken variants the master must name in one line.
+
+The FMI 2.0 part every hand-written test FMU shares, written once here (used by
+``tests/feedthrough_fmu.py`` and ``tests/ssp_third_party.py`` too):
+
+* :func:`rk4_source`: the C of a Co-Simulation FMU around a model the caller
+  writes (its states, equations and outputs), integrated by classical RK4 on
+  sub-steps of at most 1e-5 s, with its state got and set, and no directional
+  or output derivatives;
+* :func:`model_description`: its modelDescription.xml from a list of variables;
+* :func:`compile_fmu`: the shared library compiled with the system's C
+  compiler and zipped with its description.
 """
 from __future__ import annotations
 
@@ -114,13 +125,7 @@ def _zip(path: Path, files: dict) -> Path:
 
 def build_lag(d: Path) -> Path:
     """The ``lag`` FMU, compiled here with the system's C compiler."""
-    src = d / "lag.c"
-    src.write_text(LAG_C)
-    lib = d / "lag.so"
-    subprocess.run(["cc", "-O1", "-fPIC", "-shared", f"-I{FMI_HEADERS}", "-o", str(lib), str(src), "-lm"],
-                   check=True, capture_output=True, text=True)
-    return _zip(d / "lag.fmu", {"modelDescription.xml": LAG_XML.format(version="2.0", ident="lag"),
-                                f"binaries/{fmpy.platform}/lag{fmpy.sharedLibraryExtension}": lib.read_bytes()})
+    return compile_fmu(d, "lag", LAG_C, LAG_XML.format(version="2.0", ident="lag"), cflags=["-O1"])
 
 
 def broken_fmus(d: Path, lag: Path, huge: bool = True) -> dict:
@@ -160,3 +165,210 @@ def broken_fmus(d: Path, lag: Path, huge: bool = True) -> dict:
         z.writestr(binary, lib)
     out["300 MB description"] = big
     return out
+
+
+# --------------------------------------------------------------------------
+# a Co-Simulation FMU around a hand-written model, integrated by RK4
+# --------------------------------------------------------------------------
+RK4_FMU_C = r"""
+const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+const char *fmi2GetVersion(void) { return fmi2Version; }
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const fmi2String cat[]) { return fmi2OK; }
+
+fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, fmi2String loc,
+                              const fmi2CallbackFunctions *cb, fmi2Boolean vis, fmi2Boolean log) {
+    Comp *c = calloc(1, sizeof(Comp));
+    if (!c) return NULL;
+    c->cb = *cb;
+    start(c);
+    return c;
+}
+void fmi2FreeInstance(fmi2Component c) { free(c); }
+fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean td, fmi2Real tol, fmi2Real t0, fmi2Boolean sd,
+                               fmi2Real t1) { ((Comp *)c)->time = t0; return fmi2OK; }
+fmi2Status fmi2EnterInitializationMode(fmi2Component c) { return fmi2OK; }
+fmi2Status fmi2ExitInitializationMode(fmi2Component c) { outputs(c); return fmi2OK; }
+fmi2Status fmi2Terminate(fmi2Component c) { return fmi2OK; }
+fmi2Status fmi2Reset(fmi2Component c) { return fmi2Error; }
+
+fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[]) {
+    Comp *s = c;
+    outputs(s);
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] >= NR) return fmi2Error;
+        v[i] = s->r[vr[i]];
+    }
+    return fmi2OK;
+}
+fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real v[]) {
+    Comp *s = c;
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] >= NR) return fmi2Error;
+        s->r[vr[i]] = v[i];
+        s->tin[vr[i]] = s->time;  /* a new value: its derivatives start again from it */
+        s->du[0][vr[i]] = s->du[1][vr[i]] = s->du[2][vr[i]] = 0;
+    }
+    return fmi2OK;
+}
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                                       const fmi2Integer o[], const fmi2Real v[]) {
+#ifdef INTERP
+    Comp *s = c;
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] >= NR || o[i] < 1 || o[i] > 3) return fmi2Error;
+        s->du[o[i] - 1][vr[i]] = v[i];
+    }
+    return fmi2OK;
+#else
+    return fmi2Error;
+#endif
+}
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer v[]) { return n ? fmi2Error : fmi2OK; }
+fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Boolean v[]) { return n ? fmi2Error : fmi2OK; }
+fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String v[]) { return n ? fmi2Error : fmi2OK; }
+fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer v[]) { return n ? fmi2Error : fmi2OK; }
+fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Boolean v[]) { return n ? fmi2Error : fmi2OK; }
+fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String v[]) { return n ? fmi2Error : fmi2OK; }
+
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *st) {
+    Comp *copy = *st ? (Comp *)*st : malloc(sizeof(Comp));
+    if (!copy) return fmi2Error;
+    memcpy(copy, c, sizeof(Comp));
+    *st = copy;
+    return fmi2OK;
+}
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate st) {
+    if (!st) return fmi2Error;
+    memcpy(c, st, sizeof(Comp));
+    return fmi2OK;
+}
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *st) { free(*st); *st = NULL; return fmi2OK; }
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate st, size_t *n) { return fmi2Error; }
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate st, fmi2Byte b[], size_t n) { return fmi2Error; }
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t n, fmi2FMUstate *st) { return fmi2Error; }
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference u[], size_t nu,
+                                        const fmi2ValueReference z[], size_t nz, const fmi2Real dv[],
+                                        fmi2Real dz[]) { return fmi2Error; }
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                                        const fmi2Integer o[], fmi2Real v[]) { return fmi2Error; }
+
+fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet) {
+    Comp *s = c;
+    if (!(h > 0)) return fmi2Error;
+    int n = (int)ceil(h / 1e-5 - 1e-9);
+    double dt = h / n, y[NY], k1[NY], k2[NY], k3[NY], k4[NY], tmp[NY];
+    memcpy(y, s->y, sizeof y);
+    load(s, y);
+    for (int i = 0; i < n; i++) {
+        double ti = t + i * dt;
+        rhs(s, ti, y, k1);
+        for (int j = 0; j < NY; j++) tmp[j] = y[j] + 0.5 * dt * k1[j];
+        rhs(s, ti + 0.5 * dt, tmp, k2);
+        for (int j = 0; j < NY; j++) tmp[j] = y[j] + 0.5 * dt * k2[j];
+        rhs(s, ti + 0.5 * dt, tmp, k3);
+        for (int j = 0; j < NY; j++) tmp[j] = y[j] + dt * k3[j];
+        rhs(s, ti + dt, tmp, k4);
+        for (int j = 0; j < NY; j++) y[j] += dt / 6 * (k1[j] + 2 * k2[j] + 2 * k3[j] + k4[j]);
+    }
+    for (int j = 0; j < NY; j++) if (!isfinite(y[j])) return fmi2Error;
+    memcpy(s->y, y, sizeof y);
+    store(s, y);
+    s->time = t + h;
+    return fmi2OK;
+}
+fmi2Status fmi2CancelStep(fmi2Component c) { return fmi2Error; }
+fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind k, fmi2Status *v) { return fmi2Error; }
+fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k, fmi2Real *v) {
+    if (k != fmi2LastSuccessfulTime) return fmi2Error;
+    *v = ((Comp *)c)->time;
+    return fmi2OK;
+}
+fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind k, fmi2Integer *v) { return fmi2Error; }
+fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind k, fmi2Boolean *v) { return fmi2Error; }
+fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind k, fmi2String *v) { return fmi2Error; }
+"""
+
+RK4_FMU_HEAD = r"""
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include "fmi2Functions.h"
+"""
+
+RK4_FMU_STATE = r"""
+typedef struct {
+    double r[NR];  /* the variables, by value reference */
+    double du[3][NR], tin[NR];  /* input derivatives the master sent (INTERP), from the time the input was set */
+    double y[NY];  /* the states */
+    double time;
+    fmi2CallbackFunctions cb;
+} Comp;
+
+/* an input at time t: the value set, continued by the derivatives the master sent (zero when it sent none) */
+static double in(const Comp *c, int vr, double t) {
+    double s = t - c->tin[vr];
+    return c->r[vr] + s * (c->du[0][vr] + s * (c->du[1][vr] / 2 + s * c->du[2][vr] / 6));
+}
+"""
+
+
+def rk4_source(nr: int, ny: int, model_c: str) -> str:
+    """The C of an FMU with ``nr`` real variables (by value reference) and ``ny`` states around ``model_c``,
+    which defines, on ``Comp *c`` (``c->r[vr]`` the variables, ``c->y`` the states, ``in(c, vr, t)`` an input
+    at time t):
+
+    * ``start(c)``: the parameters' values at instantiation;
+    * ``rhs(c, t, y, dy)``: the state derivatives;
+    * ``load(c, y)``: before a step, states taken from variables (or nothing);
+    * ``store(c, y)``: after a step, variables written from the states (or nothing);
+    * ``outputs(c)``: the outputs computed before a read and when initialization ends (or nothing).
+
+    Compiled with ``-DINTERP``, the inputs follow the derivatives fmi2SetRealInputDerivatives sends (else it
+    refuses them)."""
+    return RK4_FMU_HEAD + f"#define NR {nr}\n#define NY {ny}\n" + RK4_FMU_STATE + model_c + RK4_FMU_C
+
+
+def model_description(ident: str, guid: str, variables: list, outputs: list, initial_unknowns=(),
+                      fmi_version: str = "2.0", co_simulation: str = "") -> str:
+    """modelDescription.xml of a Co-Simulation FMU.  ``variables``: (name, vr, causality, variability, initial,
+    start, unit) in the order the indices count; ``outputs``: (index, dependencies or None);
+    ``initial_unknowns``: (index, dependencies); ``co_simulation``: more attributes of <CoSimulation>."""
+    sv = []
+    for name, vr, caus, var, init, start, unit in variables:
+        attrs = f'name="{name}" valueReference="{vr}" causality="{caus}" variability="{var}"'
+        if init:
+            attrs += f' initial="{init}"'
+        real = "<Real" + (f' unit="{unit}"' if unit else "") + (f' start="{start!r}"' if start is not None else "") + "/>"
+        sv.append(f"    <ScalarVariable {attrs}>{real}</ScalarVariable>")
+    units = sorted({v[6] for v in variables if v[6]})
+    unit_defs = "".join(f'<Unit name="{u}"/>' for u in units)
+    ud = f"\n  <UnitDefinitions>{unit_defs}</UnitDefinitions>" if units else ""
+    outs = "".join(f'<Unknown index="{i}"/>' if d is None else f'<Unknown index="{i}" dependencies="{d}"/>'
+                   for i, d in outputs)
+    iu = "".join(f'<Unknown index="{i}" dependencies="{d}"/>' for i, d in initial_unknowns)
+    return f"""<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="{fmi_version}" modelName="{ident}" guid="{guid}" generationTool="hand-written C (test)"
+    variableNamingConvention="flat" numberOfEventIndicators="0">
+  <CoSimulation modelIdentifier="{ident}" canHandleVariableCommunicationStepSize="true"{co_simulation}
+      canGetAndSetFMUstate="true" canSerializeFMUstate="false" providesDirectionalDerivative="false"/>{ud}
+  <ModelVariables>
+{chr(10).join(sv)}
+  </ModelVariables>
+  <ModelStructure><Outputs>{outs}</Outputs>{f"<InitialUnknowns>{iu}</InitialUnknowns>" if iu else ""}</ModelStructure>
+</fmiModelDescription>
+"""
+
+
+def compile_fmu(folder: Path, ident: str, source: str, xml: str, cflags=("-O2", "-std=c99"),
+                source_name: str = None) -> Path:
+    """``folder/ident.fmu``: ``source`` compiled (with ``cflags``) into the shared library ``ident`` and zipped
+    with the description ``xml``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    src = folder / (source_name or f"{ident}.c")
+    src.write_text(source)
+    lib = folder / f"{ident}{fmpy.sharedLibraryExtension}"
+    subprocess.run(["cc", *cflags, "-fPIC", "-shared", f"-I{FMI_HEADERS}", "-o", str(lib), str(src), "-lm"],
+                   check=True, capture_output=True, text=True)
+    return _zip(folder / f"{ident}.fmu", {"modelDescription.xml": xml,
+                                         f"binaries/{fmpy.platform}/{ident}{fmpy.sharedLibraryExtension}":
+                                         lib.read_bytes()})
