@@ -89,12 +89,16 @@ EXPECTED = {
 def test_broken_fmus_give_one_line_naming_the_fmu(lag, tmp_path):
     fmus = broken_fmus(tmp_path, lag)
     assert set(fmus) == set(EXPECTED)
+    cwd = os.getcwd()
     for kind, path in fmus.items():
         with pytest.raises(FmugenError) as info:
             run(chain(lag, path), scheme="gauss-seidel")
         msg = str(info.value)
         assert isinstance(info.value, CosimError) and "\n" not in msg, (kind, msg)
         assert f"FMU 'B' ({path})" in msg and EXPECTED[kind] in msg, (kind, msg)
+        # the host's working folder is its own (fmpy changes into the binary's folder and, when the load
+        # fails, did not change back: every relative path of the process broke after it)
+        assert os.getcwd() == cwd, kind
     # a folder, a FIFO (reading it would block) and a file that does not exist
     fifo = tmp_path / "pipe.fmu"
     os.mkfifo(fifo)

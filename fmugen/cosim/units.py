@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import atexit
 import ctypes
+import os
 import shutil
 import tempfile
 from collections import deque
@@ -93,12 +94,17 @@ class _Unit:
             self._unzip = _extract(path)
         except Exception as e:
             raise load_failure(unit.name, path, "unzipping", e) from None
+        cwd = os.getcwd()
         try:
             self.fmu = self._make_fmu()
         except CosimError:
             raise
         except Exception as e:  # the shared library does not load (another architecture, missing symbols)
             raise load_failure(unit.name, path, "loading its binary", e) from None
+        finally:
+            # fmpy changes into the binary's folder to load it and changes back only when the load works: a
+            # broken binary left the host process in a temporary folder (every relative path after it broke)
+            os.chdir(cwd)
         try:
             self.fmu.instantiate(callbacks=cb, loggingOn=False)
         except Exception as e:  # fmi2Instantiate returned NULL (e.g. the GUID is not the binary's)
