@@ -6,6 +6,8 @@ and never points it back, so once ``f`` is gone the next FMU that logs through
 fmpy's default callbacks calls freed memory.  After every test the proxy is
 pointed back at fmpy's own printer (through a callback kept alive here).
 """
+import os
+import warnings
 from ctypes import byref
 
 import pytest
@@ -40,6 +42,25 @@ def _restore_fmpy_logger():
 def _fmpy_default_logger_restored():
     yield
     _restore_fmpy_logger()
+
+
+_START_FOLDER = os.getcwd()  # where pytest was started: the checkout, which many tests name files relative to
+
+
+@pytest.fixture(autouse=True)
+def _working_folder_kept(request):
+    """Every test starts in the folder pytest started in.  The process's working folder is global, and code a
+    test runs may move it and not move back: fmpy changes into an FMU's binary folder to load it and did
+    not change back when the load failed (fmugen's master now restores it, tests/test_hardening_master.py),
+    and libcosim's C++ library calls chdir too.  Once moved, every later test naming a file relative to the
+    checkout failed; a move is put back and reported as a warning naming the test."""
+    if os.getcwd() != _START_FOLDER:
+        warnings.warn(f"the working folder was {os.getcwd()} before {request.node.nodeid}; put back")
+        os.chdir(_START_FOLDER)
+    yield
+    if os.getcwd() != _START_FOLDER:
+        warnings.warn(f"{request.node.nodeid} left the working folder at {os.getcwd()}; put back")
+        os.chdir(_START_FOLDER)
 
 
 @pytest.fixture(scope="module")
