@@ -243,17 +243,19 @@ def variable_layout(model: SymbolicModel) -> VariableLayout:
         add(name=r.name, value_reference=(first_rt + r.offset) if r.type == "Real" else r.offset, type=r.type,
             causality=r.causality, variability=r.variability, initial=r.initial, start=r.start, unit=r.unit,
             description=r.description, min=r.min, max=r.max, kind="runtime")
-    # FMI 2.0 aliases (sec. 2.2.7: the same value reference, only one of a set with a start value), last so
-    # that no value reference or index above moves: a state's alias is initial="calculated" without a start
-    # (the state holds it); an input's repeats the input's start, because FMI 2.0 requires a start for
-    # every input (the same value, so the two cannot disagree)
+    # FMI 2.0 aliases (sec. 2.2.7: the same value reference; of a non-constant alias set only one variable may
+    # carry a start value), last so that no value reference or index above moves. A state's alias keeps the
+    # state's causality, initial="calculated" without a start (the state holds it). An input's alias is a
+    # *local*, initial="calculated": FMI 2.0 requires a start on every input, so an alias with causality
+    # input would be a second start in the set, which FMI Library (the Compliance Checker, libcosim,
+    # OMSimulator) answers by removing both variables. The joint name reads the value; the input sets it.
     for v in [v for v in out.variables if v.kind in ("state", "input") and v.symbol is not None]:
         src = next(s for s in (model.states if v.kind == "state" else model.inputs) if s.symbol == v.symbol)
         if not src.alias:
             continue
-        add(name=src.alias, value_reference=v.value_reference, type="Real", causality=v.causality,
-            variability=v.variability, initial="calculated" if v.kind == "state" else None,
-            start=v.start if v.kind == "input" else None, unit=v.unit,
+        add(name=src.alias, value_reference=v.value_reference, type="Real",
+            causality=v.causality if v.kind == "state" else "local", variability=v.variability,
+            initial="calculated", start=None, unit=v.unit,
             description=f"alias of {v.name}: {v.description}", nominal=v.nominal, min=v.min, max=v.max,
             kind="alias", alias_of=v.index)
     names = [v.name for v in out.variables]
