@@ -70,3 +70,29 @@ def test_without_a_tolerance_an_estimate_as_large_as_the_signal_is_unreliable():
     assert trend != "growing" and rel > NO_DIGIT and "no digit" in verdict
     assert finished(2.0 * NO_DIGIT, tol=1e3)[4] is None  # the user's own tolerance rules when given
     assert finished(1e-4)[4] is None  # an estimate well below the signal: ok
+
+
+def _window_errors(nominal, values, errors):
+    """An ErrorEstimate fed six windows whose end differs from the run by ``errors`` (per column)."""
+    from fmugen.cosim.accuracy import ErrorEstimate
+
+    est = ErrorEstimate("jacobi", "hold", 600, ("a", "b"), 1e-10, nominal)
+    for k in range(6):
+        est.pending = (0.01 * k, 1e-3, (np.zeros(2), np.asarray(errors, dtype=float)), 1)
+        est.mid = np.zeros(2)
+        est.accepted(1e-3, np.zeros(2), 100 * (k + 1))
+    return est.finish(np.asarray(values, dtype=float), None, 600)
+
+
+def test_a_signal_at_rest_is_judged_against_its_nominal_not_its_round_off():
+    """A column that stays at round-off (the PUMA wrist's motor torque at rest, 1e-14 N.m) with a window error
+    of the same size: judged against its declared nominal (here 1; FMI's default), no verdict; the other
+    column, a real signal with half its size lost in one window, still ends unreliable."""
+    values = [[1e-14, 2.0], [-1.2e-14, 2.0]]
+    verdict = _window_errors([1.0, 1.0], values, [1.2e-14, 1e-9])[4]
+    assert verdict is None
+    verdict = _window_errors([1.0, 1.0], values, [1.2e-14, 1.5])[4]
+    assert verdict is not None and " in b," in verdict
+    # a declared nominal far below the signal's size changes nothing: the largest value is the scale
+    verdict = _window_errors([1e-20, 1e-20], values, [1.2e-14, 1e-9])[4]
+    assert verdict is not None and " in a," in verdict  # 1.2e-14 of 1.2e-14: no digit known, as before

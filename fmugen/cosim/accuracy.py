@@ -97,7 +97,7 @@ ORDERS = {"hold": 1, "linear": 2, "quadratic": 3, "cubic": 3}
 class ErrorEstimate:
     """Accumulates the shadow samples of one run; ``finish`` gives the estimate, the trend and the verdict."""
 
-    def __init__(self, scheme, extrapolation, n_steps, columns, rtol):
+    def __init__(self, scheme, extrapolation, n_steps, columns, rtol, nominal=None):
         p = ORDERS[extrapolation]
         if scheme == "gauss-seidel" and p > 2:
             p = 2  # a later FMU gets the line to its source's new value
@@ -110,6 +110,9 @@ class ErrorEstimate:
         # over a window the errors are global: Richardson, e(H) = (y_H - y_H/2) 2^p / (2^p - 1)
         self.div = (2.0 ** p - 1.0) / 2.0 ** p
         self.columns = columns
+        # a column's scale is its largest value, but at least its nominal: a signal at rest (a joint
+        # without gravity load, 1e-14 N.m) would otherwise make round-off "the whole signal"
+        self.nominal = np.ones(len(columns)) if nominal is None else np.asarray(nominal, dtype=float)
         self.rtol = rtol or 0.0
         self.pending = None  # (t, H, shadow outputs, steps still to go)
         self.t, self.local = [], []  # sample times, local error per column (absolute)
@@ -183,7 +186,7 @@ class ErrorEstimate:
         gathers = np.mean(np.array(self.gathers, dtype=float), axis=0) >= 0.5
         est = np.where(gathers, self.est_sum, self.est_max)
         scale = np.max(np.abs(values), axis=0) if len(values) else np.ones(len(cols))
-        scale = np.where(scale > 0, scale, 1.0)
+        scale = np.maximum(scale, self.nominal)
         rel_est = est / scale
         j = int(np.argmax(rel_est))
         estimate = {c: float(e) for c, e in zip(cols, est)}

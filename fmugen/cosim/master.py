@@ -96,6 +96,15 @@ def _land(t, H, stop):
     return H
 
 
+
+def _nominal(variable) -> float:
+    """A variable's declared ``nominal`` (positive, finite), else 1.0 (FMI 2.0's default)."""
+    try:
+        v = abs(float(getattr(variable, "nominal", None)))
+    except (TypeError, ValueError):
+        return 1.0
+    return v if math.isfinite(v) and v > 0 else 1.0
+
 class _Recording:
     """The recorded columns at every accepted communication point (grown by doubling)."""
 
@@ -228,6 +237,10 @@ class Master:
         self.coupling_labels = tuple(u_labels)
         self.columns = tuple(r.column for r in sysm.recorded)
         self.rec_idx = np.array([y_at[(r.unit, r.variable)] for r in sysm.recorded], dtype=np.intp)
+        # the recorded signals' declared nominal values (else FMI's default, 1): the error estimate's floor
+        # for a signal that stays near zero (a joint at rest), where its largest value is round-off
+        self.rec_nominal = np.array([_nominal(self.units[index[r.unit]].variables.get(r.variable))
+                                     for r in sysm.recorded], dtype=float)
         # buffers (ctypes pointers into them are taken once)
         self.Y = np.zeros(max(ny, 1))  # outputs at t_{n+1} (being computed)
         self.Uset = np.zeros(max(nu, 1))  # input values passed at t_n
@@ -418,7 +431,7 @@ class Master:
         if estimate and len(self.rec_idx) and all(getattr(u, "can_save_state", True) for u in self.units):
             rtols = [r for r in map(internal_rtol, self.units) if r is not None]
             est = ErrorEstimate(self.scheme, self.extrapolation, int((stop - t0) / H0), self.columns,
-                                max(rtols) if rtols else 0.0)
+                                max(rtols) if rtols else 0.0, self.rec_nominal)
             shadow = self._prepare(adaptive, coupling_tol, int(max_iterations)) if implicit else scheme
         t = t0
         H = min(H0, Hmax)
