@@ -165,3 +165,17 @@ def test_annotation_reads_back_what_was_written(exported):
     assert system.couplings == built.couplings and system.recorded == built.recorded
     assert (system.order, system.step, system.start_time, system.stop_time) == \
         (built.order, built.step, built.start_time, built.stop_time)
+
+
+def test_the_printed_run_step_is_the_archives(tmp_path, capsys):
+    """fmugen ssp prints the macro step the archive's run takes: a [cosim] step (here --set cosim.step=0.004,
+    beside the scene's 1 ms) is what the run read back uses, and what the line says."""
+    from fmugen.cli import main
+    from fmugen.cosim.settings import resolve
+
+    out = tmp_path / "split.ssp"
+    assert main(["ssp", str(SPLIT), "-o", str(out), "--set", "cosim.step=0.004", "--fmus", str(tmp_path / "f")]) == 0
+    line = [ln for ln in capsys.readouterr().out.splitlines() if "fmugen's run:" in ln][0]
+    system = fmugen.load_system(out)
+    step = resolve(dict(system.settings)).step or system.step
+    assert step == 0.004 and line.endswith(f"at {step:g} s")

@@ -43,7 +43,7 @@ def cmd_ssp(args) -> int:
     print(f"wrote {r['path']}: {len(r['fmus'])} FMU(s) ({', '.join(r['fmus'])}); libcosim's fixed step "
           f"{r['libcosim_step']:g} s (held-input Jacobi "
           f"{'has no stability limit found' if lim == float('inf') else 'limit not computed' if lim != lim else f'is stable below {lim:.3g} s'}); "
-          f"fmugen's run: {r['scheme']}/{r['extrapolation']} at {built.system.step:g} s")
+          f"fmugen's run: {r['scheme']}/{r['extrapolation']} at {r['run_step']:g} s")
     return 0
 
 

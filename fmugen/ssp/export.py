@@ -235,7 +235,13 @@ def export_ssp(scene, output, fmus_dir=None, scheme: Optional[str] = None,
                 part.unlink()
     return {"path": out, "fmus": [u.name for u in built.system.units], "libcosim_step": step,
             "jacobi_limit": built.jacobi_limit, "scheme": scheme, "extrapolation": extrapolation,
-            "built": built}
+            "run_step": run_step(built.system), "built": built}
+
+
+def run_step(system) -> float:
+    """The macro step fmugen's run of ``system`` takes: its ``[cosim] step`` when the scene sets one (what
+    the archive's run settings carry and the run read back uses), else the system's step."""
+    return float(dict(system.settings).get("step", system.step))
 
 
 def _var_unit(mds: dict, unit: str, name: str) -> str:
