@@ -188,12 +188,12 @@ static const char *solver_name(int solver)
  * none (t + H == t: time would not advance at all). */
 #define FMUGEN_STEP_REL_RESOLUTION 1e-6
 
-/* Back to the start of the communication step: states, inputs and input
- * derivatives as fmi2DoStep found them (inst->step_start), time tc. */
+/* Back to the start of the communication step: states, inputs, input
+ * derivatives, discrete states and indicator memory as fmi2DoStep found them
+ * (inst->step_start), time tc. */
 static void restore_step_start(fmugen_instance *inst, double tc)
 {
-    const fmugen_model_def *m = inst->model;
-    memcpy(inst->vec, inst->step_start, ((size_t)m->nx + 4 * (size_t)m->nu) * sizeof(double));
+    memcpy(inst->vec, inst->step_start, inst->n_vec * sizeof(double));
     inst->s.time = tc;
     inst->s.fsal_valid = 0;
     fmugen_invalidate(inst);
@@ -212,6 +212,43 @@ static int kept_point_is_good(fmugen_instance *inst)
     inst->cache_status = rc;
     inst->cache_valid = 1;
     return rc == FMUGEN_OK;
+}
+
+/* The event iteration at a state event the solver located (inst->s.time,
+ * inst->x just after the crossing); an event storm -- FMUGEN_EVENT_STORM_RUN
+ * events each within FMUGEN_EVENT_STORM_GAP of the one before, or
+ * FMUGEN_EVENT_MAX_PER_STEP in one communication step -- fails the step
+ * naming the indicator instead of running forever. */
+static int handle_event(fmugen_instance *inst, fmugen_ode *ode, long long n_in_step, char *msg, size_t n)
+{
+    const double te = inst->s.time;
+    char zname[160];
+    fmugen_indicator_name(inst, inst->s.last_indicator, zname, sizeof zname);
+    if (inst->s.n_events > 0 && te - inst->s.last_event_time <= FMUGEN_EVENT_STORM_GAP * fmax(1.0, fabs(te)))
+        inst->s.storm_run++;
+    else
+        inst->s.storm_run = 0;
+    inst->s.n_events++;
+    inst->s.last_event_time = te;
+    if (inst->s.storm_run >= FMUGEN_EVENT_STORM_RUN || n_in_step > FMUGEN_EVENT_MAX_PER_STEP) {
+        if (inst->s.storm_run >= FMUGEN_EVENT_STORM_RUN)
+            snprintf(msg, n, "event storm at t = %.17g: %d events each within %.3g s of the one before (Zeno "
+                     "behaviour or chattering: the model switches without time passing); the last on indicator %s",
+                     te, inst->s.storm_run, FMUGEN_EVENT_STORM_GAP * fmax(1.0, fabs(te)), zname);
+        else
+            snprintf(msg, n, "event storm at t = %.17g: more than %d events in one communication step; the last on "
+                     "indicator %s", te, FMUGEN_EVENT_MAX_PER_STEP, zname);
+        return FMUGEN_SOLVER_FAILED;
+    }
+    double *u = ode->u_work;
+    fmugen_inputs_at(inst, ode->t0, ode->u0, te, u);
+    char why[300];
+    if (fmugen_event_iteration(inst, u, why, sizeof why) != FMUGEN_OK) {
+        snprintf(msg, n, "at the event on indicator %.150s: %s", zname, why);
+        return FMUGEN_SOLVER_FAILED;
+    }
+    fmugen_log(inst, fmi2OK, FMUGEN_LOG_EVENTS, "fmi2DoStep: state event at t = %.17g on indicator %s", te, zname);
+    return FMUGEN_SOLVER_OK;
 }
 
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
@@ -264,7 +301,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     }
 
     /* the last good point, should the end point fail its checks */
-    memcpy(inst->step_start, inst->vec, ((size_t)m->nx + 4 * (size_t)m->nu) * sizeof(double));
+    memcpy(inst->step_start, inst->vec, inst->n_vec * sizeof(double));
     const size_t off = fmugen_solver_work_doubles(m->nx);
     double *u0 = inst->work + off, *u_work = u0 + m->nu;
     if (m->nu) memcpy(u0, inst->u, (size_t)m->nu * sizeof(double));
@@ -273,10 +310,18 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     char msg[512] = "";
     const long long steps0 = inst->s.n_steps, rej0 = inst->s.n_rejected, rhs0 = inst->s.n_rhs;
     int rc;
-    switch (inst->s.solver) {
-    case FMUGEN_SOLVER_IMPLICIT: rc = fmugen_solve_rodas3(&ode, t_end, msg, sizeof msg); break;
-    case FMUGEN_SOLVER_RK4: rc = fmugen_solve_rk4(&ode, t_end, msg, sizeof msg); break;
-    default: rc = fmugen_solve_dopri5(&ode, t_end, msg, sizeof msg); break;
+    long long events = 0;
+    for (;;) {
+        switch (inst->s.solver) {
+        case FMUGEN_SOLVER_IMPLICIT: rc = fmugen_solve_rodas3(&ode, t_end, msg, sizeof msg); break;
+        case FMUGEN_SOLVER_RK4: rc = fmugen_solve_rk4(&ode, t_end, msg, sizeof msg); break;
+        default: rc = fmugen_solve_dopri5(&ode, t_end, msg, sizeof msg); break;
+        }
+        if (rc != FMUGEN_SOLVER_EVENT) break;
+        /* a state event located inside the step: the event iteration at its
+         * time with the inputs there, then on to the communication point */
+        rc = handle_event(inst, &ode, ++events, msg, sizeof msg);
+        if (rc != FMUGEN_SOLVER_OK) break;
     }
     /* inputs at the time reached, so that outputs and the next step see a
      * continuous input */

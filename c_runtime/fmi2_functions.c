@@ -153,6 +153,7 @@ void fmi2FreeInstance(fmi2Component c)
     fmi2CallbackFunctions cb = inst->cb;
     rt_free(&cb, inst->step_start);
     rt_free(&cb, inst->vec);
+    rt_free(&cb, inst->ev_work);
     rt_free(&cb, inst->dx_cache);
     rt_free(&cb, inst->y_cache);
     rt_free(&cb, inst->work);
@@ -181,6 +182,15 @@ static const char *model_problem(const fmugen_model_def *m)
     for (int i = 0; i < m->np; i++)
         if ((m->p_min && !(m->p_start[i] >= m->p_min[i])) || (m->p_max && !(m->p_start[i] <= m->p_max[i])))
             return "a parameter's start value is outside its range";
+    if (m->nz < 0 || m->nd < 0 || m->ng < 0 || m->na < 0) return "negative event sizes";
+    if (m->nz && !m->indicators) return "nz > 0 but indicators is NULL";
+    if (m->nd && (!m->d_start || !m->d_names)) return "d_start or d_names is NULL";
+    if (m->ng && (!m->update || (m->na && (!m->assign_clause || !m->assign_target))))
+        return "ng > 0 but update, assign_clause or assign_target is NULL";
+    for (int a = 0; a < m->na; a++)
+        if (m->assign_clause[a] < 0 || m->assign_clause[a] >= m->ng || m->assign_target[a] < 0 ||
+            m->assign_target[a] >= m->nd + m->nx)
+            return "an event assignment names no clause or no target";
     return NULL;
 }
 
@@ -232,16 +242,18 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     for (int k = 0; k < FMUGEN_LOG_COUNT; k++) inst->log_category_on[k] = inst->logging_on;
     size_t len = strlen(instanceName);
     inst->instance_name = rt_alloc(functions, len + 1, 1);
-    const int nx = m->nx, nu = m->nu, ny = m->ny, np = m->np;
-    inst->n_vec = (size_t)(2 * nx + 4 * nu + np);
+    const int nx = m->nx, nu = m->nu, ny = m->ny, np = m->np, nd = m->nd, nz = m->nz;
+    inst->n_vec = (size_t)(2 * nx + 4 * nu + np + nd + nz);
     inst->vec = rt_alloc(functions, inst->n_vec + 1, sizeof(double));
     inst->dx_cache = rt_alloc(functions, (size_t)nx + 1, sizeof(double));
     inst->y_cache = rt_alloc(functions, (size_t)ny + 1, sizeof(double));
     inst->work = rt_alloc(functions, fmugen_workspace_doubles(nx, nu), sizeof(double));
     inst->ipiv = rt_alloc(functions, (size_t)nx + 1, sizeof(int));
-    inst->step_start = rt_alloc(functions, (size_t)nx + 4 * (size_t)nu + 1, sizeof(double));
+    inst->step_start = rt_alloc(functions, inst->n_vec + 1, sizeof(double));
+    inst->ev_work = rt_alloc(functions, 5 * (size_t)nx + 3 * (size_t)nz + (size_t)m->ng + (size_t)m->na + 1,
+                             sizeof(double));
     if (!inst->instance_name || !inst->vec || !inst->dx_cache || !inst->y_cache || !inst->work || !inst->ipiv ||
-        !inst->step_start) {
+        !inst->step_start || !inst->ev_work) {
         fmugen_log(&tmp, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "fmi2Instantiate: out of memory");
         fmi2FreeInstance(inst);
         return NULL;
@@ -253,7 +265,8 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     inst->ddu = inst->du + nu;
     inst->dddu = inst->ddu + nu;
     inst->p = inst->dddu + nu;
-    inst->fsal = inst->p + np;
+    inst->fsal = inst->p + np + nd;
+    inst->zpre = inst->fsal + nx;
     fmugen_set_defaults(inst);
     fmugen_log(inst, fmi2OK, FMUGEN_LOG_EVENTS, "fmi2Instantiate: %s instance of %s (nx=%d, nu=%d, ny=%d, np=%d)",
                fmuType == fmi2ModelExchange ? "Model Exchange" : "Co-Simulation", m->model_identifier, nx, nu,
@@ -308,6 +321,16 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c)
      * that is not positive definite) are reported here, not in the middle
      * of a simulation */
     if (fmugen_evaluate_cached(INST, "fmi2ExitInitializationMode") != FMUGEN_OK) return fmi2Error;
+    if (fmugen_has_events(INST->model) && INST->type == fmi2CoSimulation) {
+        /* the initial event iteration (a stuck joint whose torque already exceeds breakaway starts
+         * sliding); Model Exchange leaves it to the importer's fmi2NewDiscreteStates in event mode */
+        char msg[512];
+        if (fmugen_event_iteration(INST, INST->u, msg, sizeof msg) != FMUGEN_OK) {
+            fmugen_log(INST, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "fmi2ExitInitializationMode: %s", msg);
+            return fmi2Error;
+        }
+        if (fmugen_evaluate_cached(INST, "fmi2ExitInitializationMode") != FMUGEN_OK) return fmi2Error;
+    }
     INST->s.fmi_state = INST->type == fmi2ModelExchange ? FMUGEN_EVENT_MODE : FMUGEN_STEP_COMPLETE;
     INST->s.last_successful_time = INST->s.time;
     INST->s.h_next = 0.0;
@@ -381,7 +404,8 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
             value[i] = r < fmugen_vr_u(m) ? inst->dx_cache[r - fmugen_vr_der(m)] : inst->y_cache[r - fmugen_vr_y(m)];
         } else if (r < fmugen_vr_y(m)) value[i] = inst->u[r - fmugen_vr_u(m)];
         else if (r < fmugen_vr_rt(m)) value[i] = inst->p[r - fmugen_vr_p(m)];
-        else value[i] = inst->s.rt[r - fmugen_vr_rt(m)];
+        else if (r < fmugen_vr_d(m)) value[i] = inst->s.rt[r - fmugen_vr_rt(m)];
+        else value[i] = inst->p[m->np + (r - fmugen_vr_d(m))];
     }
     return fmi2OK;
 }
@@ -401,6 +425,9 @@ static const char *set_real_refusal(const fmugen_instance *inst, fmi2ValueRefere
     if (r < fmugen_vr_u(m)) return "a derivative is computed by the model and cannot be set";
     if (r < fmugen_vr_y(m)) return NULL; /* input */
     if (r < fmugen_vr_p(m)) return "an output is computed by the model and cannot be set";
+    if (r >= fmugen_vr_d(m))
+        return before_end ? NULL : "a discrete state changes only at events; its start can be set only before "
+                                   "fmi2ExitInitializationMode";
     return before_end ? NULL : "a parameter (variability fixed) can be set only before fmi2ExitInitializationMode";
 }
 
@@ -452,7 +479,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
                 return fmi2Error;
             }
         }
-        if (vr[i] >= fmugen_vr_rt(m)) {
+        if (vr[i] >= fmugen_vr_rt(m) && vr[i] < fmugen_vr_d(m)) {
             const char *bad = rt_refusal((int)(vr[i] - fmugen_vr_rt(m)), value[i]);
             if (bad) {
                 fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
@@ -468,6 +495,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
         if (r < fmugen_vr_der(m)) slot = &inst->x[r];
         else if (r < fmugen_vr_y(m)) slot = &inst->u[r - fmugen_vr_u(m)];
         else if (r < fmugen_vr_rt(m)) slot = &inst->p[r - fmugen_vr_p(m)];
+        else if (r >= fmugen_vr_d(m)) slot = &inst->p[m->np + (r - fmugen_vr_d(m))];
         else {
             slot = &inst->s.rt[r - fmugen_vr_rt(m)];
             if (r - fmugen_vr_rt(m) == FMUGEN_RT_RTOL) inst->s.rtol_set = 1;
@@ -476,7 +504,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
          * input at every step) */
         if (*slot != value[i] || signbit(*slot) != signbit(value[i])) {
             *slot = value[i];
-            if (r < fmugen_vr_rt(m)) {
+            if (r < fmugen_vr_rt(m) || r >= fmugen_vr_d(m)) {
                 fmugen_invalidate(inst);
                 inst->s.fsal_valid = 0;
             }
@@ -486,7 +514,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
 }
 
 static const char *const int_names[FMUGEN_INT_COUNT] = {"solver", "n_steps", "n_rejected", "n_rhs", "n_jac",
-                                                         "stiffness_detected", "range_check"};
+                                                         "stiffness_detected", "range_check", "n_events"};
 
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[])
 {
@@ -510,6 +538,7 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
         case FMUGEN_INT_N_RHS: v = inst->s.n_rhs; break;
         case FMUGEN_INT_N_JAC: v = inst->s.n_jac; break;
         case FMUGEN_INT_RANGE_CHECK: v = inst->s.range_check; break;
+        case FMUGEN_INT_N_EVENTS: v = inst->s.n_events; break;
         default: v = inst->s.n_stiff; break;
         }
         value[i] = v > 2147483647LL ? 2147483647 : (fmi2Integer)v; /* counters saturate */

@@ -1,7 +1,10 @@
 /* fmi2_model_exchange.c -- the FMI 2.0 Model Exchange functions.  The
- * importer integrates dx/dt = f(t, x, u, p); the model has no event
- * indicators and no discrete states, so event mode only passes through.
- * The states allowed for each function are listed in fmi2_functions.c. */
+ * importer integrates dx/dt = f(t, x, u, p, d), watches the event
+ * indicators (fmi2GetEventIndicators) and, at an event, calls
+ * fmi2NewDiscreteStates until it says the iteration is over: each call is
+ * one round of the model's clauses (events.c).  A smooth model has no
+ * indicators, and its event mode only passes through.  The states allowed
+ * for each function are listed in fmi2_functions.c. */
 #include <math.h>
 #include <string.h>
 #include "fmugen_runtime.h"
@@ -40,6 +43,8 @@ fmi2Status fmi2EnterEventMode(fmi2Component c)
     ME_CHECK(FMUGEN_EVENT_MODE | FMUGEN_CONTINUOUS_TIME_MODE, "fmi2EnterEventMode");
     INST->s.fmi_state = FMUGEN_EVENT_MODE;
     INST->s.last_successful_time = INST->s.time; /* time may not go back before an event */
+    INST->s.event_rounds = 0;
+    INST->s.x_reinit = 0;
     fmugen_log(INST, fmi2OK, FMUGEN_LOG_EVENTS, "fmi2EnterEventMode at t = %g", INST->s.time);
     return fmi2OK;
 }
@@ -51,13 +56,39 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo)
         fmugen_log(INST, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "fmi2NewDiscreteStates: eventInfo is NULL");
         return fmi2Error;
     }
-    /* no discrete states, no time events: the event iteration ends at once */
+    fmugen_instance *inst = INST;
+    int changed = 0, x_changed = 0;
     eventInfo->newDiscreteStatesNeeded = fmi2False;
     eventInfo->terminateSimulation = fmi2False;
     eventInfo->nominalsOfContinuousStatesChanged = fmi2False;
     eventInfo->valuesOfContinuousStatesChanged = fmi2False;
-    eventInfo->nextEventTimeDefined = fmi2False;
+    eventInfo->nextEventTimeDefined = fmi2False; /* no time events */
     eventInfo->nextEventTime = 0.0;
+    if (fmugen_has_events(inst->model)) {
+        /* one round of the clauses; another is needed while a round changes something */
+        if (++inst->s.event_rounds > FMUGEN_EVENT_MAX_ROUNDS) {
+            fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                       "fmi2NewDiscreteStates: the event iteration at t = %.17g does not converge: the clauses still "
+                       "change a discrete state or a state after %d rounds", inst->s.time, FMUGEN_EVENT_MAX_ROUNDS);
+            return fmi2Error;
+        }
+        int rc = fmugen_event_round(inst, inst->u, &changed, &x_changed);
+        if (rc != FMUGEN_OK) {
+            fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                       "fmi2NewDiscreteStates: the event update at t = %.17g failed: %s", inst->s.time,
+                       fmugen_model_status_text(rc));
+            return fmi2Error;
+        }
+        if (x_changed) inst->s.x_reinit = 1;
+        if (inst->s.event_rounds == 1) inst->s.n_events++;
+        eventInfo->newDiscreteStatesNeeded = changed ? fmi2True : fmi2False;
+        /* sticky over the iteration: an importer that reads only the last round's flag still
+         * fetches the re-initialised states */
+        eventInfo->valuesOfContinuousStatesChanged = inst->s.x_reinit ? fmi2True : fmi2False;
+        if (changed)
+            fmugen_log(inst, fmi2OK, FMUGEN_LOG_EVENTS, "fmi2NewDiscreteStates at t = %.17g: round %d changed %s",
+                       inst->s.time, inst->s.event_rounds, x_changed ? "states" : "discrete states");
+    }
     return fmi2OK;
 }
 
@@ -65,6 +96,8 @@ fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c)
 {
     ME_CHECK(FMUGEN_EVENT_MODE, "fmi2EnterContinuousTimeMode");
     INST->s.fmi_state = FMUGEN_CONTINUOUS_TIME_MODE;
+    INST->s.event_rounds = 0;
+    INST->s.x_reinit = 0;
     INST->s.last_successful_time = INST->s.time;
     return fmi2OK;
 }
@@ -167,7 +200,18 @@ fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], s
     ME_CHECK(FMUGEN_INITIALIZATION_MODE | FMUGEN_EVENT_MODE | FMUGEN_CONTINUOUS_TIME_MODE | FMUGEN_TERMINATED |
                  FMUGEN_ERROR,
              "fmi2GetEventIndicators");
-    return bad_length(INST, "fmi2GetEventIndicators", "ni", ni, 0, eventIndicators) ? fmi2Error : fmi2OK;
+    fmugen_instance *inst = INST;
+    const fmugen_model_def *m = inst->model;
+    if (bad_length(inst, "fmi2GetEventIndicators", "ni", ni, m->nz, eventIndicators)) return fmi2Error;
+    if (ni == 0) return fmi2OK;
+    int rc = fmugen_event_indicators(inst, inst->s.time, inst->x, inst->u, eventIndicators);
+    if (rc != FMUGEN_OK) {
+        fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                   "fmi2GetEventIndicators: the indicators could not be evaluated at t = %.17g: %s", inst->s.time,
+                   fmugen_model_status_text(rc));
+        return (inst->s.fmi_state & (FMUGEN_EVENT_MODE | FMUGEN_CONTINUOUS_TIME_MODE)) ? fmi2Discard : fmi2Error;
+    }
+    return fmi2OK;
 }
 
 fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx)

@@ -12,12 +12,14 @@
  * Serialised form (native byte order, for the same platform):
  *   8 bytes  magic "FMUGENST"
  *   u32      format version (2: with the stiffness and stability monitors; 3: with range_check;
- *            4: with second input derivatives; 5: with third input derivatives)
+ *            4: with second input derivatives; 5: with third input derivatives; 6: with the
+ *            event memory)
  *   u32      fmuType
  *   u32 x 4  nx, nu, ny, np
  *   u32      length of the GUID, then the GUID bytes (no terminator)
  *   i64/f64  the scalar fields, in the order of put_scalars()
- *   u64      number of doubles, then the doubles x, u, du, ddu, dddu, p, fsal
+ *   u64      number of doubles, then the doubles x, u, du, ddu, dddu, p (with the discrete
+ *            states after the parameters), fsal, zpre (the event indicators' last values)
  *   u64      FNV-1a hash of all preceding bytes
  * A blob with another magic, version, GUID, size or hash is refused with
  * fmi2Error and a message saying which check failed.
@@ -29,7 +31,7 @@
 #include "fmugen_runtime.h"
 
 #define SNAPSHOT_MAGIC 0x464D5547u /* "FMUG" */
-#define FORMAT_VERSION 5u
+#define FORMAT_VERSION 6u
 static const char blob_magic[8] = {'F', 'M', 'U', 'G', 'E', 'N', 'S', 'T'};
 
 typedef struct fmugen_snapshot {
@@ -217,6 +219,12 @@ static void put_scalars(writer *w, const fmugen_scalars *s)
     put_f64(w, s->rk4_first_time);
     put_i64(w, s->rk4_next_estimate);
     put_i64(w, s->range_check);
+    put_i64(w, s->n_events);
+    put_f64(w, s->last_event_time);
+    put_i64(w, s->storm_run);
+    put_i64(w, s->last_indicator);
+    put_i64(w, s->event_rounds);
+    put_i64(w, s->x_reinit);
 }
 
 typedef struct reader {
@@ -267,6 +275,12 @@ static void get_scalars(reader *r, fmugen_scalars *s)
     s->rk4_first_time = get_f64(r);
     s->rk4_next_estimate = get_i64(r);
     s->range_check = (int)get_i64(r);
+    s->n_events = get_i64(r);
+    s->last_event_time = get_f64(r);
+    s->storm_run = (int)get_i64(r);
+    s->last_indicator = (int)get_i64(r);
+    s->event_rounds = (int)get_i64(r);
+    s->x_reinit = (int)get_i64(r);
 }
 
 
@@ -368,6 +382,9 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
     if (s.solver < FMUGEN_SOLVER_DOPRI5 || s.solver > FMUGEN_SOLVER_RK4) return fail(inst, fn, "invalid solver in blob");
     if (s.range_check < FMUGEN_RANGE_IGNORE || s.range_check > FMUGEN_RANGE_ERROR)
         return fail(inst, fn, "invalid range_check in blob");
+    if (s.n_events < 0 || s.storm_run < 0 || s.event_rounds < 0 || (s.x_reinit & ~1) || !isfinite(s.last_event_time) ||
+        s.last_indicator < -1 || s.last_indicator >= (m->nz > 0 ? m->nz : 0))
+        return fail(inst, fn, "invalid event memory (counters, last event) in blob");
     if (!isfinite(s.time)) return fail(inst, fn, "non-finite time in blob");
     /* everything fmi2SetReal/fmi2SetupExperiment would refuse is refused
      * here too: a restored state must be one the API could have produced */

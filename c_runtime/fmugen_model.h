@@ -15,7 +15,8 @@
  *   [2nx, 2nx+nu)                   inputs u
  *   [2nx+nu, 2nx+nu+ny)             computed outputs y
  *   [2nx+nu+ny, 2nx+nu+ny+np)       parameters p
- *   then the runtime's own Real parameters (FMUGEN_RT_* offsets below).
+ *   then the runtime's own Real parameters (FMUGEN_RT_* offsets below),
+ *   then the nd discrete states d of a hybrid model (see "Events" below).
  * States that are also outputs keep the value reference of the state.
  * fmi2Integer value references: FMUGEN_INT_* below.
  */
@@ -46,7 +47,8 @@ extern "C" {
 #define FMUGEN_INT_N_JAC 4      /* local: evaluations of the Jacobian so far */
 #define FMUGEN_INT_STIFFNESS_DETECTED 5 /* local: times Dormand-Prince found the problem stiff so far */
 #define FMUGEN_INT_RANGE_CHECK 6 /* parameter: what leaving a validity range does, FMUGEN_RANGE_* */
-#define FMUGEN_INT_COUNT 7
+#define FMUGEN_INT_N_EVENTS 7   /* local: events handled so far (hybrid models) */
+#define FMUGEN_INT_COUNT 8
 
 /* values of the range_check parameter (validity ranges: x_min ... below) */
 #define FMUGEN_RANGE_IGNORE 0 /* not checked */
@@ -106,6 +108,27 @@ typedef struct fmugen_model_def {
      * positive normal double): fmi2SetReal refuses a value outside them and
      * changes nothing.  NULL: no range. */
     const double *p_min, *p_max;
+
+    /* ---- Events (hybrid models; all 0/NULL for a smooth model) ----
+     * nz event indicators z = indicators(p, t, x, u): a state event when some
+     * z_i changes its domain z_i > 0 <-> z_i <= 0 (FMI 2.0 sec. 3.1).
+     * nd discrete states d, stored right after the parameters, p[np .. np+nd):
+     * evaluate, jacobian and indicators read them as parameters (constant
+     * between events).  At an event, update(p, t, x, u, guard, value) computes
+     * from the values before the event the ng guards (1 = the clause fires) and
+     * the na assigned values; the runtime then writes value[a] to
+     * assign_target[a] (k < nd: d_k; nd + j: the state x_j, a
+     * re-initialisation) for every a whose clause guard[assign_clause[a]] holds,
+     * and repeats until no discrete state and no state changes (the event
+     * iteration). */
+    int nz, nd, ng, na;
+    const char *const *z_names; /* nz: what each indicator watches (messages) */
+    const double *d_start;      /* nd */
+    const char *const *d_names; /* nd */
+    int (*indicators)(const double *p, double t, const double *x, const double *u, double *z);
+    int (*update)(const double *p, double t, const double *x, const double *u, double *guard, double *value);
+    const int *assign_clause; /* na */
+    const int *assign_target; /* na */
 } fmugen_model_def;
 
 /* Symbols shared by the runtime and model.c but not part of the FMU's

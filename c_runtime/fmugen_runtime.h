@@ -82,6 +82,13 @@ typedef struct fmugen_scalars {
     double rk4_first_limit, rk4_first_lambda, rk4_first_time; /* the first warning's numbers, for the failure message */
     long long rk4_next_estimate; /* n_steps at which RK4 estimates its stability limit again */
     int range_check;           /* FMUGEN_RANGE_*: what leaving a validity range does */
+    /* events (hybrid models) */
+    long long n_events;        /* state events handled so far (CS: located in fmi2DoStep; ME: event iterations) */
+    double last_event_time;    /* time of the last event */
+    int storm_run;             /* consecutive events closer than FMUGEN_EVENT_STORM_GAP to the one before */
+    int last_indicator;        /* index of the indicator of the last located event, -1 = none */
+    int event_rounds;          /* ME: fmi2NewDiscreteStates rounds in the current event iteration */
+    int x_reinit;              /* ME: a state was re-initialised in the current event iteration */
 } fmugen_scalars;
 
 /* Tag of a live instance (fmugen_instance.tag), cleared by fmi2FreeInstance:
@@ -101,10 +108,14 @@ typedef struct fmugen_instance {
 
     fmugen_scalars s;
 
-    /* one block: x[nx], u[nu], du[nu], ddu[nu], dddu[nu], p[np], fsal[nx] */
+    /* one block: x[nx], u[nu], du[nu], ddu[nu], dddu[nu], p[np + nd] (the
+     * parameters, then the discrete states), fsal[nx], zpre[nz] (the event
+     * indicators at the last accepted point, whose domains a step compares) */
     double *vec;
     size_t n_vec;
-    double *x, *u, *du, *ddu, *dddu, *p, *fsal;
+    double *x, *u, *du, *ddu, *dddu, *p, *fsal, *zpre;
+    /* event workspace (events.c): 5 nx + 3 nz + ng + na doubles */
+    double *ev_work;
 
     /* cache of one model evaluation at (cache_time, x, u, p) */
     int cache_valid;
@@ -115,9 +126,10 @@ typedef struct fmugen_instance {
     /* solver workspace, sized for the largest method */
     double *work;
     int *ipiv;
-    /* x, u, du, ddu, dddu at the start of the current communication step
-     * (nx + 4 nu): fmi2DoStep puts them back when the end point fails its
-     * checks, so the state is the last good point the message names */
+    /* vec at the start of the current communication step (n_vec: states,
+     * inputs and their derivatives, discrete states, indicator memory):
+     * fmi2DoStep puts it back when the end point fails its checks, so the
+     * state is the last good point the message names */
     double *step_start;
 
     int range_messages;        /* validity-range warnings logged so far (bounded) */
@@ -159,7 +171,36 @@ static inline fmi2ValueReference fmugen_vr_u(const fmugen_model_def *m) { return
 static inline fmi2ValueReference fmugen_vr_y(const fmugen_model_def *m) { return (fmi2ValueReference)(2 * m->nx + m->nu); }
 static inline fmi2ValueReference fmugen_vr_p(const fmugen_model_def *m) { return (fmi2ValueReference)(2 * m->nx + m->nu + m->ny); }
 static inline fmi2ValueReference fmugen_vr_rt(const fmugen_model_def *m) { return (fmi2ValueReference)(2 * m->nx + m->nu + m->ny + m->np); }
-static inline fmi2ValueReference fmugen_vr_end(const fmugen_model_def *m) { return fmugen_vr_rt(m) + FMUGEN_RT_COUNT; }
+static inline fmi2ValueReference fmugen_vr_d(const fmugen_model_def *m) { return fmugen_vr_rt(m) + FMUGEN_RT_COUNT; }
+static inline fmi2ValueReference fmugen_vr_end(const fmugen_model_def *m) { return fmugen_vr_d(m) + (fmi2ValueReference)m->nd; }
+
+/* ---- events (events.c) ---- */
+/* consecutive events each closer than this (times max(1, |t|)) to the one
+ * before: an event storm (Zeno behaviour, chattering) after
+ * FMUGEN_EVENT_STORM_RUN of them */
+#define FMUGEN_EVENT_STORM_GAP 1e-9
+#define FMUGEN_EVENT_STORM_RUN 100
+/* rounds of the event iteration at one event instant */
+#define FMUGEN_EVENT_MAX_ROUNDS 100
+/* events located in one communication step */
+#define FMUGEN_EVENT_MAX_PER_STEP 100000
+/* an event is located to this time tolerance (times max(1, |t|)) */
+#define FMUGEN_EVENT_TOL 1e-13
+static inline int fmugen_has_events(const fmugen_model_def *m) { return m->nz > 0 || m->ng > 0; }
+/* z = indicators at (t, x, u); FMUGEN_OK or a model/NOT_FINITE code */
+FMUGEN_INTERNAL int fmugen_event_indicators(fmugen_instance *inst, double t, const double *x, const double *u,
+                                            double *z);
+/* One round of the clauses at (time, x, u): applies the firing assignments;
+ * *changed: a discrete state or a state changed (*x_changed: a state).  FMUGEN_OK or a code. */
+FMUGEN_INTERNAL int fmugen_event_round(fmugen_instance *inst, const double *u, int *changed, int *x_changed);
+/* The whole event iteration at the current point (rounds until nothing
+ * changes), then the indicators' domains remembered (zpre).  FMUGEN_OK, or
+ * non-zero with the reason in msg. */
+FMUGEN_INTERNAL int fmugen_event_iteration(fmugen_instance *inst, const double *u, char *msg, size_t n);
+/* zpre = the indicators at the current point.  FMUGEN_OK or a code. */
+FMUGEN_INTERNAL int fmugen_event_remember(fmugen_instance *inst, const double *u);
+/* Name of indicator i into buf */
+FMUGEN_INTERNAL const char *fmugen_indicator_name(const fmugen_instance *inst, int i, char *buf, size_t n);
 
 /* solver workspace: 10 nx + 2 nx^2 doubles for the methods (the implicit one
  * needs the most), then u0 and u(t) for the input extrapolation (2 nu) */

@@ -73,7 +73,8 @@ const char *fmugen_real_name(const fmugen_instance *inst, fmi2ValueReference vr,
     else if (vr < fmugen_vr_y(m)) snprintf(buf, n, "%s", m->u_names[vr - fmugen_vr_u(m)]);
     else if (vr < fmugen_vr_p(m)) snprintf(buf, n, "%s", m->y_names[vr - fmugen_vr_y(m)]);
     else if (vr < fmugen_vr_rt(m)) snprintf(buf, n, "%s", m->p_names[vr - fmugen_vr_p(m)]);
-    else if (vr < fmugen_vr_end(m)) snprintf(buf, n, "%s", rt_names[vr - fmugen_vr_rt(m)]);
+    else if (vr < fmugen_vr_d(m)) snprintf(buf, n, "%s", rt_names[vr - fmugen_vr_rt(m)]);
+    else if (vr < fmugen_vr_end(m)) snprintf(buf, n, "%s", m->d_names[vr - fmugen_vr_d(m)]);
     else snprintf(buf, n, "<unknown>");
     return buf;
 }
@@ -127,6 +128,7 @@ void fmugen_set_defaults(fmugen_instance *inst)
     if (m->nx) memcpy(inst->x, m->x_start, (size_t)m->nx * sizeof(double));
     if (m->nu) memcpy(inst->u, m->u_start, (size_t)m->nu * sizeof(double));
     if (m->np) memcpy(inst->p, m->p_start, (size_t)m->np * sizeof(double));
+    if (m->nd) memcpy(inst->p + m->np, m->d_start, (size_t)m->nd * sizeof(double));
     memset(&inst->s, 0, sizeof inst->s);
     inst->s.fmi_state = FMUGEN_INSTANTIATED;
     inst->s.rt[FMUGEN_RT_RTOL] = 1e-6;
@@ -140,5 +142,6 @@ void fmugen_set_defaults(fmugen_instance *inst)
     inst->range_messages = 0;
     inst->s.facold = 1e-4;
     inst->s.last_do_step_status = fmi2OK;
+    inst->s.last_indicator = -1;
     fmugen_invalidate(inst);
 }

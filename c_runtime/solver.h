@@ -16,6 +16,9 @@
 
 #define FMUGEN_SOLVER_OK 0
 #define FMUGEN_SOLVER_FAILED 1
+/* stopped at a located state event: inst->s.time and inst->x are the point
+ * just after the crossing; fmi2DoStep runs the event iteration and goes on */
+#define FMUGEN_SOLVER_EVENT 2
 
 /* internal steps allowed in one communication step */
 #define FMUGEN_SOLVER_MAX_STEPS 100000
@@ -59,6 +62,15 @@ FMUGEN_INTERNAL fmi2Status fmugen_check_step_result(fmugen_instance *inst, const
  * valid): fmi2OK, fmi2Warning (logged) or fmi2Discard (range_check = 2; the
  * reason in msg, not logged). */
 FMUGEN_INTERNAL fmi2Status fmugen_check_ranges(fmugen_instance *inst, const char *fn, char *msg, size_t n);
+
+/* After an accepted internal step from (t0, x0, f0) to (t1, x1, f1) of a
+ * model with event indicators (events.c; f1 NULL: computed when needed):
+ * 0 when no indicator changed its domain (zpre takes the values at t1); 1
+ * when one did: the crossing is located on the step's cubic Hermite
+ * interpolant, inst->x and inst->s.time are the point just after it; -1 when
+ * the indicators could not be evaluated (reason in msg). */
+FMUGEN_INTERNAL int fmugen_step_event(fmugen_ode *ode, double t0, const double *x0, const double *f0, double t1,
+                                      const double *x1, const double *f1, char *msg, size_t n);
 
 FMUGEN_INTERNAL int fmugen_solve_dopri5(fmugen_ode *ode, double t_end, char *msg, size_t n);
 FMUGEN_INTERNAL int fmugen_solve_rodas3(fmugen_ode *ode, double t_end, char *msg, size_t n);

@@ -221,6 +221,16 @@ int fmugen_solve_dopri5(fmugen_ode *ode, double t_end, char *msg, size_t msgn)
             if (reject) hnew = fmin(hnew, h);
             /* a step shortened to hit the communication point is no test */
             if (!last) stiffness_test(inst, t, h, k6, k7, ys, ynew);
+            if (inst->model->nz) { /* a state event inside the step: stop just after it */
+                const int ev = fmugen_step_event(ode, t, x, k1, last ? t_end : t + h, ynew, k7, msg, msgn);
+                if (ev < 0) return FMUGEN_SOLVER_FAILED;
+                if (ev > 0) {
+                    inst->s.n_steps++;
+                    inst->s.facold = fmax(e, 1e-4);
+                    inst->s.h_next = fmin(hnew, h);
+                    return FMUGEN_SOLVER_EVENT;
+                }
+            }
             memcpy(x, ynew, (size_t)n * sizeof(double));
             memcpy(k1, k7, (size_t)n * sizeof(double));
             t = last ? t_end : t + h;

@@ -257,6 +257,11 @@ int fmugen_solve_rk4(fmugen_ode *ode, double t_end, char *msg, size_t msgn)
                 return FMUGEN_SOLVER_FAILED;
             }
         }
+        if (inst->model->nz) { /* a state event inside the step: stop just after it */
+            const int ev = fmugen_step_event(ode, t, x, k1, tn, xn, NULL, msg, msgn);
+            if (ev < 0) return FMUGEN_SOLVER_FAILED;
+            if (ev > 0) { inst->s.n_steps++; return FMUGEN_SOLVER_EVENT; }
+        }
         memcpy(x, xn, (size_t)n * sizeof(double));
         inst->s.time = tn;
         inst->s.n_steps++;

@@ -165,6 +165,15 @@ int fmugen_solve_rodas3(fmugen_ode *ode, double t_end, char *msg, size_t msgn)
         if (e <= 1.0) {
             if (reject_last) hnew = fmin(hnew, h);
             reject_last = reject_more = 0;
+            if (inst->model->nz) { /* a state event inside the step: stop just after it */
+                const int ev = fmugen_step_event(ode, t, x, f0, t_new, ys, NULL, msg, msgn);
+                if (ev < 0) return FMUGEN_SOLVER_FAILED;
+                if (ev > 0) {
+                    inst->s.n_steps++;
+                    inst->s.h_next = fmin(hnew, h);
+                    return FMUGEN_SOLVER_EVENT;
+                }
+            }
             memcpy(x, ys, (size_t)n * sizeof(double));
             t = t_new;
             inst->s.time = t;

@@ -838,6 +838,10 @@ def _time_symbol(model: SymbolicModel, known: set) -> Optional[sp.Symbol]:
                 free |= st.A.free_symbols | st.B.free_symbols
     for e in list(model.derivatives) + list(model.output_exprs):
         free |= sp.sympify(e).free_symbols
+    if model.events is not None:
+        for e in model.events.expressions():
+            free |= e.free_symbols
+        free |= {t for c in model.events.clauses for t, _ in c.assign}
     for m in (model.dfdx, model.dfdu, model.dgdx, model.dgdu):
         if m is not None:
             free |= m.free_symbols
@@ -877,7 +881,8 @@ def _check_model(model: SymbolicModel) -> None:
 def _declare_reads(body: Body, names: "_Names", model: SymbolicModel, time) -> list:
     """``const double q_1 = x[0];`` for every state/input/parameter read."""
     lines = []
-    for arr, vars_ in (("x", model.states), ("u", model.inputs), ("p", model.parameters)):
+    # a hybrid model's discrete states follow the parameters in p (c_runtime/fmugen_model.h)
+    for arr, vars_ in (("x", model.states), ("u", model.inputs), ("p", model.parameters + _discrete(model))):
         for i, v in enumerate(vars_):
             if v.symbol in body.reads:
                 lines.append(f"    const double {names.map[v.symbol]} = {arr}[{i}]; "
@@ -900,9 +905,71 @@ def _function(signature: str, args: Sequence[str], body: Body, reads: list) -> s
     return "\n".join(out)
 
 
+def _discrete(model: SymbolicModel) -> tuple:
+    """The discrete states of a hybrid model (none for a smooth one)."""
+    return tuple(model.events.discrete) if model.events is not None else ()
+
+
+def _event_functions(model: SymbolicModel, names: "_Names", known: set, time) -> tuple:
+    """(C source of ``indicators`` and ``update``, declarations, struct fields) of a hybrid model.
+
+    ``update`` writes guard[k] = 1 when clause k fires and value[a] for every assignment a, all from the
+    values before the event; the tables ``assign_clause``/``assign_target`` tell the runtime where each
+    value goes (target k < nd: discrete state k; nd + j: state j)."""
+    ev = model.events
+    disc = _discrete(model)
+    nd = len(disc)
+    d_index = {v.symbol: k for k, v in enumerate(disc)}
+    x_index = {v.symbol: j for j, v in enumerate(model.states)}
+    parts, decls, fields = [], [], []
+    nz = len(ev.indicators)
+    if nz:
+        zb = lower([], [SinkGroup(None, [Sink("z", i, sp.sympify(e)) for i, (_, e) in enumerate(ev.indicators)])],
+                   names, known)
+        parts.append("/* event indicators: a state event when z[i] changes its domain z > 0 <-> z <= 0 */\n"
+                     + _function("indicators(const double *p, double t, const double *x, const double *u, double *z)",
+                                 ["p", "t", "x", "u", "z"], zb, _declare_reads(zb, names, model, time)))
+        decls.append(_array("char *const", "z_names", [_c_string(n) for n, _ in ev.indicators]))
+        fields += [f"    .nz = {nz}, .z_names = z_names, .indicators = indicators,"]
+    clauses = list(ev.clauses)
+    if clauses:
+        sinks, a_clause, a_target = [], [], []
+        for k, c in enumerate(clauses):
+            sinks.append(Sink("guard", k, sp.Piecewise((sp.Float(1.0), c.guard), (sp.Float(0.0), True))))
+        a = 0
+        for k, c in enumerate(clauses):
+            for target, e in c.assign:
+                if target in d_index:
+                    a_target.append(d_index[target])
+                elif target in x_index:
+                    a_target.append(nd + x_index[target])
+                else:
+                    raise ValueError(f"model {model.name!r}: event clause {c.name or k + 1} assigns {target}, "
+                                     f"neither a discrete state nor a state")
+                a_clause.append(k)
+                sinks.append(Sink("value", a, sp.sympify(e)))
+                a += 1
+        ub = lower([], [SinkGroup(None, sinks)], names, known)
+        parts.append("/* the event clauses: guard[k] = 1 when clause k fires, value[a] the value of assignment a\n"
+                     " * (from the values before the event; the runtime applies them) */\n"
+                     + _function("update(const double *p, double t, const double *x, const double *u, "
+                                 "double *guard, double *value)",
+                                 ["p", "t", "x", "u", "guard", "value"], ub, _declare_reads(ub, names, model, time)))
+        decls += [_array("int", "assign_clause", [str(i) for i in a_clause]),
+                  _array("int", "assign_target", [str(i) for i in a_target])]
+        fields += [f"    .ng = {len(clauses)}, .na = {a}, .update = update,",
+                   f"    .assign_clause = {'assign_clause' if a else 'NULL'}, "
+                   f".assign_target = {'assign_target' if a else 'NULL'},"]
+    if nd:
+        decls += [_array("double", "d_start", [_c_double(v.start) for v in disc]),
+                  _array("char *const", "d_names", [_c_string(v.name) for v in disc])]
+        fields += [f"    .nd = {nd}, .d_start = d_start, .d_names = d_names,"]
+    return parts, decls, fields
+
+
 def _new_names(model: SymbolicModel, time) -> _Names:
     names = _Names()
-    for v in model.states + model.inputs + model.parameters:
+    for v in model.states + model.inputs + model.parameters + _discrete(model):
         names.add(v.symbol)
     if time is not None:
         # time is read as the argument t; its local copy needs another name
@@ -1004,7 +1071,10 @@ def generate_c(
                 if not math.isfinite(float(val)):
                     raise ValueError(f"model {model.name!r}{origin}: {kind} {v.name!r}: non-finite {what} value "
                                      f"{float(val)!r}")
-    known = {v.symbol for v in model.states + model.inputs + model.parameters}
+    for v in _discrete(model):
+        if v.start is None or not math.isfinite(float(v.start)):
+            raise ValueError(f"model {model.name!r}{origin}: discrete state {v.name!r} needs a finite start value")
+    known = {v.symbol for v in model.states + model.inputs + model.parameters + _discrete(model)}
     time = _time_symbol(model, known)
     if time is not None:
         known.add(time)
@@ -1046,6 +1116,8 @@ def generate_c(
             ["p", "t", "x", "u", "dfdx", "dfdu", "dgdx", "dgdu"], jb,
             _declare_reads(jb, names, model, time))
         op_counts["jacobian"] = jb.function_ops
+
+    ev_parts, ev_decls, ev_fields = _event_functions(model, names, known, time) if model.events else ([], [], [])
 
     guid_text = GUID_PLACEHOLDER if guid is None else guid
     header = [
@@ -1132,6 +1204,7 @@ def generate_c(
         f"    .jacobian = {'jacobian' if has_jac else 'NULL'},",
         *(f"    .{k}_min = {lo}, .{k}_max = {hi}," for k, (lo, hi) in ranges.items()),
         *_runtime_start_fields(runtime_start),
+        *ev_fields,
         "};",
     ]
     looped = ev.n_chains + (jb.n_chains if has_jac else 0)
@@ -1142,6 +1215,9 @@ def generate_c(
              "/* dx = f(t, x, u, p) and y = g(t, x, u, p) in one pass */\n" + evaluate]
     if has_jac:
         parts.append("/* exact partial derivatives, dense row-major */\n" + jac_src)
+    if ev_decls:
+        parts.append("\n".join(d for d in ev_decls if d))
+    parts += ev_parts
     parts.append("\n".join(struct))
     source = "\n\n".join(parts) + "\n"
     if guid is None:

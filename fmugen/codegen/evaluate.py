@@ -11,6 +11,7 @@ the Jacobians into a ``control.StateSpace``.
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Mapping, Optional
 
 import numpy as np
@@ -32,6 +33,12 @@ class ModelEvaluator:
 
     def __init__(self, model: SymbolicModel, parameter_values: Optional[Mapping[str, float]] = None):
         self.model = model
+        # a hybrid model is evaluated in one mode: its discrete states are parameters here, at their start
+        # values unless ``parameter_values`` names them (``self.mode``: the values used)
+        discrete = tuple(model.events.discrete) if model.events is not None else ()
+        if discrete:
+            model = replace(model, parameters=tuple(model.parameters) + discrete)
+        self.mode = {v.name: v.start for v in discrete}
         values = {v.name: v.start for v in model.parameters}
         unknown = set(parameter_values or {}) - set(values)
         if unknown:
@@ -41,6 +48,7 @@ class ModelEvaluator:
         if missing:
             raise ValueError(f"{model.name}: no value for parameter(s) {', '.join(missing)}")
         self.p = np.array([values[v.name] for v in model.parameters], dtype=float)
+        self.mode = {k: values[k] for k in self.mode}
         xs = [v.symbol for v in model.states]
         us = [v.symbol for v in model.inputs]
         ps = [v.symbol for v in model.parameters]

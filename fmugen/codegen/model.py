@@ -65,6 +65,53 @@ def physical_range(v: Variable) -> tuple:
 
 
 @dataclass(frozen=True)
+class EventClause:
+    """One guarded assignment of a hybrid model: at an event, when ``guard`` holds, every
+    ``(target, expr)`` of ``assign`` is applied -- a discrete state takes a new value, or a state is
+    re-initialised (Modelica's ``reinit``).
+
+    ``guard`` and the values are sympy expressions of the states, inputs, parameters, discrete states
+    and time ``t`` only (no program symbols), evaluated with the values just before the event; all clauses
+    of one round are evaluated first and then applied in order (a later clause wins a shared target).
+    """
+
+    guard: sp.Basic
+    assign: tuple  # ((target symbol, value expression), ...)
+    name: str = ""  # for messages: the file's name of the clause
+
+
+@dataclass(frozen=True)
+class Events:
+    """What makes a model hybrid (FMI 2.0 events; see c_runtime/README.md "Events").
+
+    ``discrete``: Variables of the discrete states (start values required), constant between events;
+    the continuous equations read them like parameters.  ``indicators``: ``(name, expr)`` pairs, a state
+    event when one changes its domain expr > 0 <-> expr <= 0.  ``clauses``: the :class:`EventClause`
+    list run at every event, round after round, until no discrete state and no state changes (the event
+    iteration).  Indicators and clauses use states, inputs, parameters, discrete states and ``t`` only.
+    """
+
+    discrete: tuple = ()
+    indicators: tuple = ()
+    clauses: tuple = ()
+
+    def expressions(self) -> list:
+        """Every expression the events evaluate (indicators, guards, assigned values)."""
+        out = [sp.sympify(e) for _, e in self.indicators]
+        for c in self.clauses:
+            out.append(c.guard)
+            out += [sp.sympify(e) for _, e in c.assign]
+        return out
+
+    def substituted(self, env: dict) -> "Events":
+        """A copy with ``env`` (symbol -> expression) replaced everywhere."""
+        sub = lambda e: sp.sympify(e).xreplace(env)  # noqa: E731
+        return Events(self.discrete, tuple((n, sub(e)) for n, e in self.indicators),
+                      tuple(EventClause(sub(c.guard), tuple((t, sub(e)) for t, e in c.assign), c.name)
+                            for c in self.clauses))
+
+
+@dataclass(frozen=True)
 class SymbolicModel:
     name: str
     description: str
@@ -82,6 +129,8 @@ class SymbolicModel:
     dgdu: Optional[sp.Matrix] = None
     # where the equations come from, printed in generated files
     provenance: str = ""
+    # a hybrid model's discrete states, event indicators and event clauses (None: smooth)
+    events: Optional[Events] = None
 
     # -- construction ----------------------------------------------------
     @staticmethod
@@ -95,10 +144,12 @@ class SymbolicModel:
         output_exprs: Sequence[sp.Expr] = (),
         description: str = "",
         provenance: str = "",
+        events: Optional[Events] = None,
     ) -> "SymbolicModel":
         """An explicit ODE model from plain expressions (small components).
 
-        The Jacobians are obtained by symbolic differentiation.
+        The Jacobians are obtained by symbolic differentiation (a discrete state of ``events`` is a
+        constant to it: the Jacobian of the mode the model is in).
         """
         states, inputs = tuple(states), tuple(inputs)
         f = sp.Matrix([sp.sympify(e) for e in derivatives])
@@ -135,6 +186,8 @@ class SymbolicModel:
             dgdx=jm(g, xs),
             dgdu=jm(g, us),
             provenance=provenance,
+            events=events if events is not None and (events.discrete or events.indicators or events.clauses)
+            else None,
         )
 
     # -- queries -----------------------------------------------------------
@@ -255,6 +308,7 @@ class SymbolicModel:
             dfdu=subm(self.dfdu),
             dgdx=subm(self.dgdx),
             dgdu=subm(self.dgdu),
+            events=None if self.events is None else self.events.substituted(full),
         )
 
     # -- scene-driven reductions ---------------------------------------------

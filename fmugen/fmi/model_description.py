@@ -121,6 +121,10 @@ def runtime_parameters() -> tuple:
                          "a state, input or output outside its validity range [min, max]: 0 ignored, "
                          "1 fmi2Warning (default), 2 fmi2Discard",
                          min=d["FMUGEN_RANGE_IGNORE"], max=d["FMUGEN_RANGE_ERROR"]),
+        # listed only by FMUs of hybrid models (variable_layout)
+        RuntimeParameter("solver.n_events", d["FMUGEN_INT_N_EVENTS"], "Integer", "local", "discrete", "calculated",
+                         None, "", "events handled so far (Co-Simulation: state events located inside "
+                         "communication steps; Model Exchange: event iterations)"),
     )
 
 
@@ -240,9 +244,19 @@ def variable_layout(model: SymbolicModel) -> VariableLayout:
             nominal=v.nominal, min=physical_range(v)[0], max=v.max, kind="parameter", symbol=v.symbol)
     first_rt = 2 * nx + nu + ny + np_
     for r in runtime_parameters():
+        if r.name == "solver.n_events" and model.events is None:
+            continue
         add(name=r.name, value_reference=(first_rt + r.offset) if r.type == "Real" else r.offset, type=r.type,
             causality=r.causality, variability=r.variability, initial=r.initial, start=r.start, unit=r.unit,
             description=r.description, min=r.min, max=r.max, kind="runtime")
+    # a hybrid model's discrete states: after the runtime's Real parameters (c_runtime/fmugen_model.h),
+    # piecewise constant (variability discrete), changed only at events; a start is settable before
+    # initialisation like a parameter's
+    first_d = first_rt + _header_defines()["FMUGEN_RT_COUNT"]
+    for k, v in enumerate(model.events.discrete if model.events is not None else ()):
+        add(name=v.name, value_reference=first_d + k, type="Real", causality="local", variability="discrete",
+            initial="exact", start=v.start, unit=v.unit, description=v.description or "discrete state",
+            kind="discrete", symbol=v.symbol)
     # FMI 2.0 aliases (sec. 2.2.7: the same value reference; of a non-constant alias set only one variable may
     # carry a start value), last so that no value reference or index above moves. A state's alias keeps the
     # state's causality, initial="calculated" without a start (the state holds it). An input's alias is a
@@ -357,7 +371,8 @@ def model_description_xml(
     root = ET.Element("fmiModelDescription")
     _set(root, fmiVersion=FMI_VERSION, modelName=model.name, guid=guid,
          description=model.description, generationTool=GENERATION_TOOL,
-         variableNamingConvention="structured", numberOfEventIndicators="0")
+         variableNamingConvention="structured",
+         numberOfEventIndicators=str(len(model.events.indicators) if model.events is not None else 0))
 
     def interface(tag, **flags):
         el = ET.SubElement(root, tag)

@@ -1,0 +1,235 @@
+/*
+ * events.c -- state events of hybrid models (fmugen_model_def.nz, nd, ng > 0).
+ *
+ * A model with events has event indicators z(t, x, u, p, d), discrete states
+ * d (stored after the parameters, constant between events) and guarded
+ * assignments ("clauses") that fire at events.  This file holds what Model
+ * Exchange and Co-Simulation share:
+ *   - the indicators and the domain of each (z > 0 or z <= 0, FMI 2.0 sec. 3.1);
+ *   - one round of the clauses (all guards and values from the values before
+ *     the round, then the assignments of the firing clauses in order) and the
+ *     event iteration: rounds until nothing changes;
+ *   - for Co-Simulation, the location of a domain change inside an accepted
+ *     internal solver step: root finding on the cubic Hermite interpolant
+ *     of the step (x and f at both ends; exact for polynomial solutions up to
+ *     degree 3, O(h^4) otherwise), Illinois steps safeguarded by bisection,
+ *     to FMUGEN_EVENT_TOL x max(1, |t|) in time.  The state is put at the
+ *     right end of the final bracket: just after the crossing, where the
+ *     indicator has changed its domain (the guards see the new side).
+ *
+ * Reinitialising a state to the value it has, or a discrete state to its own
+ * value, is no change: an iteration ends when a round changes nothing.
+ */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+#include "fmugen_runtime.h"
+#include "solver.h"
+
+const char *fmugen_indicator_name(const fmugen_instance *inst, int i, char *buf, size_t n)
+{
+    const fmugen_model_def *m = inst->model;
+    if (m->z_names && i >= 0 && i < m->nz) snprintf(buf, n, "z[%d] (%s)", i + 1, m->z_names[i]);
+    else snprintf(buf, n, "z[%d]", i + 1);
+    return buf;
+}
+
+int fmugen_event_indicators(fmugen_instance *inst, double t, const double *x, const double *u, double *z)
+{
+    const fmugen_model_def *m = inst->model;
+    if (m->nz == 0) return FMUGEN_OK;
+    if (!m->indicators) return FMUGEN_NOT_FINITE;
+    int rc = m->indicators(inst->p, t, x, u, z);
+    if (rc == FMUGEN_OK && !fmugen_all_finite(z, m->nz)) rc = FMUGEN_NOT_FINITE;
+    return rc;
+}
+
+int fmugen_event_remember(fmugen_instance *inst, const double *u)
+{
+    return fmugen_event_indicators(inst, inst->s.time, inst->x, u, inst->zpre);
+}
+
+/* the same value, bit for bit (a -0.0 for 0.0 is no change of a mode) */
+static int same(double a, double b) { return a == b; }
+
+int fmugen_event_round(fmugen_instance *inst, const double *u, int *changed, int *x_changed)
+{
+    const fmugen_model_def *m = inst->model;
+    *changed = *x_changed = 0;
+    if (m->ng == 0 || !m->update) return FMUGEN_OK;
+    double *guard = inst->ev_work + 5 * (size_t)m->nx + 3 * (size_t)m->nz, *value = guard + m->ng;
+    int rc = m->update(inst->p, inst->s.time, inst->x, u, guard, value);
+    if (rc != FMUGEN_OK) return rc;
+    for (int a = 0; a < m->na; a++) {
+        if (guard[m->assign_clause[a]] == 0.0) continue;
+        if (!isfinite(value[a])) return FMUGEN_NOT_FINITE;
+    }
+    for (int a = 0; a < m->na; a++) {
+        if (guard[m->assign_clause[a]] == 0.0) continue;
+        const int tgt = m->assign_target[a];
+        double *slot = tgt < m->nd ? &inst->p[m->np + tgt] : &inst->x[tgt - m->nd];
+        if (!same(*slot, value[a])) {
+            *slot = value[a];
+            *changed = 1;
+            if (tgt >= m->nd) *x_changed = 1;
+        }
+    }
+    if (*changed) {
+        fmugen_invalidate(inst);
+        inst->s.fsal_valid = 0;
+    }
+    return FMUGEN_OK;
+}
+
+/* zpre = the indicators a moment after the current point, along the flow.  Just after an event an
+ * indicator sits at its zero (the crossing was located to within FMUGEN_EVENT_TOL, or a state was
+ * re-initialised onto a boundary); its domain there is the one the trajectory enters: a ball
+ * re-initialised upwards at h = -1e-13 is in h > 0.  Taking h <= 0 would hide the next fall below
+ * the ground when one internal step spans the whole flight (both ends in h <= 0). */
+static int remember_ahead(fmugen_instance *inst, const double *u)
+{
+    const fmugen_model_def *m = inst->model;
+    const int n = m->nx;
+    if (m->nz == 0) return FMUGEN_OK;
+    double *f = inst->ev_work, *xs = f + n;
+    const double t = inst->s.time, delta = 1e3 * FMUGEN_EVENT_TOL * fmax(1.0, fabs(t));
+    int rc = n ? m->evaluate(inst->p, t, inst->x, u, f, NULL) : FMUGEN_OK;
+    if (rc == FMUGEN_OK && !fmugen_all_finite(f, n)) rc = FMUGEN_NOT_FINITE;
+    if (rc != FMUGEN_OK) return rc;
+    for (int i = 0; i < n; i++) xs[i] = inst->x[i] + delta * f[i];
+    return fmugen_event_indicators(inst, t + delta, xs, u, inst->zpre);
+}
+
+int fmugen_event_iteration(fmugen_instance *inst, const double *u, char *msg, size_t n)
+{
+    const fmugen_model_def *m = inst->model;
+    int changed = 0, x_changed = 0, round = 0;
+    do {
+        if (round++ == FMUGEN_EVENT_MAX_ROUNDS) {
+            snprintf(msg, n, "the event iteration at t = %.17g does not converge: the clauses still change a "
+                     "discrete state or a state after %d rounds (a clause whose condition its own assignment "
+                     "does not make false?)", inst->s.time, FMUGEN_EVENT_MAX_ROUNDS);
+            return FMUGEN_NOT_FINITE;
+        }
+        int rc = fmugen_event_round(inst, u, &changed, &x_changed);
+        if (rc != FMUGEN_OK) {
+            snprintf(msg, n, "the event update at t = %.17g failed: %s", inst->s.time, fmugen_model_status_text(rc));
+            return rc;
+        }
+    } while (changed);
+    int rc = remember_ahead(inst, u);
+    if (rc != FMUGEN_OK) {
+        snprintf(msg, n, "the event indicators at t = %.17g could not be evaluated after the event: %s",
+                 inst->s.time, fmugen_model_status_text(rc));
+        return rc;
+    }
+    (void)m;
+    return FMUGEN_OK;
+}
+
+/* domain of an indicator value: 1 for z > 0, 0 for z <= 0 */
+static int domain(double z) { return z > 0; }
+
+/* the cubic Hermite interpolant of the step at theta in [0, 1] into out */
+static void hermite(int n, double h, double th, const double *x0, const double *f0, const double *x1,
+                    const double *f1, double *out)
+{
+    const double t2 = th * th, t3 = t2 * th;
+    const double h00 = 2 * t3 - 3 * t2 + 1, h10 = t3 - 2 * t2 + th, h01 = -2 * t3 + 3 * t2, h11 = t3 - t2;
+    for (int i = 0; i < n; i++) out[i] = h00 * x0[i] + h10 * h * f0[i] + h01 * x1[i] + h11 * h * f1[i];
+}
+
+int fmugen_step_event(fmugen_ode *ode, double t0, const double *x0, const double *f0, double t1, const double *x1,
+                      const double *f1, char *msg, size_t msgn)
+{
+    fmugen_instance *inst = ode->inst;
+    const fmugen_model_def *m = inst->model;
+    const int n = m->nx, nz = m->nz;
+    if (nz == 0) return 0;
+    double *w = inst->ev_work;
+    double *xa = w, *xm = w + n, *f1buf = w + 2 * n, *xs0 = w + 3 * n, *fs0 = w + 4 * n;
+    double *za = w + 5 * n, *zb = za + nz, *zm = zb + nz;
+    double *u = ode->u_work;
+    int rc;
+    /* x0 and f0 may live where the solver writes next: keep copies */
+    memcpy(xs0, x0, (size_t)n * sizeof(double));
+    memcpy(fs0, f0, (size_t)n * sizeof(double));
+    fmugen_inputs_at(inst, ode->t0, ode->u0, t1, u);
+    rc = fmugen_event_indicators(inst, t1, x1, u, zb);
+    if (rc != FMUGEN_OK) {
+        snprintf(msg, msgn, "event indicators could not be evaluated at t = %.17g: %s", t1,
+                 fmugen_model_status_text(rc));
+        return -1;
+    }
+    int crossed = 0;
+    for (int i = 0; i < nz; i++) crossed |= domain(zb[i]) != domain(inst->zpre[i]);
+    if (!crossed) {
+        memcpy(inst->zpre, zb, (size_t)nz * sizeof(double));
+        return 0;
+    }
+    if (!f1) {
+        rc = fmugen_ode_rhs(ode, t1, x1, f1buf);
+        if (rc != FMUGEN_OK) {
+            snprintf(msg, msgn, "model evaluation failed at t = %.17g while locating an event: %s", t1,
+                     fmugen_model_status_text(rc));
+            return -1;
+        }
+        f1 = f1buf;
+    }
+    memcpy(za, inst->zpre, (size_t)nz * sizeof(double));
+    const double h = t1 - t0, tol = FMUGEN_EVENT_TOL * fmax(1.0, fabs(t1));
+    double a = 0.0, b = 1.0;
+    int kept_a = 0, kept_b = 0, first = -1;
+    for (int iter = 0; iter < 400 && (b - a) * h > tol; iter++) {
+        /* Illinois-type secant estimate from the earliest crossing, safeguarded by
+         * bisection when one end has been kept twice in a row */
+        double th = b;
+        for (int i = 0; i < nz; i++) {
+            if (domain(za[i]) == domain(zb[i])) continue;
+            const double d = za[i] - zb[i];
+            double s = d != 0 ? za[i] / d : 0.5;
+            if (!(s >= 0.0 && s <= 1.0)) s = 0.5;
+            const double ti = a + (b - a) * s;
+            if (ti < th) th = ti;
+        }
+        if (kept_a >= 2 || kept_b >= 2) th = 0.5 * (a + b);
+        const double lo = a + 0.01 * (b - a), hi = b - 0.01 * (b - a);
+        if (th < lo) th = lo;
+        if (th > hi) th = hi;
+        hermite(n, h, th, xs0, fs0, x1, f1, xm);
+        const double tm = t0 + th * h;
+        fmugen_inputs_at(inst, ode->t0, ode->u0, tm, u);
+        rc = fmugen_event_indicators(inst, tm, xm, u, zm);
+        if (rc != FMUGEN_OK) {
+            snprintf(msg, msgn, "event indicators could not be evaluated at t = %.17g while locating an event: %s",
+                     tm, fmugen_model_status_text(rc));
+            return -1;
+        }
+        int left = 0;
+        for (int i = 0; i < nz; i++) left |= domain(zm[i]) != domain(za[i]);
+        if (left) { /* a crossing in [a, th] */
+            b = th;
+            memcpy(zb, zm, (size_t)nz * sizeof(double));
+            kept_a++;
+            kept_b = 0;
+        } else {
+            a = th;
+            memcpy(za, zm, (size_t)nz * sizeof(double));
+            kept_b++;
+            kept_a = 0;
+        }
+    }
+    /* the earliest indicator that changed its domain over the final bracket */
+    for (int i = 0; i < nz && first < 0; i++)
+        if (domain(za[i]) != domain(zb[i])) first = i;
+    inst->s.last_indicator = first;
+    const double te = b >= 1.0 ? t1 : t0 + b * h;
+    if (b >= 1.0) memcpy(xa, x1, (size_t)n * sizeof(double));
+    else hermite(n, h, b, xs0, fs0, x1, f1, xa);
+    memcpy(inst->x, xa, (size_t)n * sizeof(double));
+    inst->s.time = te;
+    memcpy(inst->zpre, zb, (size_t)nz * sizeof(double));
+    fmugen_invalidate(inst);
+    inst->s.fsal_valid = 0;
+    return 1;
+}
