@@ -127,8 +127,12 @@ int fmugen_event_iteration(fmugen_instance *inst, const double *u, char *msg, si
     return FMUGEN_OK;
 }
 
-/* domain of an indicator value: 1 for z > 0, 0 for z <= 0 */
-static int domain(double z) { return z > 0; }
+/* Has an indicator whose last value was ref crossed to z?  Its domain was z > 0 or z <= 0 (FMI);
+ * it has crossed when z lies strictly on the other side: from z > 0 to z < 0, from z <= 0 to z > 0.
+ * A value of exactly 0 after a positive one is not yet past the crossing: the point an event is put
+ * at is strictly beyond it, so that a guard written with the strict comparison of the other side
+ * (|tau| > T_s after T_s - |tau| fell through 0) holds there. */
+static int crossed(double ref, double z) { return ref > 0 ? z < 0 : z > 0; }
 
 /* the cubic Hermite interpolant of the step at theta in [0, 1] into out */
 static void hermite(int n, double h, double th, const double *x0, const double *f0, const double *x1,
@@ -161,10 +165,13 @@ int fmugen_step_event(fmugen_ode *ode, double t0, const double *x0, const double
                  fmugen_model_status_text(rc));
         return -1;
     }
-    int crossed = 0;
-    for (int i = 0; i < nz; i++) crossed |= domain(zb[i]) != domain(inst->zpre[i]);
-    if (!crossed) {
-        memcpy(inst->zpre, zb, (size_t)nz * sizeof(double));
+    int any = 0;
+    for (int i = 0; i < nz; i++) any |= crossed(inst->zpre[i], zb[i]);
+    if (!any) {
+        /* the new values are the reference of the next step; an indicator that reached exactly 0 keeps
+         * the side it came from until it leaves 0 */
+        for (int i = 0; i < nz; i++)
+            if (zb[i] != 0.0) inst->zpre[i] = zb[i];
         return 0;
     }
     if (!f1) {
@@ -177,6 +184,7 @@ int fmugen_step_event(fmugen_ode *ode, double t0, const double *x0, const double
         f1 = f1buf;
     }
     memcpy(za, inst->zpre, (size_t)nz * sizeof(double));
+    const double *ref = inst->zpre; /* the sides every crossing is measured from */
     const double h = t1 - t0, tol = FMUGEN_EVENT_TOL * fmax(1.0, fabs(t1));
     double a = 0.0, b = 1.0;
     int kept_a = 0, kept_b = 0, first = -1;
@@ -185,7 +193,7 @@ int fmugen_step_event(fmugen_ode *ode, double t0, const double *x0, const double
          * bisection when one end has been kept twice in a row */
         double th = b;
         for (int i = 0; i < nz; i++) {
-            if (domain(za[i]) == domain(zb[i])) continue;
+            if (!crossed(ref[i], zb[i])) continue;
             const double d = za[i] - zb[i];
             double s = d != 0 ? za[i] / d : 0.5;
             if (!(s >= 0.0 && s <= 1.0)) s = 0.5;
@@ -206,7 +214,7 @@ int fmugen_step_event(fmugen_ode *ode, double t0, const double *x0, const double
             return -1;
         }
         int left = 0;
-        for (int i = 0; i < nz; i++) left |= domain(zm[i]) != domain(za[i]);
+        for (int i = 0; i < nz; i++) left |= crossed(ref[i], zm[i]);
         if (left) { /* a crossing in [a, th] */
             b = th;
             memcpy(zb, zm, (size_t)nz * sizeof(double));
@@ -221,7 +229,7 @@ int fmugen_step_event(fmugen_ode *ode, double t0, const double *x0, const double
     }
     /* the earliest indicator that changed its domain over the final bracket */
     for (int i = 0; i < nz && first < 0; i++)
-        if (domain(za[i]) != domain(zb[i])) first = i;
+        if (crossed(ref[i], zb[i])) first = i;
     inst->s.last_indicator = first;
     const double te = b >= 1.0 ? t1 : t0 + b * h;
     if (b >= 1.0) memcpy(xa, x1, (size_t)n * sizeof(double));

@@ -924,7 +924,8 @@ def _event_functions(model: SymbolicModel, names: "_Names", known: set, time) ->
     parts, decls, fields = [], [], []
     nz = len(ev.indicators)
     if nz:
-        zb = lower([], [SinkGroup(None, [Sink("z", i, sp.sympify(e)) for i, (_, e) in enumerate(ev.indicators)])],
+        zb = lower(model.program.steps,
+                   [SinkGroup(None, [Sink("z", i, sp.sympify(e)) for i, (_, e) in enumerate(ev.indicators)])],
                    names, known)
         parts.append("/* event indicators: a state event when z[i] changes its domain z > 0 <-> z <= 0 */\n"
                      + _function("indicators(const double *p, double t, const double *x, const double *u, double *z)",
@@ -949,7 +950,7 @@ def _event_functions(model: SymbolicModel, names: "_Names", known: set, time) ->
                 a_clause.append(k)
                 sinks.append(Sink("value", a, sp.sympify(e)))
                 a += 1
-        ub = lower([], [SinkGroup(None, sinks)], names, known)
+        ub = lower(model.program.steps, [SinkGroup(None, sinks)], names, known)
         parts.append("/* the event clauses: guard[k] = 1 when clause k fires, value[a] the value of assignment a\n"
                      " * (from the values before the event; the runtime applies them) */\n"
                      + _function("update(const double *p, double t, const double *x, const double *u, "

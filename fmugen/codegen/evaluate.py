@@ -65,6 +65,76 @@ class ModelEvaluator:
             self._jac = compile_program(both, args, mats, "jacobians")
         self.x0 = np.array([0.0 if v.start is None else v.start for v in model.states], dtype=float)
         self.u0 = np.array([0.0 if v.start is None else v.start for v in model.inputs], dtype=float)
+        self._events = None
+        if self.model.events is not None:
+            self._compile_events(model, args)
+
+    # -- hybrid models: the discrete states are the last entries of p --------------------------------
+    def _compile_events(self, model, args) -> None:
+        ev = self.model.events
+        nd = len(ev.discrete)
+        self._d0 = len(self.p) - nd
+        d_index = {v.symbol: k for k, v in enumerate(ev.discrete)}
+        x_index = {v.symbol: j for j, v in enumerate(model.states)}
+        targets, clause_of, guards, values = [], [], [], []
+        for k, c in enumerate(ev.clauses):
+            guards.append(sp.Piecewise((sp.Float(1.0), c.guard), (sp.Float(0.0), True)))
+            for t, e in c.assign:
+                targets.append(("d", d_index[t]) if t in d_index else ("x", x_index[t]))
+                clause_of.append(k)
+                values.append(sp.sympify(e))
+        z = [sp.sympify(e) for _, e in ev.indicators]
+        self._z = compile_program(model.program, args, [sp.Matrix(z or [0])], "indicators")
+        self._upd = compile_program(model.program, args, [sp.Matrix(guards or [0]), sp.Matrix(values or [0])],
+                                    "update")
+        self._events = (targets, clause_of, len(z))
+        self.indicator_names = tuple(n for n, _ in ev.indicators)
+
+    @property
+    def discrete(self) -> np.ndarray:
+        """The discrete states' current values (a copy)."""
+        return self.p[self._d0:].copy() if self._events is not None else np.zeros(0)
+
+    @discrete.setter
+    def discrete(self, values) -> None:
+        self.p[self._d0:] = np.asarray(values, dtype=float)
+
+    def indicators(self, t, x=None, u=None) -> np.ndarray:
+        """The event indicators z(t, x, u) in the current mode."""
+        if self._events is None or not self._events[2]:
+            return np.zeros(0)
+        return self._z(*self._args(t, x, u))[0][: self._events[2], 0]
+
+    def event_round(self, t, x, u=None) -> tuple:
+        """One round of the clauses at (t, x, u) (c_runtime/events.c's rule): every guard and value from the
+        values now, then the firing assignments in order.  Returns (x after, changed); the discrete states
+        change in place."""
+        x = np.array(x, dtype=float)
+        if self._events is None:
+            return x, False
+        targets, clause_of, _ = self._events
+        g, vals = self._upd(*self._args(t, x, u))
+        g, vals = g[:, 0], vals[:, 0]
+        changed = False
+        for a, (kind, i) in enumerate(targets):
+            if g[clause_of[a]] == 0.0:
+                continue
+            if not np.isfinite(vals[a]):
+                raise ValueError(f"{self.model.name}: an event assignment is not finite at t = {t}")
+            arr, off = (x, 0) if kind == "x" else (self.p, self._d0)
+            if arr[off + i] != vals[a]:
+                arr[off + i] = vals[a]
+                changed = True
+        return x, changed
+
+    def event_iteration(self, t, x, u=None, max_rounds: int = 100) -> np.ndarray:
+        """Rounds of :meth:`event_round` until nothing changes; the state after."""
+        for _ in range(max_rounds):
+            x, changed = self.event_round(t, x, u)
+            if not changed:
+                return x
+        raise ValueError(f"{self.model.name}: the event iteration at t = {t} does not converge after "
+                         f"{max_rounds} rounds")
 
     def _args(self, t, x, u):
         x = self.x0 if x is None else np.asarray(x, dtype=float).ravel()

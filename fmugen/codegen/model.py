@@ -70,9 +70,10 @@ class EventClause:
     ``(target, expr)`` of ``assign`` is applied -- a discrete state takes a new value, or a state is
     re-initialised (Modelica's ``reinit``).
 
-    ``guard`` and the values are sympy expressions of the states, inputs, parameters, discrete states
-    and time ``t`` only (no program symbols), evaluated with the values just before the event; all clauses
-    of one round are evaluated first and then applied in order (a later clause wins a shared target).
+    ``guard`` and the values are sympy expressions of the states, inputs, parameters, discrete states,
+    time ``t`` and the symbols of the model's program (a robot's constraint torque), evaluated with the
+    values at the event; all clauses of one round are evaluated first and then applied in order (a later
+    clause wins a shared target).
     """
 
     guard: sp.Basic
@@ -88,7 +89,8 @@ class Events:
     the continuous equations read them like parameters.  ``indicators``: ``(name, expr)`` pairs, a state
     event when one changes its domain expr > 0 <-> expr <= 0.  ``clauses``: the :class:`EventClause`
     list run at every event, round after round, until no discrete state and no state changes (the event
-    iteration).  Indicators and clauses use states, inputs, parameters, discrete states and ``t`` only.
+    iteration).  Indicators and clauses may read the program's symbols: the generated ``indicators`` and
+    ``update`` run the program steps they need.
     """
 
     discrete: tuple = ()
@@ -404,7 +406,8 @@ class SymbolicModel:
             jac_needs = list(reads) + jac_needs
         else:
             jprog = None
-        prog = self.program.pruned(list(self.derivatives) + list(self.output_exprs) + jac_needs)
+        ev_needs = self.events.expressions() if self.events is not None else []
+        prog = self.program.pruned(list(self.derivatives) + list(self.output_exprs) + jac_needs + ev_needs)
         return replace(self, program=prog, jacobian=jprog)
 
     def operation_count(self) -> int:

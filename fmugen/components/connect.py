@@ -41,7 +41,7 @@ from typing import Mapping, Optional, Sequence
 import sympy as sp
 
 from ..codegen.differentiate import differentiate
-from ..codegen.model import SymbolicModel, Variable
+from ..codegen.model import EventClause, Events, SymbolicModel, Variable
 from ..codegen.program import Assign, Program, SolveSPD
 from ..fmi.units import base_units
 
@@ -148,7 +148,7 @@ def assemble(name: str, components: Mapping[str, SymbolicModel], connections: Se
     info = {}
     for inst, m in components.items():
         ren = {}
-        for group in (m.states, m.inputs, m.parameters, m.outputs):
+        for group in (m.states, m.inputs, m.parameters, m.outputs, _discrete(m)):
             for v in group:
                 ren[v.symbol] = sp.Symbol(f"{inst}{SEP}{v.symbol.name}", real=True)
         closed = m.program.inline(list(m.derivatives) + list(m.output_exprs))
@@ -202,8 +202,37 @@ def assemble(name: str, components: Mapping[str, SymbolicModel], connections: Se
 
     v = _assembled_variables(info, source_of, inputs, outputs, description, provenance, where, resolved)
     states, free, params, ders, outs, out_exprs, desc, prov = v
+    events = _assembled_events(components, info, lambda m, e: m.program.inline([e])[0], resolved)
     return SymbolicModel.from_equations(name, states, free, params, ders, outs, out_exprs,
-                                        description=desc, provenance=prov)
+                                        description=desc, provenance=prov, events=events)
+
+
+def _discrete(m: SymbolicModel) -> tuple:
+    return tuple(m.events.discrete) if m.events is not None else ()
+
+
+def _assembled_events(components, info, closed, resolved) -> Optional[Events]:
+    """The components' events, renamed like their variables: discrete states ``inst.name``, indicators
+    ``inst: name``; ``closed(model, expr)`` gives an event expression in the assembly's terms (the
+    closed-form path inlines the component's program; the program path keeps program symbols, renamed),
+    and connected inputs are replaced by ``resolved`` (empty on the program path, where they are
+    assignments of the program)."""
+    discrete, indicators, clauses = [], [], []
+    for inst, m in components.items():
+        if m.events is None:
+            continue
+        ren = info[inst]["ren"]
+
+        def term(e):
+            return sp.sympify(closed(m, sp.sympify(e))).xreplace(ren).xreplace(resolved)
+
+        discrete += [_renamed(inst, v) for v in m.events.discrete]
+        indicators += [(f"{inst}: {n}", term(e)) for n, e in m.events.indicators]
+        clauses += [EventClause(term(c.guard), tuple((ren[t], term(e)) for t, e in c.assign),
+                                f"{inst}: {c.name}" if c.name else inst) for c in m.events.clauses]
+    if not (discrete or indicators or clauses):
+        return None
+    return Events(tuple(discrete), tuple(indicators), tuple(clauses))
 
 
 def _assembled_variables(info, source_of, inputs, outputs, description, provenance, where, resolved):
@@ -257,7 +286,7 @@ def _assemble_programs(name, components, connections, inputs, outputs, descripti
     info, steps = {}, []
     for inst, m in components.items():
         ren = {}
-        for group in (m.states, m.inputs, m.parameters, m.outputs):
+        for group in (m.states, m.inputs, m.parameters, m.outputs, _discrete(m)):
             for v in group:
                 ren[v.symbol] = sp.Symbol(f"{inst}{SEP}{v.symbol.name}", real=True)
         for sym in m.program.assigned_symbols():
@@ -294,6 +323,7 @@ def _assemble_programs(name, components, connections, inputs, outputs, descripti
         name=name, description=desc, states=tuple(states), inputs=tuple(free), parameters=tuple(params),
         outputs=tuple(outs), program=program, derivatives=tuple(ders), output_exprs=tuple(out_exprs),
         jacobian=jac, dfdx=F[:, :nx], dfdu=F[:, nx:], dgdx=G[:, :nx], dgdu=G[:, nx:], provenance=prov,
+        events=_assembled_events(components, info, lambda m, e: e, {}),
     )
 
 

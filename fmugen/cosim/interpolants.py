@@ -80,6 +80,12 @@ class InputHistory:
         P += U0
         return P
 
+    def restart(self) -> None:
+        """Forget every point but the newest: an FMU reported an event in the last step, so its outputs
+        may have jumped, and an extrapolant through points on both sides of the jump would carry it
+        across (a slope of jump / H).  The next steps rebuild the history from this point on."""
+        self.n = 1
+
     def push(self, t, U):
         if self.hold_only:
             self.U0[:] = U

@@ -97,6 +97,10 @@ def _land(t, H, stop):
 
 
 
+def _event_count(unit) -> int:
+    return int(unit.get_integer("solver.n_events"))
+
+
 def _nominal(variable) -> float:
     """A variable's declared ``nominal`` (positive, finite), else 1.0 (FMI 2.0's default)."""
     try:
@@ -237,6 +241,9 @@ class Master:
         self.coupling_labels = tuple(u_labels)
         self.columns = tuple(r.column for r in sysm.recorded)
         self.rec_idx = np.array([y_at[(r.unit, r.variable)] for r in sysm.recorded], dtype=np.intp)
+        # FMUs that report their events (fmugen's hybrid FMUs count them in solver.n_events): a step in
+        # which one had an event may have made its outputs jump (fmugen/cosim/README.md "Events")
+        self.event_units = [u for u in self.units if u.kind == "cs" and "solver.n_events" in u.variables]
         # the recorded signals' declared nominal values (else FMI's default, 1): the error estimate's floor
         # for a signal that stays near zero (a joint at rest), where its largest value is round-off
         self.rec_nominal = np.array([_nominal(self.units[index[r.unit]].variables.get(r.variable))
@@ -369,6 +376,19 @@ class Master:
                 D *= self.F
         return calls
 
+    def _events_in_step(self, summ) -> bool:
+        """Did an FMU report an event in the macro step just accepted?  (solver.n_events rose; an FMU state
+        restored by a rollback or a shadow window restores the count too.)"""
+        counts = [_event_count(u) for u in self.event_units]
+        summ.fmu_calls += len(counts)
+        before = getattr(self, "_n_events", None) or [0] * len(counts)
+        self._n_events = counts
+        new = sum(max(0, a - b) for a, b in zip(counts, before))
+        if new:
+            summ.events += new
+            summ.discontinuities += 1
+        return new > 0
+
     def _coupled(self, out: np.ndarray) -> np.ndarray:
         nu = self.nu
         if nu:
@@ -437,6 +457,7 @@ class Master:
         H = min(H0, Hmax)
         try:
             calls += self._initialize(history.U[0])
+            self._n_events = [_event_count(u) for u in self.event_units]
             G = np.zeros(2 * nu if self.hermite else nu)  # the iteration's image: values (and slopes) at t_{n+1}
             if self.hermite:
                 calls += self._gather(Unew, G)
@@ -534,13 +555,23 @@ class Master:
                 if H > summ.step_max:
                     summ.step_max = H
                 history.push(t, Unew_v)
+                jump = self._events_in_step(summ) if self.event_units else False
+                if jump:
+                    history.restart()
+                    if implicit and hasattr(scheme, "M"):
+                        scheme.M = None  # the interface Jacobian of the old mode
                 if self.hermite:
                     self.dU0[:nu] = G[nu:]  # the slopes at t_{n+1}: the next step's predictor
                 # 6. record, watch
                 rec.append(t)
                 if est is not None and est.pending is not None:
-                    est.accepted(H, rec.V[rec.n - 1], summ.macro_steps)
-                if monitor is not None:
+                    if jump:  # a window across an event compares jumps, not coupling errors
+                        est.discard()
+                    else:
+                        est.accepted(H, rec.V[rec.n - 1], summ.macro_steps)
+                if monitor is not None and jump:
+                    monitor.count = 0  # the defect of a step with an event is the jump: a new block
+                elif monitor is not None:
                     failure = monitor.observe(t, H, d_v, Unew_v)
                     if failure is not None:
                         break

@@ -199,7 +199,7 @@ def solve_reference(problem: ReferenceProblem, times: Optional[Sequence[float]] 
             out[:, j] = X[i] if k == "x" else Ys[:, i]
         return out
 
-    if cache and path.is_file():
+    if cache and path.is_file() and m.events is None:
         try:
             with np.load(path, allow_pickle=False) as z:
                 ts, y_old, Q, error, text = z["ts"], z["y_old"], z["Q"], z["error"], str(z["settings"])
@@ -219,6 +219,11 @@ def solve_reference(problem: ReferenceProblem, times: Optional[Sequence[float]] 
     else:
         nom = np.array([abs(v.nominal) if v.nominal else max(1.0, abs(x)) for v, x in zip(m.states, x0)])
     nom = np.where(nom > 0, nom, 1.0)
+    if m.events is not None:  # piecewise smooth: located events and restarts (not cached)
+        from .hybrid_reference import solve_hybrid_reference
+
+        values, err, settings = solve_hybrid_reference(problem, times, rtol, parameter_values, cols, nom)
+        return ReferenceSolution(times, values, tuple(problem.columns), err, settings)
 
     model_ev = ev()
 

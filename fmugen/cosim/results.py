@@ -45,6 +45,8 @@ class Summary:
     rollbacks: int = 0  # rejected (restored) macro steps
     iterations: int = 0  # coupling iterations beyond the first (iterative/newton)
     jacobians: int = 0  # interface Jacobians by finite differences
+    events: int = 0  # events the FMUs reported inside macro steps (fmugen FMUs' solver.n_events)
+    discontinuities: int = 0  # macro steps after which the input history restarted because of them
     do_steps: int = 0  # fmi2DoStep calls (all FMUs, also rolled-back ones)
     fmu_calls: int = 0  # all fmi2* calls of the master
     wall_time: float = 0.0  # [s]
@@ -72,6 +74,7 @@ class Summary:
     def as_dict(self) -> dict:
         d = {k: getattr(self, k) for k in ("system", "scheme", "extrapolation", "adaptive", "status",
                                            "macro_steps", "rollbacks", "iterations", "jacobians",
+                                           "events", "discontinuities",
                                            "do_steps", "fmu_calls", "wall_time", "simulated_time",
                                            "step_min", "step_max", "threads", "coupling_tol",
                                            "coupling_tol_source", "error_estimate", "error_estimates",
@@ -86,7 +89,9 @@ class Summary:
              f"{self.status}; {self.macro_steps} macro steps (H {self.step_min:.4g}..{self.step_max:.4g} s), "
              f"{self.rollbacks} rollbacks, {self.iterations} iterations, {self.jacobians} Jacobians, "
              f"{self.do_steps} doStep, {self.fmu_calls} FMU calls, wall {self.wall_time:.4g} s "
-             f"({self.real_time_factor:.3g}x real time)" + (f", {self.threads} threads" if self.threads > 1 else ""))
+             f"({self.real_time_factor:.3g}x real time)" + (f", {self.threads} threads" if self.threads > 1 else "")
+             + (f"; {self.events} events in {self.discontinuities} macro steps (input history restarted "
+                f"there)" if self.events else ""))
         if self.estimate_samples:
             s += (f"\nestimated coupling error {self.error_estimate:.3g} of the largest column's range "
                   f"({self.estimate_samples} step-doubling samples), trend {self.error_trend}")

@@ -91,12 +91,6 @@ class Scene:
         for name, ins in self.spec.instances.items():
             outs = ("p_ee", "qdd") + _frame_outputs(ins) if ins.kind == "robot" else ()
             out[name] = instance_model(ins, self.spec.parameter_set, self.src, self._sets.get(name), outs)
-            if out[name].events is not None:
-                # the scene's state of rest, pruning, monolithic reference and held-input analysis are
-                # smooth-only: a hybrid component would be simulated as if it never switched
-                raise SceneError(f"{self.src}: [instances.{name}]: {out[name].name} has events (discrete states, "
-                                 f"event indicators); a component with events cannot join a scene yet -- build it "
-                                 f"on its own (fmugen build) and co-simulate its FMU")
         return out
 
     def _var(self, inst: str, var: str, where: str):

@@ -1,0 +1,114 @@
+"""Hybrid components in scenes: the events go through assembly, the hybrid reference and the master.
+
+A torque ramp tau = r t (its own FMU) drives lib:stick_slip (J = 0.05, T_c = 2, T_s = 3, b = 0.02): the
+shaft is stuck until tau reaches T_s at t_b = T_s / r = 3 s, then J w' = r t - T_c - b w from w(t_b) = 0,
+
+    w(t) = (r t - T_c)/b - r J/b^2 + C exp(-b (t - t_b)/J),   C = r J/b^2 - (r t_b - T_c)/b,
+
+and phi its integral.  The reference (Radau with located events and restarts, fmugen/cosim/hybrid_reference)
+meets the closed form; the co-simulation's master sees the event (solver.n_events), restarts its input
+history there, and converges to the reference.
+"""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fmugen
+from fmugen.cosim import run, solve_reference
+
+J, T_C, T_S, B, RATE = 0.05, 2.0, 3.0, 0.02, 1.0
+T_B = T_S / RATE
+
+RAMP = """
+[component]
+name = "ramp"
+description = "a torque ramp"
+equations = ["der(tau) = rate"]
+[parameters]
+rate = { value = 1.0, unit = "N.m/s", description = "slope" }
+[states]
+tau = { unit = "N.m", start = 0.0, output = true, description = "torque" }
+"""
+
+SCENE = """
+[scene]
+name = "ramp_stick"
+stop = 5.0
+step = 1e-2
+record = ["shaft.phi", "shaft.w", "shaft.tau_f", "src.tau"]
+connections = [["src.tau", "shaft.tau"]]
+[instances]
+src = { type = "file:ramp.toml" }
+shaft = { type = "lib:stick_slip" }
+[fmus.src]
+members = ["src"]
+[fmus.shaft]
+members = ["shaft"]
+"""
+
+
+def closed_form(t):
+    t = np.asarray(t, dtype=float)
+    a = B / J
+    C = RATE * J / B ** 2 - (RATE * T_B - T_C) / B
+    s = np.maximum(t - T_B, 0.0)
+    w = np.where(t > T_B, (RATE * t - T_C) / B - RATE * J / B ** 2 + C * np.exp(-a * s), 0.0)
+    # phi = int_{t_b}^t w
+    F = lambda tt: RATE * tt ** 2 / (2 * B) - T_C * tt / B - RATE * J * tt / B ** 2  # noqa: E731
+    phi = np.where(t > T_B, F(t) - F(T_B) + C * (1 - np.exp(-a * s)) / a, 0.0)
+    return phi, w
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    d = tmp_path_factory.mktemp("ramp_stick")
+    (d / "ramp.toml").write_text(RAMP)
+    (d / "scene.toml").write_text(SCENE)
+    return d
+
+
+def test_the_hybrid_reference_meets_the_closed_form(scene):
+    sc = fmugen.load_scene(scene / "scene.toml")
+    t = np.linspace(0.0, 5.0, 501)
+    ref = solve_reference(sc.reference_problem(), times=t, cache=False)
+    assert ref.settings["events"] == 1 and abs(ref.settings["event_times"][0] - T_B) < 1e-9
+    phi, w = closed_form(t)
+    assert np.abs(ref["shaft.w"] - w).max() < 1e-7 * np.abs(w).max()
+    assert np.abs(ref["shaft.phi"] - phi).max() < 1e-7 * np.abs(phi).max()
+    assert np.all(ref["shaft.phi"][t < T_B] == 0.0)  # stuck: not one ulp of creep
+    # stuck, the friction is the constraint torque (= the drive); sliding, T_c + b w
+    assert np.allclose(ref["shaft.tau_f"][t < T_B], RATE * t[t < T_B], rtol=0, atol=1e-12)
+    assert ref.error_of("shaft.phi") < 1e-8
+
+
+@pytest.mark.parametrize("scheme,ext", [("gauss-seidel", "linear"), ("newton", "linear")])
+def test_cosimulation_across_the_breakaway_converges_to_the_reference(scene, scheme, ext, tmp_path):
+    sc = fmugen.load_scene(scene / "scene.toml")
+    built = sc.build(tmp_path / "fmus")
+    t = np.linspace(0.0, 5.0, 501)
+    ref = solve_reference(sc.reference_problem(), times=t, cache=False)
+    errs = []
+    for H in (0.04, 0.01):
+        r = run(built.system, scheme, ext, step=H)
+        assert r.ok and r.summary.events == 1 and r.summary.discontinuities == 1, r.summary
+        idx = np.rint(r.time / 0.01).astype(int)
+        errs.append(np.abs(r["shaft.phi"] - ref["shaft.phi"][idx]).max())
+    assert errs[1] < 1e-5 and errs[1] <= errs[0] * 1.01, errs
+
+
+def test_the_monolithic_fmu_locates_the_breakaway_at_any_step(scene, tmp_path):
+    """One FMU for the whole scene: the ramp is inside it, so the breakaway is located inside the step
+    (0.5 s communication steps give the trajectory of 0.01 s steps)."""
+    from fmpy import simulate_fmu
+
+    sc = fmugen.load_scene(scene / "scene.toml", set={"scene.monolithic": True})
+    built = sc.build(tmp_path / "mono")
+    path = str(built.system.units[0].path)
+    out = []
+    for H in (0.5, 0.01):
+        r = simulate_fmu(path, fmi_type="CoSimulation", stop_time=5.0, output_interval=H,
+                         start_values={"solver.rtol": 1e-10}, output=["shaft.phi", "shaft.w"])
+        out.append(r[-1]["shaft.phi"])
+    phi_end = closed_form([5.0])[0][0]
+    assert abs(out[0] - phi_end) < 1e-6 * phi_end and abs(out[1] - phi_end) < 1e-6 * phi_end, (out, phi_end)
