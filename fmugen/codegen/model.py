@@ -369,11 +369,16 @@ class SymbolicModel:
         for g in ("states", "inputs", "parameters"):
             groups[g] = tuple(replace(v, start=as_number(values[v.name], f"{self.name}: {v.name}"))
                               if v.name in values else v for v in getattr(self, g))
-        known = {v.name for g in groups.values() for v in g}
+        events = self.events
+        if events is not None:  # a discrete state's start: the mode the model starts in
+            events = replace(events, discrete=tuple(
+                replace(v, start=as_number(values[v.name], f"{self.name}: {v.name}")) if v.name in values else v
+                for v in events.discrete))
+        known = {v.name for g in groups.values() for v in g} | {v.name for v in (events.discrete if events else ())}
         unknown = sorted(set(values) - known)
         if unknown:
-            raise ValueError(f"{self.name}: {', '.join(unknown)} not a state, input or parameter")
-        return replace(self, **groups)
+            raise ValueError(f"{self.name}: {', '.join(unknown)} not a state, input, parameter or discrete state")
+        return replace(self, events=events, **groups)
 
     def with_ranges_narrowed(self, ranges: dict) -> "SymbolicModel":
         """A copy whose states and outputs named in ``ranges`` ({name: (min, max)}, None = open) keep

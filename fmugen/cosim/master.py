@@ -565,14 +565,13 @@ class Master:
                 # 6. record, watch
                 rec.append(t)
                 if est is not None and est.pending is not None:
-                    if jump:  # a window across an event compares jumps, not coupling errors
-                        est.discard()
-                    else:
-                        est.accepted(H, rec.V[rec.n - 1], summ.macro_steps)
-                if monitor is not None and jump:
-                    monitor.count = 0  # the defect of a step with an event is the jump: a new block
-                elif monitor is not None:
-                    failure = monitor.observe(t, H, d_v, Unew_v)
+                    # a window across an event is kept: the H/2 shadow places the event's effects more
+                    # exactly, and their difference is the coupling's error in timing it
+                    est.accepted(H, rec.V[rec.n - 1], summ.macro_steps)
+                if monitor is not None:
+                    # the defect of a step with an event is the jump, not a coupling error: the values are
+                    # still watched (a divergence grows them), its defect is not
+                    failure = monitor.observe(t, H, np.zeros_like(d_v) if jump else d_v, Unew_v)
                     if failure is not None:
                         break
                     if est is not None and monitor.count == 0:  # a block ended: a window if the defect rose

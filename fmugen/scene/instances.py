@@ -67,10 +67,11 @@ def instance_model(spec: InstanceSpec, default_set: str, src: str, sets: Optiona
         check_model_values(model, values, origin.get)
     except FmugenError as exc:
         raise SceneError(str(exc)) from None
-    known = {v.name for g in (model.states, model.inputs, model.parameters) for v in g}
+    discrete = tuple(model.events.discrete) if model.events is not None else ()
+    known = {v.name for g in (model.states, model.inputs, model.parameters, discrete) for v in g}
     for k in values:
         if k not in known:
-            raise SceneError(f"{where}: {k!r} is not a parameter, state or input of {spec.name}"
+            raise SceneError(f"{where}: {k!r} is not a parameter, state, input or discrete state of {spec.name}"
                              f"{did_you_mean(k, known)}; parameters: "
                              f"{', '.join(v.name for v in model.parameters) or '-'}")
     model = model.with_starts(values)
