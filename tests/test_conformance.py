@@ -4,8 +4,9 @@ each with 0 warnings and 0 errors (ME and CS), and libcosim loads and steps each
 FMI Library enforces FMI 2.0 rules that fmpy's validation does not: a URDF arm whose joint-name aliases of
 its inputs both carried a start value lost both variables there, which stopped the checker ("Model structure
 is not valid") and crashed libcosim's add_local_slave.  The kinds: a DH robot file (forward and inverse
-dynamics), URDF chains and a tree (straight-line and looped code), a component file, a shipped assembly and
-the FMUs of two split scenes (the one-joint rig; the UR5 with electric axes, a URDF arm inside a scene).
+dynamics), URDF chains and a tree (straight-line and looped code), component files (smooth, with state
+events, with modes), a shipped assembly and the FMUs of three split scenes (the one-joint rig; the UR5 with
+electric axes, a URDF arm inside a scene; the PUMA shoulder on a stick-slip drive with backlash).
 """
 import subprocess
 import sys
@@ -42,9 +43,12 @@ KINDS = {
     "urdf_panda": ("erd:panda_description/urdf/panda.urdf", [], False),
     "urdf_tree": ("erd:allegro_hand_description/urdf/allegro_right_hand.urdf", [], False),
     "component_file": ("lib:stribeck", [], False),
+    "component_events": ("examples/components/bouncing_ball.toml", [], False),
+    "component_modes": ("lib:stick_slip", [], False),
     "assembly": ("examples/single_joint_default.toml", [], False),
     "scene_split": ("examples/scenes/single_joint_split.toml", [], True),
     "scene_urdf_electric": ("examples/scenes/ur5_electric.toml", ["--set", "scene.monolithic=false"], True),
+    "scene_hybrid": ("examples/scenes/puma_geared_drive_hybrid.toml", [], True),
 }
 
 

@@ -136,6 +136,10 @@ def describe(lm, model, op=None, out=None) -> None:
           f"C {ny}x{nx}, D {ny}x{nu}", file=out)
     if op is not None:
         print(op.report(), file=out)
+    if getattr(lm, "mode", None):
+        print("a hybrid model, linearised in the mode it is in: "
+              + ", ".join(f"{k} = {v:g}" for k, v in lm.mode.items())
+              + " (valid until its next event; another mode: --set NAME=VALUE)", file=out)
     print("eigenvalues (slowest first):", file=out)
     print(f"  {'real':>14} {'imag':>14} {'damping':>9} {'freq [rad/s]':>13}", file=out)
     for lam, zeta, w in modes(lm.A):

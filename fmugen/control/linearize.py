@@ -23,7 +23,7 @@ rule of :mod:`fmugen.control.names` (FMI names, '.' written '_').
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Mapping, Optional, Sequence, Union
 
 import numpy as np
@@ -97,6 +97,9 @@ class LinearModel:
     u0: np.ndarray  # every input of the model, not only the selected columns
     y0: np.ndarray  # the selected outputs
     all_inputs: list
+    # a hybrid model is linearised in one mode: its discrete states' values (name -> value), {} if smooth;
+    # choose another with parameter_values={"mode": 1, ...}
+    mode: dict = field(default_factory=dict)
 
 
 def linear_model(model, x=None, u=None, t: float = 0.0, parameter_values=None, outputs="all",
@@ -135,4 +138,4 @@ def linear_model(model, x=None, u=None, t: float = 0.0, parameter_values=None, o
     y0 = np.array([x0[s.index] if s.kind == "state" else g[s.index] for s in chosen])
     return LinearModel(model.name, A, B, C, D, [v.name for v in model.states],
                        [model.inputs[i].name for i in cols], [s.name for s in chosen], t, x0, u0, y0,
-                       [v.name for v in model.inputs])
+                       [v.name for v in model.inputs], dict(ev.mode))
