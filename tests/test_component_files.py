@@ -411,7 +411,7 @@ def test_component_file_in_a_scene_like_a_builtin(tmp_path):
     assert d["load.w"] == pytest.approx((u - tf) / 0.5, rel=1e-12)
     assert d["ctl.x_d"] == pytest.approx((e - 0.02) / 2e-3, rel=1e-12)
     # a parameter the scene does not name, refused with the file named
-    with pytest.raises(FmugenError, match="not a parameter, state or input of load"):
+    with pytest.raises(FmugenError, match="not a parameter, state, input or discrete state of load"):
         fmugen.load_scene(sc, set={"load.T_x": 1.0}).monolithic_model()
     sc.write_text(SCENE.format(factor="1.0").replace("file:comp/stribeck.toml", "file:comp/none.toml"))
     with pytest.raises(FmugenError, match=r"\[instances.load\] type = 'file:comp/none.toml'.*no such component file"):

@@ -13,12 +13,14 @@ anything) and refuses:
 
 * a sum, difference, ``min``/``max``/``sat``/``deadzone``/``abs`` whose
   operands differ, or an ``if`` whose branches differ;
-* a comparison whose sides differ, a smoothing width ``eps`` of another
-  dimension than what it smooths;
+* a comparison whose sides differ (also in the conditions of ``[[when]]``
+  clauses; ``a < b < c`` is ``a < b and b < c``), a smoothing width ``eps``
+  of another dimension than what it smooths;
 * ``exp``, ``log``, ``tanh``, ``sin``, ``cos``, ``tan``, ``atan`` of anything
   but a pure number (an angle is one); a dimensioned base raised to a
   non-constant power;
-* an equation whose two sides differ (``der(x)`` has x's dimension / s).
+* an equation whose two sides differ (``der(x)`` has x's dimension / s), an
+  event's assigned value of another dimension than its target.
 
 The literal ``0`` has every dimension; other numbers are pure numbers
 (write a parameter with its unit instead of a bare constant of a dimension).
@@ -35,6 +37,7 @@ SI_BASE = tuple(b for b in BASE if b != "rad")  # the seven SI base dimensions
 Dim = tuple  # len(SI_BASE) Fractions
 DIMENSIONLESS: Dim = tuple(Fraction(0) for _ in SI_BASE)
 ANY = None  # the literal 0: fits every dimension
+BOOLEAN = "boolean"  # a condition (comparisons, and/or/not): no dimension
 SECOND = tuple(Fraction(1 if b == "s" else 0) for b in SI_BASE)
 
 
@@ -144,7 +147,21 @@ class Checker:
         return self.dims[node.id]
 
     def _UnaryOp(self, node):
+        if isinstance(node.op, ast.Not):
+            self.dim(node.operand)
+            return BOOLEAN
         return self.dim(node.operand)
+
+    def _Compare(self, node):  # a condition: the two sides of each comparison (a < b < c: a, b and b, c) agree
+        sides = [node.left, *node.comparators]
+        for a, b in zip(sides, sides[1:]):
+            self.same(node, a, b)
+        return BOOLEAN
+
+    def _BoolOp(self, node):
+        for v in node.values:
+            self.dim(v)
+        return BOOLEAN
 
     def _BinOp(self, node):
         if isinstance(node.op, (ast.Add, ast.Sub)):
@@ -183,12 +200,18 @@ class Checker:
 
     def _IfExp(self, node):
         test = node.test
-        parts = []
         if isinstance(test, ast.Call):  # smooth(l > r, eps)
-            parts.append(test.args[1])
             test = test.args[0]
-        self.same(node.test, test.left, test.comparators[0], *parts)
+            self.same(node.test, test.left, test.comparators[0], node.test.args[1])
+        else:
+            self.dim(test)
         return self.same(node, node.body, node.orelse)
+
+
+def dimension(text: str, tree, dims: dict, constant_value) -> Dim:
+    """The dimension of an expression (an event indicator), or :data:`BOOLEAN` for a condition; an
+    inconsistent one is refused (:class:`DimensionError`)."""
+    return Checker(text, dims, constant_value).dim(tree)
 
 
 def check_equation(text: str, tree, lhs_text: str, lhs_dim: Dim, dims: dict, constant_value) -> None:

@@ -1,7 +1,9 @@
 """Read a component file (TOML) into a SymbolicModel: declare, check dimensions, generate.
 
 The format, key by key, is in ``fmugen/components/README.md`` ("Component
-files").  Every key is checked where it is read; errors are
+files"; a hybrid file's ``[discrete]``, ``[indicators]`` and ``[[when]]``:
+"Events: discrete states, indicators, when clauses", they become the model's
+:class:`~fmugen.codegen.model.Events`).  Every key is checked where it is read; errors are
 :class:`fmugen.errors.InputFileError` naming the file, the table or equation
 and the reason.  The file is parsed by :mod:`tomllib`; equations go through
 :mod:`.language` (never evaluated) and :mod:`.dimensions`.
@@ -18,28 +20,33 @@ from typing import Mapping, Optional
 
 import sympy as sp
 
-from ...codegen.model import SymbolicModel
+from ...codegen.model import EventClause, Events, SymbolicModel
 from ...errors import InputFileError, check_identifier, read_text_file, toml_problem
 from ...robot.expressions import ExpressionError
 from ..base import var
 from . import language
-from .dimensions import DimensionError, SECOND, check_equation, dimension_of_unit, sub
+from .dimensions import ANY, DimensionError, SECOND, check_equation, dimension, dimension_of_unit, show, sub
 
-TOP_KEYS = {"component", "parameters", "inputs", "states", "intermediates", "outputs", "sets", "connectors"}
+TOP_KEYS = {"component", "parameters", "inputs", "states", "intermediates", "outputs", "sets", "connectors",
+            "discrete", "indicators", "when"}
 COMPONENT_KEYS = {"name", "description", "equations", "provenance"}
 PARAMETER_KEYS = {"value", "unit", "min", "max", "description"}
 INPUT_KEYS = {"unit", "start", "min", "max", "description"}
 STATE_KEYS = {"unit", "start", "nominal", "min", "max", "description", "output"}
 INTERMEDIATE_KEYS = {"unit", "description"}
 OUTPUT_KEYS = {"unit", "min", "max", "description"}
+DISCRETE_KEYS = {"unit", "start", "min", "max", "description", "output"}
+WHEN_KEYS = {"condition", "set", "name", "description"}
 MAX_DECLARATIONS = 200  # per table: a component file is a component, not a model of everything
 MAX_EQUATIONS = 400
+MAX_INDICATORS = 100
+MAX_CLAUSES = 100
 
 
 @dataclass(frozen=True)
 class Declared:
     name: str
-    kind: str  # parameter, input, state, intermediate, output
+    kind: str  # parameter, input, state, discrete, intermediate, output
     unit: str
     description: str = ""
     value: Optional[float] = None  # parameter value / start value
@@ -63,9 +70,37 @@ class ComponentFile:
     sets: dict  # set name -> {parameter: value}
     connectors: dict = field(default_factory=dict)  # name -> (type, {connector var: variable}), checked
     kinks: list = field(default_factory=list)  # (equation, text, function, [distances], eps): smoothed kinks
+    indicators: list = field(default_factory=list)  # (name, Parsed), one per [indicators] entry
+    clauses: list = field(default_factory=list)  # Clause, one per [[when]] table, in file order
 
     def of_kind(self, kind: str) -> list:
         return [d for d in self.declared.values() if d.kind == kind]
+
+    @property
+    def hybrid(self) -> bool:
+        """Whether the file declares events (discrete states, indicators, when clauses)."""
+        return bool(self.indicators or self.clauses or self.of_kind("discrete"))
+
+
+@dataclass(frozen=True)
+class Parsed:
+    """One expression of the events: where it is (for messages), its text, checked tree, Python text."""
+
+    where: str
+    text: str
+    tree: object
+    python: str
+
+
+@dataclass(frozen=True)
+class Clause:
+    """A ``[[when]]`` table: ``name`` (given or ``when<k>``), its condition and its ``set`` entries."""
+
+    name: str
+    where: str  # "[[when]] 2 (stick)" for messages
+    description: str
+    condition: Parsed
+    assign: tuple  # ((target name, Parsed value), ...) in file order
 
 
 def _err(src, msg):
@@ -119,7 +154,8 @@ def read_component_file(path) -> ComponentFile:
 
     declared: dict = {}
     specs = (("parameters", "parameter", PARAMETER_KEYS), ("inputs", "input", INPUT_KEYS),
-             ("states", "state", STATE_KEYS), ("intermediates", "intermediate", INTERMEDIATE_KEYS),
+             ("states", "state", STATE_KEYS), ("discrete", "discrete", DISCRETE_KEYS),
+             ("intermediates", "intermediate", INTERMEDIATE_KEYS),
              ("outputs", "output", OUTPUT_KEYS))
     for table, kind, keys in specs:
         tab = data.get(table, {})
@@ -153,6 +189,9 @@ def read_component_file(path) -> ComponentFile:
                     if k in entry}
             if kind == "parameter" and "value" not in vals:
                 raise _err(src, f"{where}: a parameter needs a value")
+            if kind == "discrete" and "start" not in vals:
+                raise _err(src, f"{where}: a discrete state needs a start value (its value until the first "
+                                f"[[when]] clause sets it)")
             if "nominal" in vals and vals["nominal"] <= 0:
                 raise _err(src, f"{where} nominal must be positive")
             lo, hi = vals.get("min"), vals.get("max")
@@ -178,7 +217,9 @@ def read_component_file(path) -> ComponentFile:
     from ..connectors import check_file_connectors
 
     connectors = check_file_connectors(connectors, declared, src)
-    cf = ComponentFile(path, name, desc, prov, declared, equations, order, sets, connectors)
+    indicators, clauses = _events(data, declared, src)
+    cf = ComponentFile(path, name, desc, prov, declared, equations, order, sets, connectors,
+                       indicators=indicators, clauses=clauses)
     _build_all(cf, cf.kinks)  # the language's refusals first (they say what is wrong with the text) ...
     _check_dimensions(cf)  # ... then the dimensions of what it says
     return cf
@@ -216,14 +257,7 @@ def _equations(raw, declared, src) -> dict:
                             f"y = ... for an output or intermediate y")
         if target in out:
             raise _err(src, f"{where}: a second equation for {lhs} (the first: {out[target][0]} = {out[target][1]})")
-        try:
-            tree, python = language.parse_tree(rhs)
-        except ExpressionError as exc:
-            raise _err(src, f"{where}: {exc}") from None
-        unknown = sorted(language.names_in(tree) - set(declared) - {"pi", "time"} - language.FUNCTION_NAMES)
-        if unknown:
-            raise _err(src, f"{where}: unknown name(s) {', '.join(unknown)}; declared: {', '.join(declared)}, "
-                            f"time, pi")
+        tree, python = _parse(rhs, where, declared, src)
         out[target] = (lhs, rhs, tree, python)
     missing = [("der(" + d.name + ")" if d.kind == "state" else d.name) for d in declared.values()
                if d.kind in ("state", "output", "intermediate") and d.name not in out]
@@ -231,6 +265,118 @@ def _equations(raw, declared, src) -> dict:
         raise _err(src, f"no equation for {', '.join(missing)}: every state needs der(x) = ..., every output "
                         f"and intermediate y = ...")
     return out
+
+
+def _parse(text, where, declared, src) -> tuple:
+    """(checked tree, Python text) of an expression, every name declared (else one line naming ``where``)."""
+    try:
+        tree, python = language.parse_tree(text)
+    except ExpressionError as exc:
+        raise _err(src, f"{where}: {exc}") from None
+    unknown = sorted(language.names_in(tree) - set(declared) - {"pi", "time"} - language.FUNCTION_NAMES)
+    if unknown:
+        raise _err(src, f"{where}: unknown name(s) {', '.join(unknown)}; declared: {', '.join(declared)}, "
+                        f"time, pi")
+    return tree, python
+
+
+def _value_text(v, where, src) -> str:
+    """A ``set`` value: an expression string, or a TOML number written as one."""
+    if isinstance(v, str):
+        return v
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        return repr(_number(v, where, src))
+    raise _err(src, f"{where} must be an expression string or a number, got {type(v).__name__} {v!r}")
+
+
+def _events(data, declared, src) -> tuple:
+    """The checked ``[indicators]`` and ``[[when]]`` tables: ([(name, Parsed)], [Clause])."""
+    raw = data.get("indicators", {})
+    if not isinstance(raw, dict):
+        raise _err(src, "[indicators] must be a table of name = \"expression\" entries")
+    if len(raw) > MAX_INDICATORS:
+        raise _err(src, f"[indicators] declares {len(raw)} indicators; at most {MAX_INDICATORS}")
+    indicators = []
+    for iname, text in raw.items():
+        where = f"[indicators] {iname}"
+        problem = _name_problem(iname)
+        if problem:
+            raise _err(src, f"{where}: the name {problem}")
+        if iname in declared:
+            raise _err(src, f"{where}: {iname!r} is also a declared {declared[iname].kind}; give the indicator a "
+                            f"name of its own")
+        if not isinstance(text, str):
+            raise _err(src, f"{where} must be an expression string whose sign change is the event, like \"h\" "
+                            f"or \"T_s - abs(tau)\"")
+        tree, python = _parse(text, f"{where} = {language._short(text)}", declared, src)
+        if isinstance(tree, (ast.Compare, ast.BoolOp)) or (isinstance(tree, ast.UnaryOp)
+                                                           and isinstance(tree.op, ast.Not)):
+            raise _err(src, f"{where} = {language._short(text)}: an indicator is a quantity, not a condition: the "
+                            f"event is its sign change (write \"h\", not \"h <= 0\")")
+        indicators.append((iname, Parsed(f"{where} = {language._short(text)}", text, tree, python)))
+
+    raw = data.get("when", [])
+    if isinstance(raw, dict):
+        raise _err(src, "[when] must be an array of tables: write [[when]] (two brackets) for each clause")
+    if not isinstance(raw, list) or not all(isinstance(c, dict) for c in raw):
+        raise _err(src, "[[when]] clauses must be tables [[when]] with condition = \"...\" and set = { ... }")
+    if len(raw) > MAX_CLAUSES:
+        raise _err(src, f"{len(raw)} [[when]] clauses; at most {MAX_CLAUSES}")
+    clauses, seen = [], {}
+    for k, tab in enumerate(raw, 1):
+        cname = tab.get("name", f"when{k}")
+        where = f"[[when]] {k}" + (f" ({cname})" if "name" in tab else "")
+        bad = sorted(set(tab) - WHEN_KEYS)
+        if bad:
+            raise _err(src, f"{where} has unknown key(s) {', '.join(bad)}; known: {', '.join(sorted(WHEN_KEYS))}")
+        problem = _name_problem(cname)
+        if problem:
+            raise _err(src, f"{where}: the name {problem}")
+        if cname in seen:
+            raise _err(src, f"{where}: the name {cname!r} is also {seen[cname]}'s")
+        seen[cname] = where
+        desc = tab.get("description", "")
+        if not isinstance(desc, str):
+            raise _err(src, f"{where} description must be a string")
+        cond = tab.get("condition")
+        if not isinstance(cond, str):
+            raise _err(src, f"{where} needs condition = \"...\", a string (comparisons joined by and, or, not)"
+                            + (f", not {type(cond).__name__} {cond!r}" if cond is not None else ""))
+        cwhere = f"{where} condition {language._short(cond)}"
+        tree, python = _parse(cond, cwhere, declared, src)
+        condition = Parsed(cwhere, cond, tree, python)
+        sets = tab.get("set")
+        if not isinstance(sets, dict) or not sets:
+            raise _err(src, f"{where} needs set = {{ target = \"value\", ... }}, the discrete states and states "
+                            f"it assigns")
+        assign = []
+        for target, value in sets.items():
+            swhere = f"{where} set {target}"
+            d = declared.get(target)
+            if d is None or d.kind not in ("discrete", "state"):
+                what = f"is {'an' if d.kind[0] in 'aeiou' else 'a'} {d.kind}" if d else "is not declared"
+                targets = [n for n, e in declared.items() if e.kind in ("discrete", "state")]
+                raise _err(src, f"{swhere}: unknown target: {target!r} {what}; a clause sets a [discrete] state "
+                                f"or re-initialises a [states] state ({', '.join(targets) or 'none declared'})")
+            text = _value_text(value, swhere, src)
+            vwhere = f"{swhere} = {language._short(text)}"
+            tree, python = _parse(text, vwhere, declared, src)
+            assign.append((target, Parsed(vwhere, text, tree, python)))
+        clauses.append(Clause(cname, where, desc, condition, tuple(assign)))
+
+    discrete = [n for n, d in declared.items() if d.kind == "discrete"]
+    assigned = {t for c in clauses for t, _ in c.assign}
+    never = [n for n in discrete if n not in assigned]
+    if never:
+        raise _err(src, f"[discrete] {', '.join(never)}: never set by a [[when]] clause, so constant: make "
+                        f"{'it a parameter' if len(never) == 1 else 'them parameters'}")
+    if clauses and not indicators:
+        raise _err(src, "[[when]] clauses but no [indicators]: no event would ever run them after the start; "
+                        "declare the quantities whose sign change is an event")
+    if indicators and not clauses:
+        raise _err(src, "[indicators] but no [[when]] clause: an event would change nothing; add the clauses "
+                        "that act at the events")
+    return indicators, clauses
 
 
 def _order_intermediates(equations, declared, src) -> list:
@@ -310,6 +456,29 @@ def _check_dimensions(cf: ComponentFile) -> None:
                                 f"{lhs.removeprefix('der(').removesuffix(')')} [{cf.declared[target].unit}]"
                                 f"{', ' + units if units else ''}") from None
 
+    def units(tree, first=""):
+        names = sorted(language.names_in(tree) & set(dims) - {first})
+        shown = ([f"{first} [{cf.declared[first].unit}]"] if first else []) + [f"{n} [{cf.declared[n].unit}]"
+                                                                                 for n in names]
+        return f"; units: {', '.join(shown)}" if shown else ""
+
+    def dim_of(p: Parsed):
+        try:
+            return dimension(p.python, p.tree, dims, _constant_value(p.python))
+        except DimensionError as exc:
+            raise _err(cf.path, f"{p.where} is dimensionally inconsistent: {exc}{units(p.tree)}") from None
+
+    for _, ind in cf.indicators:
+        dim_of(ind)
+    for c in cf.clauses:
+        dim_of(c.condition)
+        for target, p in c.assign:
+            d = dim_of(p)
+            if d is not ANY and d != dims[target]:
+                raise _err(cf.path, f"{p.where}: the value is [{show(d)}] but {target} is in "
+                                    f"[{cf.declared[target].unit}] ([{show(dims[target])}]): a clause must assign "
+                                    f"a value of its target's unit{units(p.tree, target)}")
+
 
 def component_model(cf: ComponentFile, name: Optional[str] = None, parameter_set=None,
                     overrides: Optional[Mapping[str, float]] = None, strict_set: bool = True) -> SymbolicModel:
@@ -340,11 +509,15 @@ def component_model(cf: ComponentFile, name: Optional[str] = None, parameter_set
                                  f"{', '.join(cf.sets) or 'none'} ([sets.<name>])")
     values.update(_check_values(dict(overrides or {}), params, f"{src}: parameter override"))
 
-    ders, outs = _build_all(cf)
+    ders, outs, events = _build_all(cf)
 
     def v(d, start):
         return var(d.name, d.unit, d.description, start=start, nominal=d.nominal, min=d.min, max=d.max,
-                   output=d.kind == "state" and d.output)
+                   output=d.kind in ("state", "discrete") and d.output)
+
+    if events is not None:
+        events = Events(discrete=tuple(v(d, d.value) for d in cf.of_kind("discrete")), indicators=events[0],
+                        clauses=events[1])
 
     try:
         return explicit_model(
@@ -354,21 +527,51 @@ def component_model(cf: ComponentFile, name: Optional[str] = None, parameter_set
             [v(d, values[d.name]) for d in params.values()],
             ders, [v(d, None) for d in cf.of_kind("output")], outs,
             description=cf.description or f"component file {cf.path.name}",
-            provenance=cf.provenance or f"component file {cf.path.name}")
+            provenance=cf.provenance or f"component file {cf.path.name}", events=events)
     except ValueError as exc:
         raise _err(src, str(exc)) from None
 
 
 def _build_all(cf: ComponentFile, kinks: Optional[list] = None) -> tuple:
-    """(derivative expressions, output expressions); intermediates substituted, parameters symbolic."""
+    """(derivative expressions, output expressions, events); intermediates substituted, parameters symbolic.
+
+    ``events``: None for a smooth file, else (indicators, clauses) as :class:`Events` takes them, every
+    intermediate and output inlined (the events read states, inputs, parameters, discrete states, t).
+    """
     symbols = {n: sp.Symbol(n, real=True) for n in cf.declared
-               if cf.declared[n].kind in ("parameter", "input", "state")}
-    constant = {symbols[d.name] for d in cf.of_kind("parameter")}
+               if cf.declared[n].kind in ("parameter", "input", "state", "discrete")}
+    # constant between events: a kink or an exact if on these is no kink of the integrated equations
+    constant = {symbols[d.name] for d in cf.of_kind("parameter") + cf.of_kind("discrete")}
     names = dict(symbols)
     for n in cf.order:  # intermediates and outputs, each after what it reads
         names[n] = _build(cf, n, names, constant, kinks)
     ders = [_build(cf, d.name, names, constant, kinks) for d in cf.of_kind("state")]
-    return ders, [names[d.name] for d in cf.of_kind("output")]
+    outs = [names[d.name] for d in cf.of_kind("output")]
+    if not cf.hybrid:
+        return ders, outs, None
+    indicators = tuple((n, _build_event(cf, p, names, constant, "indicator")) for n, p in cf.indicators)
+    clauses = tuple(EventClause(_build_event(cf, c.condition, names, constant, "condition"),
+                                tuple((symbols[t], _build_event(cf, p, names, constant, "event")) for t, p in c.assign),
+                                c.name) for c in cf.clauses)
+    return ders, outs, (indicators, clauses)
+
+
+def _build_event(cf, p: Parsed, names, constant, what):
+    """An indicator (``what = "indicator"``), a condition (``"condition"``) or an assigned value (``"event"``)."""
+    try:
+        builder = language.EquationBuilder(p.python, names, constant, "indicator" if what == "indicator" else "event")
+        expr = builder.condition(p.tree) if what == "condition" else builder.build(p.tree)
+        language.check_finite_constants(expr, p.text)
+    except ExpressionError as exc:
+        raise _err(cf.path, f"{p.where}: {str(exc).replace(repr(p.python), repr(p.text))}") from None
+    if what == "condition" and expr in (sp.true, sp.false):
+        raise _err(cf.path, f"{p.where} is always {'true' if expr == sp.true else 'false'}: a condition must "
+                            f"depend on the model's values (a clause whose condition stays true after its "
+                            f"assignment would repeat at every round of the event iteration)")
+    if what == "indicator" and expr.free_symbols <= constant:
+        raise _err(cf.path, f"{p.where} depends on no state, input or time: it never changes sign between "
+                            f"events, so it is never an event")
+    return expr
 
 
 def _build(cf, target, names, constant, kinks=None):
@@ -399,7 +602,7 @@ class _RealAbs(sp.Function):
 
 
 def explicit_model(name, states, inputs, parameters, derivatives, outputs, output_exprs, description,
-                   provenance) -> SymbolicModel:
+                   provenance, events: Optional[Events] = None) -> SymbolicModel:
     """:meth:`SymbolicModel.from_equations` with |x| differentiated as sign(x) dx (see :class:`_RealAbs`)."""
     from ...codegen.model import _finite_signs
     from ...codegen.program import Program
@@ -425,4 +628,4 @@ def explicit_model(name, states, inputs, parameters, derivatives, outputs, outpu
     return SymbolicModel(name=name, description=description, states=tuple(states), inputs=tuple(inputs),
                          parameters=tuple(parameters), outputs=tuple(outputs), program=prog, derivatives=fd,
                          output_exprs=gd, jacobian=jac, dfdx=jm(f, xs), dfdu=jm(f, us), dgdx=jm(g, xs),
-                         dgdu=jm(g, us), provenance=provenance)
+                         dgdu=jm(g, us), provenance=provenance, events=events)

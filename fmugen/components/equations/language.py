@@ -32,26 +32,41 @@ Kinked (a corner or a jump): ``abs(x)``, ``sign(x)``, ``min(a, b)``,
   the exact Jacobian jump and a jump makes f itself jump, so RODAS3's
   Newton iteration (which reuses one Jacobian across the step), the master's
   Newton coupling and the equilibrium solver lose their convergence at the
-  switch, and the runtime has no event handling to stop there.  On
-  parameters and constants (fixed during a run) the exact form is kept.
+  switch, and nothing stops the solver there (unless the switch is made an
+  event: a discrete state set by ``[[when]]`` clauses).  On parameters,
+  discrete states and constants (fixed between events) the exact form is kept.
 
 Conditionals
 ------------
-``if C then A else B`` where ``C`` is one comparison ``l > r`` (``<``,
-``>=``, ``<=``; ``==``/``!=`` and ``and``/``or`` are refused: nest the ifs).
-An ``if`` starts an expression: the whole right-hand side, a parenthesised
-group or a function argument (``1 + (if x > 0 then a else b)``).
+``if C then A else B``.  An ``if`` starts an expression: the whole right-hand
+side, a parenthesised group or a function argument
+(``1 + (if x > 0 then a else b)``).  A condition is made of comparisons
+``<``, ``<=``, ``>``, ``>=``, ``==``, ``!=`` (chained ``a < b <= c`` means
+``a < b and b <= c``) joined by ``and``, ``or``, ``not`` and parentheses
+(:meth:`EquationBuilder.condition`); nothing else is one (``w``, ``not v``,
+``x in ...``, ``is``: refused).
 
-* On parameters and constants: exact (a ternary in C; constant during a run).
-* On a state, input or time the switch must be smooth: write
+* On parameters, discrete states and constants: exact, any condition (a
+  ternary in C; constant between events).
+* On a state, input or time the switch must be smooth, and the condition one
+  comparison ``l > r`` (``<``, ``>=``, ``<=``): write
   ``if smooth(l > r, eps) then A else B``, which is
   ``B + (A - B) step(l - r, eps)``: exactly A for l - r >= eps, exactly B for
   l - r <= -eps, a C^1 blend in between.  A plain comparison there is refused
   (why: as above).
 
+Events
+------
+The same language writes a hybrid file's ``[indicators]`` (context
+``"indicator"``: continuous between events, so a corner is kept exact but a
+jump on a state, input or time is refused), and its ``[[when]]`` conditions
+and assigned values (context ``"event"``: evaluated once at an event, so
+every function and ``if`` is exact; ``==``/``!=`` on a state, input or time
+is refused there -- never met exactly just after a crossing).
+
 Names: ``time`` is the model time [s]; ``pi``; every declared parameter,
-input, state and intermediate.  Other names are refused with the list of
-declared ones.
+input, state, discrete state and intermediate.  Other names are refused with
+the list of declared ones.
 """
 from __future__ import annotations
 
@@ -77,6 +92,8 @@ FUNCTION_NAMES = frozenset(SMOOTH_FUNCTIONS) | frozenset(KINKED_FUNCTIONS) | {"a
 RESERVED = FUNCTION_NAMES | {"pi", "time", "t", "if", "then", "else", "elseif", "and", "or", "not"}
 
 _COMPARE = {ast.Gt: sp.Gt, ast.GtE: sp.Ge, ast.Lt: sp.Lt, ast.LtE: sp.Le}
+_EQUALITY = {ast.Eq: sp.Eq, ast.NotEq: sp.Ne}
+_OPERATOR_NAMES = {ast.In: "in", ast.NotIn: "not in", ast.Is: "is", ast.IsNot: "is not"}
 
 
 # --------------------------------------------------------------------------
@@ -184,14 +201,32 @@ class EquationBuilder(_Builder):
 
     ``names``: name -> sympy expression (parameters and variables their
     symbols, intermediates their already-built expressions).  ``constant``:
-    symbols fixed during a run (the parameters): a kinked function or an
-    ``if`` on them is kept exact, anything else must be smooth.
+    symbols fixed between events (the parameters and the discrete states): a
+    kinked function or an ``if`` on them is kept exact, anything else must be
+    smooth.
+
+    ``context``: what the expression is --
+
+    * ``"equation"`` (default): a right-hand side, integrated by the solvers:
+      the rules above;
+    * ``"indicator"``: an event indicator, whose zero the runtime locates by
+      root finding: it must be continuous between events, so a corner
+      (``abs min max sat deadzone``) is kept exact but a jump (``sign``,
+      ``step``, an ``if``) must be on constants;
+    * ``"event"``: a ``[[when]]`` condition or assigned value, evaluated once
+      at an event (never integrated, never differentiated): every function
+      and ``if`` is exact.
     """
 
-    def __init__(self, text: str, names: dict, constant: set):
+    CONTEXTS = ("equation", "indicator", "event")
+
+    def __init__(self, text: str, names: dict, constant: set, context: str = "equation"):
         super().__init__(text)
+        if context not in self.CONTEXTS:
+            raise ValueError(f"context {context!r}; one of {self.CONTEXTS}")
         self.names = names
         self.constant = constant
+        self.context = context
         self.kinks = []  # (text, name, [distances to the kink], eps): where a smoothed kink sits
 
     def _site(self, node, name, distances, eps):
@@ -212,6 +247,11 @@ class EquationBuilder(_Builder):
             known = ", ".join(sorted(self.names)) or "-"
             raise ExpressionError(f"unknown name {name!r} in {self.text!r}; declared: {known}, time, pi")
         return self.names[name]
+
+    def _UnaryOp(self, node):
+        if isinstance(node.op, ast.Not):
+            raise ExpressionError(f"'not' is only in a condition (of an if or a [[when]] clause) in {self.text!r}")
+        return super()._UnaryOp(node)
 
     def _Call(self, node):
         if not isinstance(node.func, ast.Name) or node.func.id not in FUNCTION_NAMES - {"smooth", "der"}:
@@ -238,20 +278,65 @@ class EquationBuilder(_Builder):
             a = args
             dist = ([a[0] - a[1]] if name in ("min", "max") else [a[0] - a[1], a[0] - a[2]]
                     if name in ("sat", "deadzone") else [a[0]])
-            self._site(node, name, dist, a[n])
+            if self.context == "equation":
+                self._site(node, name, dist, a[n])
             return _smooth_form(name, args[:n], args[n])
-        if not all(self._is_constant(a) for a in args):
+        jump = name in ("sign", "step")
+        if self.context == "event" or (self.context == "indicator" and not jump) \
+                or all(self._is_constant(a) for a in args):
+            return _exact_form(name, args)
+        if self.context == "indicator":
             raise ExpressionError(
-                f"{name}({', '.join(map(str, args))}) in {self.text!r} has a "
-                f"{'jump' if name in ('sign', 'step') else 'corner'} on a state, input or time: give the width "
-                f"of its smooth band as a last argument, {name}(..., eps) (an exact kink breaks the exact "
-                f"Jacobian and the Newton iterations of the implicit solvers)")
-        return _exact_form(name, args)
+                f"{name}({', '.join(map(str, args))}) in {self.text!r} jumps on a state, input or time: an "
+                f"indicator must be continuous between events (the runtime locates its zero by root finding); "
+                f"use the quantity itself (its sign changes where {name}() jumps)")
+        raise ExpressionError(
+            f"{name}({', '.join(map(str, args))}) in {self.text!r} has a "
+            f"{'jump' if jump else 'corner'} on a state, input or time: give the width "
+            f"of its smooth band as a last argument, {name}(..., eps) (an exact kink breaks the exact "
+            f"Jacobian and the Newton iterations of the implicit solvers), or make the switch an event "
+            f"(a [discrete] mode set by [[when]] clauses)")
 
     @staticmethod
     def _arity(name, args, n):
         if len(args) != n:
             raise ExpressionError(f"{name}() takes exactly {n} argument{'s' if n > 1 else ''}, got {len(args)}")
+
+    # -- conditions -------------------------------------------------------
+    def condition(self, node) -> sp.Basic:
+        """A sympy Boolean of a condition tree: comparisons (``<, <=, >, >=, ==, !=``, chained
+        ``a < b < c`` meaning ``a < b and b < c``) joined by ``and``, ``or``, ``not``.
+
+        ``==`` and ``!=`` compare quantities constant between events (parameters, discrete states,
+        numbers) only in an event condition: a state or input meets a value exactly only by chance.
+        """
+        if isinstance(node, ast.BoolOp):
+            parts = [self.condition(v) for v in node.values]
+            return sp.And(*parts) if isinstance(node.op, ast.And) else sp.Or(*parts)
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.Not):
+            return sp.Not(self.condition(node.operand))
+        if isinstance(node, ast.Compare):
+            for op in node.ops:
+                if type(op) not in _COMPARE and type(op) not in _EQUALITY:
+                    raise ExpressionError(f"the comparison {_OPERATOR_NAMES.get(type(op), type(op).__name__)!r} "
+                                          f"is not allowed in {self.text!r}; compare with <, <=, >, >=, ==, !=")
+            sides = [self.build(node.left)] + [self.build(c) for c in node.comparators]
+            rels = []
+            for op, lhs, rhs in zip(node.ops, sides, sides[1:]):
+                cls = _COMPARE.get(type(op)) or _EQUALITY.get(type(op))
+                if cls in (sp.Eq, sp.Ne) and self.context != "equation" and not (
+                        self._is_constant(lhs) and self._is_constant(rhs)):
+                    raise ExpressionError(
+                        f"{lhs} {'==' if cls is sp.Eq else '!='} {rhs} compares a state, input or time for "
+                        f"equality in {self.text!r}: the runtime stops just after a crossing, where such a value "
+                        f"is never exactly met; use <, <=, >, >= (== and != are for parameters and discrete states)")
+                rels.append(cls(lhs, rhs))
+            return sp.And(*rels)
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "smooth":
+            raise ExpressionError(f"smooth(...) is only the whole condition of an if in an equation "
+                                  f"(if smooth(l > r, eps) then ...) in {self.text!r}")
+        raise ExpressionError(f"a condition must be a comparison (<, <=, >, >=, ==, !=) or comparisons joined by "
+                              f"and, or, not; {ast.unparse(node)!r} is not one (in {self.text!r})")
 
     def _IfExp(self, node):
         test, eps = node.test, None
@@ -259,25 +344,40 @@ class EquationBuilder(_Builder):
             if len(test.args) != 2 or test.keywords:
                 raise ExpressionError(f"smooth(condition, eps) takes a comparison and a width in {self.text!r}")
             test, eps = test.args[0], self.build(test.args[1])
-        if not isinstance(test, ast.Compare) or len(test.ops) != 1 or type(test.ops[0]) not in _COMPARE:
-            raise ExpressionError(f"an if-condition is one comparison l > r, l < r, l >= r or l <= r "
-                                  f"(optionally smooth(l > r, eps)) in {self.text!r}")
-        lhs, rhs = self.build(test.left), self.build(test.comparators[0])
-        a, b = self.build(node.body), self.build(node.orelse)
-        greater = isinstance(test.ops[0], (ast.Gt, ast.GtE))
-        if eps is not None:
+            if not isinstance(test, ast.Compare) or len(test.ops) != 1 or type(test.ops[0]) not in _COMPARE:
+                raise ExpressionError(f"the condition of smooth(condition, eps) is one comparison l > r, l < r, "
+                                      f"l >= r or l <= r in {self.text!r}")
+            lhs, rhs = self.build(test.left), self.build(test.comparators[0])
+            a, b = self.build(node.body), self.build(node.orelse)
+            greater = isinstance(test.ops[0], (ast.Gt, ast.GtE))
             d = lhs - rhs if greater else rhs - lhs
-            self._site(node.test, "if", [d], eps)
+            if self.context == "equation":
+                self._site(node.test, "if", [d], eps)
             return b + (a - b) * _smooth_form("step", [d], eps)
-        if not (self._is_constant(lhs) and self._is_constant(rhs)):
+        cond = self.condition(test)
+        a, b = self.build(node.body), self.build(node.orelse)
+        if self.context == "event" or cond.free_symbols <= self.constant:
+            return sp.Piecewise((a, cond), (b, True))
+        if self.context == "indicator":
             raise ExpressionError(
-                f"if-condition on a state, input or time in {self.text!r}: a switch there makes f or its Jacobian "
-                f"jump, which the implicit solvers' Newton iterations and the runtime (no event handling) cannot "
-                f"follow; write if smooth(l > r, eps) then A else B (a C^1 blend over |l - r| < eps)")
-        return sp.Piecewise((a, _COMPARE[type(test.ops[0])](lhs, rhs)), (b, True))
+                f"if-condition on a state, input or time in {self.text!r}: an indicator must be continuous "
+                f"between events (the runtime locates its zero by root finding); an if on parameters and "
+                f"discrete states is fine (constant between events)")
+        if not isinstance(test, ast.Compare) or len(test.ops) != 1 or type(test.ops[0]) not in _COMPARE:
+            raise ExpressionError(f"an if-condition on a state, input or time is one comparison l > r, l < r, "
+                                  f"l >= r or l <= r written smooth(l > r, eps) in {self.text!r} (conditions "
+                                  f"with ==, !=, and, or, not are for parameters and discrete states)")
+        raise ExpressionError(
+            f"if-condition on a state, input or time in {self.text!r}: a switch there makes f or its Jacobian "
+            f"jump, which the implicit solvers' Newton iterations cannot follow between events; write "
+            f"if smooth(l > r, eps) then A else B (a C^1 blend over |l - r| < eps), or make the switch an "
+            f"event (a [discrete] mode set by [[when]] clauses)")
 
     def _Compare(self, node):
-        raise ExpressionError(f"a comparison is only an if-condition in {self.text!r}")
+        raise ExpressionError(f"a comparison is only an if-condition or a [[when]] condition in {self.text!r}")
+
+    def _BoolOp(self, node):
+        raise ExpressionError(f"'and'/'or' join conditions only (of an if or a [[when]] clause) in {self.text!r}")
 
 
 def _exact_form(name, a):
