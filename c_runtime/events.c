@@ -20,6 +20,7 @@
  * Reinitialising a state to the value it has, or a discrete state to its own
  * value, is no change: an iteration ends when a round changes nothing.
  */
+#include <float.h>
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -240,4 +241,83 @@ int fmugen_step_event(fmugen_ode *ode, double t0, const double *x0, const double
     fmugen_invalidate(inst);
     inst->s.fsal_valid = 0;
     return 1;
+}
+
+/* ---- clocks: time events of sampled components ---------------------------------------------- */
+
+/* a tick within this of t is at t (a sample instant computed as offset + j period carries round-off) */
+static double tick_tol(double t, double period) { return fmax(1e-9 * period, 8 * DBL_EPSILON * fabs(t)); }
+
+int fmugen_next_tick(fmugen_instance *inst, double t, double *next, int *at_t)
+{
+    const fmugen_model_def *m = inst->model;
+    *next = HUGE_VAL;
+    *at_t = 0;
+    if (m->ns == 0) return FMUGEN_OK;
+    double *per = inst->ev_work + 5 * (size_t)m->nx + 3 * (size_t)m->nz + m->ng + m->na, *off = per + m->ns;
+    int rc = m->clocks(inst->p, per, off);
+    if (rc != FMUGEN_OK) return rc;
+    for (int k = 0; k < m->ns; k++) {
+        const double P = per[k], O = off[k];
+        if (!(P > 0) || !isfinite(P) || !isfinite(O)) return FMUGEN_NOT_FINITE;
+        const double tol = tick_tol(t, P), j = floor((t - O) / P + 0.5);
+        double nk;
+        if (t < O - tol) {
+            nk = O;
+        } else if (fabs(O + j * P - t) <= tol) {
+            *at_t = 1;
+            nk = O + (j + 1) * P;
+        } else {
+            nk = O + ceil((t - O) / P) * P;
+        }
+        if (nk < *next) *next = nk;
+    }
+    return FMUGEN_OK;
+}
+
+/* Set the tick flags of the clocks that tick at t to on (1) or all to 0. */
+static void set_ticks(fmugen_instance *inst, double t, int on)
+{
+    const fmugen_model_def *m = inst->model;
+    double *per = inst->ev_work + 5 * (size_t)m->nx + 3 * (size_t)m->nz + m->ng + m->na, *off = per + m->ns;
+    for (int k = 0; k < m->ns; k++) {
+        double v = 0.0;
+        if (on) {
+            const double P = per[k], O = off[k], j = floor((t - O) / P + 0.5);
+            v = (t >= O - tick_tol(t, P) && fabs(O + j * P - t) <= tick_tol(t, P)) ? 1.0 : 0.0;
+        }
+        inst->p[m->np + m->clock_tick[k]] = v;
+    }
+}
+
+int fmugen_tick_round(fmugen_instance *inst, const double *u, int *changed, int *x_changed)
+{
+    const fmugen_model_def *m = inst->model;
+    double next;
+    int at = 0;
+    *changed = *x_changed = 0;
+    if (m->ns == 0) return fmugen_event_round(inst, u, changed, x_changed);
+    int rc = fmugen_next_tick(inst, inst->s.time, &next, &at);
+    if (rc != FMUGEN_OK) return rc;
+    const int fresh = at && !(inst->s.tick_done && inst->s.tick_time == inst->s.time);
+    if (fresh) set_ticks(inst, inst->s.time, 1);
+    rc = fmugen_event_round(inst, u, changed, x_changed);
+    if (fresh) {
+        set_ticks(inst, inst->s.time, 0);
+        inst->s.tick_done = 1;
+        inst->s.tick_time = inst->s.time;
+        fmugen_invalidate(inst);
+    }
+    return rc;
+}
+
+int fmugen_tick_iteration(fmugen_instance *inst, const double *u, char *msg, size_t n)
+{
+    int changed, x_changed;
+    int rc = fmugen_tick_round(inst, u, &changed, &x_changed);
+    if (rc != FMUGEN_OK) {
+        snprintf(msg, n, "the sampled update at t = %.17g failed: %s", inst->s.time, fmugen_model_status_text(rc));
+        return rc;
+    }
+    return fmugen_event_iteration(inst, u, msg, n);
 }

@@ -219,6 +219,14 @@ static int kept_point_is_good(fmugen_instance *inst)
  * events each within FMUGEN_EVENT_STORM_GAP of the one before, or
  * FMUGEN_EVENT_MAX_PER_STEP in one communication step -- fails the step
  * naming the indicator instead of running forever. */
+/* Does a clock tick at t (within the tick tolerance)? */
+static int tick_at(fmugen_instance *inst, double t)
+{
+    double next;
+    int at = 0;
+    return fmugen_next_tick(inst, t, &next, &at) == FMUGEN_OK && at;
+}
+
 static int handle_event(fmugen_instance *inst, fmugen_ode *ode, long long n_in_step, char *msg, size_t n)
 {
     const double te = inst->s.time;
@@ -312,16 +320,38 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     int rc;
     long long events = 0;
     for (;;) {
+        /* a sampled component's next tick inside the step is a time event: integrate exactly to it */
+        double target = t_end, tick = HUGE_VAL;
+        int at;
+        if (m->ns && fmugen_next_tick(inst, inst->s.time, &tick, &at) == FMUGEN_OK && tick < t_end)
+            target = tick;
+        const int to_tick = target < t_end || (m->ns && tick_at(inst, t_end));
         switch (inst->s.solver) {
-        case FMUGEN_SOLVER_IMPLICIT: rc = fmugen_solve_rodas3(&ode, t_end, msg, sizeof msg); break;
-        case FMUGEN_SOLVER_RK4: rc = fmugen_solve_rk4(&ode, t_end, msg, sizeof msg); break;
-        default: rc = fmugen_solve_dopri5(&ode, t_end, msg, sizeof msg); break;
+        case FMUGEN_SOLVER_IMPLICIT: rc = fmugen_solve_rodas3(&ode, target, msg, sizeof msg); break;
+        case FMUGEN_SOLVER_RK4: rc = fmugen_solve_rk4(&ode, target, msg, sizeof msg); break;
+        default: rc = fmugen_solve_dopri5(&ode, target, msg, sizeof msg); break;
         }
-        if (rc != FMUGEN_SOLVER_EVENT) break;
-        /* a state event located inside the step: the event iteration at its
-         * time with the inputs there, then on to the communication point */
-        rc = handle_event(inst, &ode, ++events, msg, sizeof msg);
+        if (rc == FMUGEN_SOLVER_EVENT) {
+            /* a state event located inside the step: the event iteration at its
+             * time with the inputs there, then on to the communication point */
+            rc = handle_event(inst, &ode, ++events, msg, sizeof msg);
+            if (rc != FMUGEN_SOLVER_OK) break;
+            continue;
+        }
         if (rc != FMUGEN_SOLVER_OK) break;
+        if (to_tick) { /* the sample instant: the clocks' event iteration, with the inputs there */
+            inst->s.time = target;
+            fmugen_inputs_at(inst, tc, u0, target, u_work);
+            char why[300];
+            if (fmugen_tick_iteration(inst, u_work, why, sizeof why) != FMUGEN_OK) {
+                snprintf(msg, sizeof msg, "at the sample instant t = %.17g: %s", target, why);
+                rc = FMUGEN_SOLVER_FAILED;
+                break;
+            }
+            inst->s.fsal_valid = 0;
+            inst->s.n_events++;
+        }
+        if (target >= t_end) break;
     }
     /* inputs at the time reached, so that outputs and the next step see a
      * continuous input */

@@ -191,6 +191,9 @@ static const char *model_problem(const fmugen_model_def *m)
         if (m->assign_clause[a] < 0 || m->assign_clause[a] >= m->ng || m->assign_target[a] < 0 ||
             m->assign_target[a] >= m->nd + m->nx)
             return "an event assignment names no clause or no target";
+    if (m->ns < 0 || (m->ns && (!m->clocks || !m->clock_tick))) return "ns > 0 but clocks or clock_tick is NULL";
+    for (int k = 0; k < m->ns; k++)
+        if (m->clock_tick[k] < 0 || m->clock_tick[k] >= m->nd) return "a clock's tick flag is no discrete state";
     return NULL;
 }
 
@@ -250,8 +253,8 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     inst->work = rt_alloc(functions, fmugen_workspace_doubles(nx, nu), sizeof(double));
     inst->ipiv = rt_alloc(functions, (size_t)nx + 1, sizeof(int));
     inst->step_start = rt_alloc(functions, inst->n_vec + 1, sizeof(double));
-    inst->ev_work = rt_alloc(functions, 5 * (size_t)nx + 3 * (size_t)nz + (size_t)m->ng + (size_t)m->na + 1,
-                             sizeof(double));
+    inst->ev_work = rt_alloc(functions, 5 * (size_t)nx + 3 * (size_t)nz + (size_t)m->ng + (size_t)m->na +
+                             2 * (size_t)m->ns + 1, sizeof(double));
     if (!inst->instance_name || !inst->vec || !inst->dx_cache || !inst->y_cache || !inst->work || !inst->ipiv ||
         !inst->step_start || !inst->ev_work) {
         fmugen_log(&tmp, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "fmi2Instantiate: out of memory");
@@ -321,11 +324,21 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c)
      * that is not positive definite) are reported here, not in the middle
      * of a simulation */
     if (fmugen_evaluate_cached(INST, "fmi2ExitInitializationMode") != FMUGEN_OK) return fmi2Error;
+    if (INST->model->ns) { /* the clocks' periods, checked once: a non-positive one is refused here */
+        double next;
+        int at;
+        if (fmugen_next_tick(INST, INST->s.time, &next, &at) != FMUGEN_OK) {
+            fmugen_log(INST, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                       "fmi2ExitInitializationMode: a clock's sample period is not positive and finite");
+            return fmi2Error;
+        }
+    }
     if (fmugen_has_events(INST->model) && INST->type == fmi2CoSimulation) {
         /* the initial event iteration (a stuck joint whose torque already exceeds breakaway starts
-         * sliding); Model Exchange leaves it to the importer's fmi2NewDiscreteStates in event mode */
+         * sliding; a clock whose first tick is the start samples); Model Exchange leaves it to the
+         * importer's fmi2NewDiscreteStates in event mode */
         char msg[512];
-        if (fmugen_event_iteration(INST, INST->u, msg, sizeof msg) != FMUGEN_OK) {
+        if (fmugen_tick_iteration(INST, INST->u, msg, sizeof msg) != FMUGEN_OK) {
             fmugen_log(INST, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "fmi2ExitInitializationMode: %s", msg);
             return fmi2Error;
         }

@@ -62,7 +62,7 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo)
     eventInfo->terminateSimulation = fmi2False;
     eventInfo->nominalsOfContinuousStatesChanged = fmi2False;
     eventInfo->valuesOfContinuousStatesChanged = fmi2False;
-    eventInfo->nextEventTimeDefined = fmi2False; /* no time events */
+    eventInfo->nextEventTimeDefined = fmi2False; /* set below when the model has clocks */
     eventInfo->nextEventTime = 0.0;
     if (fmugen_has_events(inst->model)) {
         /* one round of the clauses; another is needed while a round changes something */
@@ -72,7 +72,7 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo)
                        "change a discrete state or a state after %d rounds", inst->s.time, FMUGEN_EVENT_MAX_ROUNDS);
             return fmi2Error;
         }
-        int rc = fmugen_event_round(inst, inst->u, &changed, &x_changed);
+        int rc = fmugen_tick_round(inst, inst->u, &changed, &x_changed);
         if (rc != FMUGEN_OK) {
             fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
                        "fmi2NewDiscreteStates: the event update at t = %.17g failed: %s", inst->s.time,
@@ -88,6 +88,14 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo)
         if (changed)
             fmugen_log(inst, fmi2OK, FMUGEN_LOG_EVENTS, "fmi2NewDiscreteStates at t = %.17g: round %d changed %s",
                        inst->s.time, inst->s.event_rounds, x_changed ? "states" : "discrete states");
+        if (inst->model->ns) { /* the next sample instant: a time event */
+            double next;
+            int at;
+            if (fmugen_next_tick(inst, inst->s.time, &next, &at) == FMUGEN_OK && isfinite(next)) {
+                eventInfo->nextEventTimeDefined = fmi2True;
+                eventInfo->nextEventTime = next;
+            }
+        }
     }
     return fmi2OK;
 }

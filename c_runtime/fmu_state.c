@@ -225,6 +225,8 @@ static void put_scalars(writer *w, const fmugen_scalars *s)
     put_i64(w, s->last_indicator);
     put_i64(w, s->event_rounds);
     put_i64(w, s->x_reinit);
+    put_i64(w, s->tick_done);
+    put_f64(w, s->tick_time);
 }
 
 typedef struct reader {
@@ -281,6 +283,8 @@ static void get_scalars(reader *r, fmugen_scalars *s)
     s->last_indicator = (int)get_i64(r);
     s->event_rounds = (int)get_i64(r);
     s->x_reinit = (int)get_i64(r);
+    s->tick_done = (int)get_i64(r);
+    s->tick_time = get_f64(r);
 }
 
 
@@ -383,6 +387,7 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
     if (s.range_check < FMUGEN_RANGE_IGNORE || s.range_check > FMUGEN_RANGE_ERROR)
         return fail(inst, fn, "invalid range_check in blob");
     if (s.n_events < 0 || s.storm_run < 0 || s.event_rounds < 0 || (s.x_reinit & ~1) || !isfinite(s.last_event_time) ||
+        (s.tick_done & ~1) || !isfinite(s.tick_time) ||
         s.last_indicator < -1 || s.last_indicator >= (m->nz > 0 ? m->nz : 0))
         return fail(inst, fn, "invalid event memory (counters, last event) in blob");
     if (!isfinite(s.time)) return fail(inst, fn, "non-finite time in blob");

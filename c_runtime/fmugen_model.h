@@ -129,6 +129,17 @@ typedef struct fmugen_model_def {
     int (*update)(const double *p, double t, const double *x, const double *u, double *guard, double *value);
     const int *assign_clause; /* na */
     const int *assign_target; /* na */
+
+    /* ---- Clocks (sampled components; all 0/NULL without) ----
+     * ns clocks tick at t = offset_k + j period_k (j = 0, 1, ...): time
+     * events.  clocks(p, period, offset) gives them from the parameters (a
+     * period > 0, checked at initialisation); clock_tick[k] is the index in d
+     * of clock k's tick flag, which the runtime sets to 1 for the first round
+     * of the event iteration at each of its ticks (and to 0 otherwise), so a
+     * clause guarded by it fires once per sample instant. */
+    int ns;
+    int (*clocks)(const double *p, double *period, double *offset);
+    const int *clock_tick; /* ns */
 } fmugen_model_def;
 
 /* Symbols shared by the runtime and model.c but not part of the FMU's

@@ -89,6 +89,8 @@ typedef struct fmugen_scalars {
     int last_indicator;        /* index of the indicator of the last located event, -1 = none */
     int event_rounds;          /* ME: fmi2NewDiscreteStates rounds in the current event iteration */
     int x_reinit;              /* ME: a state was re-initialised in the current event iteration */
+    int tick_done;             /* the clocks' ticks at tick_time have been processed */
+    double tick_time;          /* time of the last processed tick */
 } fmugen_scalars;
 
 /* Tag of a live instance (fmugen_instance.tag), cleared by fmi2FreeInstance:
@@ -114,7 +116,7 @@ typedef struct fmugen_instance {
     double *vec;
     size_t n_vec;
     double *x, *u, *du, *ddu, *dddu, *p, *fsal, *zpre;
-    /* event workspace (events.c): 5 nx + 3 nz + ng + na doubles */
+    /* event workspace (events.c): 5 nx + 3 nz + ng + na + 2 ns doubles */
     double *ev_work;
 
     /* cache of one model evaluation at (cache_time, x, u, p) */
@@ -186,7 +188,17 @@ static inline fmi2ValueReference fmugen_vr_end(const fmugen_model_def *m) { retu
 #define FMUGEN_EVENT_MAX_PER_STEP 100000
 /* an event is located to this time tolerance (times max(1, |t|)) */
 #define FMUGEN_EVENT_TOL 1e-13
-static inline int fmugen_has_events(const fmugen_model_def *m) { return m->nz > 0 || m->ng > 0; }
+static inline int fmugen_has_events(const fmugen_model_def *m) { return m->nz > 0 || m->ng > 0 || m->ns > 0; }
+/* The first tick of any clock strictly after t (a tick within the tolerance
+ * of t counts as at t, not after): HUGE_VAL without clocks.  *at_t: some
+ * clock ticks at t.  FMUGEN_OK, or a code when a period is not positive. */
+FMUGEN_INTERNAL int fmugen_next_tick(fmugen_instance *inst, double t, double *next, int *at_t);
+/* The event iteration at a tick at the current time: the ticking clocks'
+ * flags are set for its first round.  FMUGEN_OK, or non-zero (msg). */
+FMUGEN_INTERNAL int fmugen_tick_iteration(fmugen_instance *inst, const double *u, char *msg, size_t n);
+/* One round of the clauses at the current time, the ticking clocks' flags set when this time's ticks have
+ * not been processed yet (the first round at a sample instant); otherwise fmugen_event_round. */
+FMUGEN_INTERNAL int fmugen_tick_round(fmugen_instance *inst, const double *u, int *changed, int *x_changed);
 /* z = indicators at (t, x, u); FMUGEN_OK or a model/NOT_FINITE code */
 FMUGEN_INTERNAL int fmugen_event_indicators(fmugen_instance *inst, double t, const double *x, const double *u,
                                             double *z);

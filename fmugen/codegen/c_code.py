@@ -961,6 +961,20 @@ def _event_functions(model: SymbolicModel, names: "_Names", known: set, time) ->
         fields += [f"    .ng = {len(clauses)}, .na = {a}, .update = update,",
                    f"    .assign_clause = {'assign_clause' if a else 'NULL'}, "
                    f".assign_target = {'assign_target' if a else 'NULL'},"]
+    if ev.clocks:
+        cb = lower([], [SinkGroup(None, [Sink("period", k, sp.sympify(c.period)) for k, c in enumerate(ev.clocks)]
+                                  + [Sink("offset", k, sp.sympify(c.offset)) for k, c in enumerate(ev.clocks)])],
+                   names, known)
+        parts.append("/* sample clocks: ticks at offset[k] + j period[k] (time events) */\n"
+                     + _function("clocks(const double *p, double *period, double *offset)", ["p", "period", "offset"],
+                                 cb, _declare_reads(cb, names, model, None)))
+        ticks = []
+        for c in ev.clocks:
+            if c.tick.symbol not in d_index:
+                raise ValueError(f"model {model.name!r}: a clock's tick flag {c.tick.name!r} is not a discrete state")
+            ticks.append(str(d_index[c.tick.symbol]))
+        decls.append(_array("int", "clock_tick", ticks))
+        fields += [f"    .ns = {len(ev.clocks)}, .clocks = clocks, .clock_tick = clock_tick,"]
     if nd:
         decls += [_array("double", "d_start", [_c_double(v.start) for v in disc]),
                   _array("char *const", "d_names", [_c_string(v.name) for v in disc])]

@@ -89,6 +89,47 @@ class ModelEvaluator:
                                     "update")
         self._events = (targets, clause_of, len(z))
         self.indicator_names = tuple(n for n, _ in ev.indicators)
+        self._ticks = [d_index[c.tick.symbol] for c in ev.clocks]
+        self._clock_fn = None
+        if ev.clocks:
+            self._clock_fn = compile_program(model.program, args,
+                                             [sp.Matrix([sp.sympify(c.period) for c in ev.clocks]),
+                                              sp.Matrix([sp.sympify(c.offset) for c in ev.clocks])], "clocks")
+
+    def clocks(self) -> tuple:
+        """(periods, offsets) of the sample clocks (empty arrays without)."""
+        if self._events is None or self._clock_fn is None:
+            return np.zeros(0), np.zeros(0)
+        P, O = self._clock_fn(*self._args(0.0, None, None))
+        return P[:, 0], O[:, 0]
+
+    def next_tick(self, t) -> tuple:
+        """(the first tick strictly after t, the clocks ticking at t): c_runtime/events.c's rule."""
+        P, O = self.clocks()
+        nxt, at = np.inf, []
+        for k, (p_, o) in enumerate(zip(P, O)):
+            if not (p_ > 0 and np.isfinite(p_)):
+                raise ValueError(f"{self.model.name}: clock {k + 1}'s period {p_} is not positive")
+            tol = max(1e-9 * p_, 8 * np.finfo(float).eps * abs(t))
+            j = np.floor((t - o) / p_ + 0.5)
+            if t < o - tol:
+                nk = o
+            elif abs(o + j * p_ - t) <= tol:
+                at.append(k)
+                nk = o + (j + 1) * p_
+            else:
+                nk = o + np.ceil((t - o) / p_) * p_
+            nxt = min(nxt, nk)
+        return nxt, at
+
+    def tick_iteration(self, t, x, u=None, clocks=()) -> np.ndarray:
+        """The event iteration at a sample instant of ``clocks``: their tick flags set for its first round."""
+        for k in clocks:
+            self.p[self._d0 + self._ticks[k]] = 1.0
+        x, _ = self.event_round(t, x, u)
+        for k in clocks:
+            self.p[self._d0 + self._ticks[k]] = 0.0
+        return self.event_iteration(t, x, u)
 
     @property
     def discrete(self) -> np.ndarray:

@@ -82,6 +82,20 @@ class EventClause:
 
 
 @dataclass(frozen=True)
+class Clock:
+    """A sample clock of a hybrid model: ticks at t = offset + j period (j = 0, 1, ...), time events.
+
+    ``period``, ``offset``: expressions of the parameters (numbers or parameter symbols); ``tick``: a
+    discrete state of the model's :class:`Events` (start 0) that the runtime sets to 1 for the first round
+    of the event iteration at each tick, so that a clause guarded by ``tick > 0`` fires once per sample
+    instant (a sampled controller's update)."""
+
+    period: sp.Basic
+    offset: sp.Basic
+    tick: Variable
+
+
+@dataclass(frozen=True)
 class Events:
     """What makes a model hybrid (FMI 2.0 events; see c_runtime/README.md "Events").
 
@@ -96,13 +110,16 @@ class Events:
     discrete: tuple = ()
     indicators: tuple = ()
     clauses: tuple = ()
+    clocks: tuple = ()  # of Clock: sampled updates (time events)
 
     def expressions(self) -> list:
-        """Every expression the events evaluate (indicators, guards, assigned values)."""
+        """Every expression the events evaluate (indicators, guards, assigned values, clock timing)."""
         out = [sp.sympify(e) for _, e in self.indicators]
         for c in self.clauses:
             out.append(c.guard)
             out += [sp.sympify(e) for _, e in c.assign]
+        for k in self.clocks:
+            out += [sp.sympify(k.period), sp.sympify(k.offset)]
         return out
 
     def substituted(self, env: dict) -> "Events":
@@ -110,7 +127,8 @@ class Events:
         sub = lambda e: sp.sympify(e).xreplace(env)  # noqa: E731
         return Events(self.discrete, tuple((n, sub(e)) for n, e in self.indicators),
                       tuple(EventClause(sub(c.guard), tuple((t, sub(e)) for t, e in c.assign), c.name)
-                            for c in self.clauses))
+                            for c in self.clauses),
+                      tuple(Clock(sub(k.period), sub(k.offset), k.tick) for k in self.clocks))
 
 
 @dataclass(frozen=True)
@@ -188,8 +206,8 @@ class SymbolicModel:
             dgdx=jm(g, xs),
             dgdu=jm(g, us),
             provenance=provenance,
-            events=events if events is not None and (events.discrete or events.indicators or events.clauses)
-            else None,
+            events=events if events is not None and (events.discrete or events.indicators or events.clauses
+                                                     or events.clocks) else None,
         )
 
     # -- queries -----------------------------------------------------------

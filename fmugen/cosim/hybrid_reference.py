@@ -72,7 +72,8 @@ def solve_hybrid(ev, t0: float, t1: float, x0, u, rtol: float, atol, use_jac: bo
     discrete states it changes) from (t0, x0) with constant inputs ``u``."""
     from scipy.integrate import solve_ivp
 
-    x = ev.event_iteration(t0, np.asarray(x0, dtype=float), u)
+    tick, at = ev.next_tick(t0)
+    x = ev.tick_iteration(t0, np.asarray(x0, dtype=float), u, at)
     t = float(t0)
     dense, events, steps, run, last = _Piecewise(), [], 0, 0, None
     nz = len(ev.indicators(t, x, u))
@@ -100,14 +101,27 @@ def solve_hybrid(ev, t0: float, t1: float, x0, u, rtol: float, atol, use_jac: bo
             g.terminal = True
             funcs.append(g)
         kw = {"jac": lambda tt, xx: ev.jacobians(tt, xx, u)[0]} if use_jac and ev.model.jacobian is not None else {}
-        sol = solve_ivp(lambda tt, xx: ev.f(tt, xx, u), (t, t1), x, method="Radau", rtol=rtol, atol=atol,
+        tick, _ = ev.next_tick(t)
+        t_end = min(t1, tick)  # a sample instant is a time event: the piece ends there
+        sol = solve_ivp(lambda tt, xx: ev.f(tt, xx, u), (t, t_end), x, method="Radau", rtol=rtol, atol=atol,
                         dense_output=True, events=funcs or None, **kw)
         if sol.status == -1:
             raise CosimError(f"hybrid reference of {ev.model.name}: the solve from t = {t:g} failed: {sol.message}")
         steps += sol.t.size - 1
-        if sol.status == 0:  # reached t1
-            dense.add(t, t1, sol.sol, sol.y[:, -1], ev.discrete)
-            break
+        if sol.status == 0:  # reached the end of the piece: the stop time, or a sample instant
+            dense.add(t, t_end, sol.sol, sol.y[:, -1], ev.discrete)
+            _, clocks = ev.next_tick(t_end)
+            if t_end >= t1 and not clocks:
+                break
+            x_before, d_before = sol.y[:, -1], ev.discrete
+            x = ev.tick_iteration(t_end, sol.y[:, -1], u, clocks)
+            if np.any(x != x_before) or np.any(ev.discrete != d_before):
+                events.append(t_end)
+            dense.add(t_end, t_end, None, x, ev.discrete)
+            t = t_end
+            if t_end >= t1:  # a sample instant at the stop time is taken, as an FMU's last step takes it
+                break
+            continue
         hit = [i for i in range(nz) if len(sol.t_events[i])]
         te = float(min(sol.t_events[i][0] for i in hit))
         xe = np.array(sol.sol(te))

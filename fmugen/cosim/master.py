@@ -376,6 +376,22 @@ class Master:
                 D *= self.F
         return calls
 
+    def _check_clocks(self, t0: float, H: float, adaptive: bool) -> None:
+        """Every sample instant of a sampled FMU must be a communication point: then a sampler reads its
+        inputs where they are exact, not extrapolated inside a step.  The macro step must divide the
+        period and the offset (from the start); an adaptive run cannot keep to that and is refused."""
+        for u in self.units:
+            for period, offset in getattr(u, "clocks", ()):
+                what = f"FMU {u.name!r} samples every {period:g} s (offset {offset:g} s)"
+                if adaptive:
+                    raise CosimError(f"{what}: an adaptive macro step cannot land on its sample instants; run "
+                                     f"with a fixed step that divides {period:g} s")
+                k, j = period / H, (offset - t0) / H
+                if k < 1 - 1e-9 or abs(k - round(k)) > 1e-9 * k or abs(j - round(j)) > 1e-9 * max(1.0, abs(j)):
+                    raise CosimError(f"{what}: a macro step of {H:g} s does not land on its sample instants; take "
+                                     f"a step that divides the period ({period:g} s, {period / 2:g} s, "
+                                     f"{period / 5:g} s, ...) and the offset")
+
     def _events_in_step(self, summ) -> bool:
         """Did an FMU report an event in the macro step just accepted?  (solver.n_events rose; an FMU state
         restored by a rollback or a shadow window restores the count too.)"""
@@ -418,6 +434,7 @@ class Master:
         Hmax = _positive("max_step", max_step) if max_step is not None else (max(H0, (stop - t0) / 10) if adaptive else H0)
         if Hmin > Hmax:
             raise CosimError(f"min_step {Hmin} exceeds max_step {Hmax}")
+        self._check_clocks(t0, H0, adaptive)
         scheme = self._prepare(adaptive, coupling_tol, int(max_iterations))
         implicit = scheme.implicit
         summ = Summary(sysm.name, self.scheme, self.extrapolation, bool(adaptive))

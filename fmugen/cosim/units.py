@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import atexit
 import ctypes
+import math
 import os
 import shutil
 import tempfile
@@ -59,6 +60,36 @@ def dptr(arr: np.ndarray, offset: int = 0):
 
 def vr_array(vrs) -> ctypes.Array:
     return (c_uint * max(1, len(vrs)))(*vrs)
+
+
+def _clocks(unzip_dir, variables, start_values) -> list:
+    """(period, offset) of each sample clock an fmugen FMU declares in its vendor annotation
+    (fmugen/fmi/model_description.py), with the start values the run sets for their parameters."""
+    import xml.etree.ElementTree as ET
+
+    import defusedxml.ElementTree as safe  # an FMU is untrusted: no entities, no DTD
+
+    path = Path(unzip_dir) / "modelDescription.xml"
+    try:
+        root = safe.parse(path).getroot()
+    except (OSError, ET.ParseError, ValueError):
+        return []
+    out = []
+    for c in root.findall("./VendorAnnotations/Tool[@name='fmugen']/Clock"):
+        vals = []
+        for key in ("period", "offset"):
+            name = c.get(f"{key}Parameter")
+            v = start_values.get(name) if name else None
+            if v is None and name in variables and variables[name].start is not None:
+                v = variables[name].start
+            try:
+                vals.append(float(v if v is not None else c.get(key)))
+            except (TypeError, ValueError):
+                raise CosimError(f"{path}: a clock's {key} {c.get(key)!r} is not a number") from None
+        if not (vals[0] > 0 and math.isfinite(vals[0]) and math.isfinite(vals[1])):
+            raise CosimError(f"{path}: a clock's period {vals[0]} must be positive and finite")
+        out.append(tuple(vals))
+    return out
 
 
 class _Unit:
@@ -118,6 +149,7 @@ class _Unit:
         self._freeState = f["fmi2FreeFMUstate"]
         self._dirDer = f["fmi2GetDirectionalDerivative"]
         self._apply_start_values(unit.start_values)
+        self.clocks = _clocks(self._unzip, self.variables, unit.start_values)
         # the raw C functions return the status (fmpy's wrappers raise without the FMU's message)
         # no stop time: a run may be continued or given a later stop than the system's
         self.check(f["fmi2SetupExperiment"](self.c, 0, 0.0, start_time, 0, stop_time), "fmi2SetupExperiment")

@@ -279,6 +279,28 @@ def variable_layout(model: SymbolicModel) -> VariableLayout:
     return out
 
 
+def clock_annotations(model: SymbolicModel) -> list:
+    """Per sample clock: its period and offset at the start values, and the parameter each is (when it is
+    one) -- ``{"period", "offset", "periodParameter", "offsetParameter"}``."""
+    if model.events is None or not model.events.clocks:
+        return []
+    starts = {v.symbol: v.start for v in model.parameters}
+    names = {v.symbol: v.name for v in model.parameters}
+    out = []
+    for c in model.events.clocks:
+        row = {}
+        for key, e in (("period", c.period), ("offset", c.offset)):
+            e = sp.sympify(e)
+            value = e.xreplace({k: sp.Float(v) for k, v in starts.items() if v is not None})
+            if not value.is_Number:
+                raise FmugenError(f"model {model.name!r}: a clock's {key} {e} is no number at the start values")
+            row[key] = float(value)
+            if e in names:
+                row[f"{key}Parameter"] = names[e]
+        out.append(row)
+    return out
+
+
 def _derivative_unit(unit: str) -> str:
     """Unit of dx/dt: ``rad`` -> ``rad/s``, ``m/s`` -> ``m/s2``, ``1`` -> ``1/s``."""
     if not unit:
@@ -417,6 +439,13 @@ def model_description_xml(
         ET.SubElement(cats, "Category", name=name, description=desc)
     if default_experiment:
         _set(ET.SubElement(root, "DefaultExperiment"), **{k: float(v) for k, v in default_experiment.items()})
+    clocks = clock_annotations(model)
+    if clocks:
+        # the sample clocks of a sampled component, for a master that lands its macro steps on their
+        # instants (fmugen's does: fmugen/cosim/README.md "Sample clocks"); FMI 2.0 has no element for them
+        tool = ET.SubElement(ET.SubElement(root, "VendorAnnotations"), "Tool", name="fmugen")
+        for c in clocks:
+            _set(ET.SubElement(tool, "Clock"), **c)
 
     mv = ET.SubElement(root, "ModelVariables")
     for v in layout.variables:
