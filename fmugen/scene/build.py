@@ -372,10 +372,14 @@ STABLE_SAFETY = 0.8
 
 
 def _jacobi_limit(scene, keys: dict, use_cache: bool) -> float:
-    """:func:`fmugen.scene.stability.jacobi_hold_limit`, cached under the hash of every group's key."""
+    """:func:`fmugen.scene.stability.jacobi_hold_limit`, cached under the hash of every group's key and of the
+    analysis' version."""
     if len(keys) < 2:
         return float("inf")
-    key = hashlib.sha256(" ".join(sorted(keys.values())).encode()).hexdigest()[:32]
+    # version 2 (issue 29): the FMUs linearised on their own, feedthrough delayed a step; version 1 took the
+    # monolithic model's blocks, feedthrough as exact -- its entries (limits up to 1e4 x too large) never served
+    version = "jacobi-hold-limit v2"
+    key = hashlib.sha256(f"{version} {' '.join(sorted(keys.values()))}".encode()).hexdigest()[:32]
     path = cache_dir() / "stability" / f"{key}.json"
     if use_cache and path.is_file():
         try:  # served only as written for this key (a swapped or edited entry is computed again)
