@@ -68,17 +68,25 @@ def _kind(path: Path) -> str:
 
 
 def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler", model="forward_dynamics",
-                   sets=None, strategy="auto"):
+                   sets=None, strategy="auto", friction="smooth", limits="range"):
     """The SymbolicModel a file describes (robot, component assembly, or a scene's monolithic model).
 
     For a robot, ``model`` chooses the forward dynamics (states q, qd; input
     tau) or the inverse dynamics (inputs q, qd, qdd; output tau).  ``sets``
-    ({name: value}) gives parameters and start values by name.
+    ({name: value}) gives parameters and start values by name.  ``friction``
+    ("smooth" | "stick-slip") and ``limits`` ("range" | "stops"): a robot's
+    Coulomb friction and joint limits as smooth terms and validity ranges, or
+    as events (``Manipulator.state_space_model``).
     """
     from .scene import SceneError, load_scene, parse_sets
 
     sets = parse_sets(sets)
     kind = _kind(path)
+    if (friction != "smooth" or limits != "range") and (kind != "robot" or model == "inverse_dynamics"):
+        flags = " ".join(f for f, on in ((f"--friction {friction}", friction != "smooth"),
+                                         (f"--limits {limits}", limits != "range")) if on)
+        what = "the inverse-dynamics model" if kind == "robot" else f"a {kind} file"
+        raise SceneError(f"{path}: {flags} is for a robot's forward dynamics, not {what}")
     if kind == "scene":
         return load_scene(path, set=sets).monolithic_model()
     if kind == "robot":
@@ -86,7 +94,7 @@ def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler", mo
 
         arm = fmugen.load_robot(path, formulation)
         m = (arm.inverse_dynamics_model() if model == "inverse_dynamics"
-             else arm.state_space_model(outputs=outputs, strategy=strategy))
+             else arm.state_space_model(outputs=outputs, strategy=strategy, friction=friction, limits=limits))
     elif kind == "component":  # a component file: parameters through its checks (ranges, exact ifs)
         from .components.equations import load_component, read_component_file
 
@@ -202,7 +210,8 @@ def _cmd_build(args) -> int:
     outputs = tuple(o for o in args.outputs.split(",") if o)
     if sys.stderr.isatty():  # progress of the first stage; build_fmu reports the others
         print(f"fmugen build {path.name}: derive ...", end="", file=sys.stderr, flush=True)
-    model = symbolic_model(path, outputs, args.formulation, args.model, sets=args.set, strategy=args.strategy)
+    model = symbolic_model(path, outputs, args.formulation, args.model, sets=args.set, strategy=args.strategy,
+                           friction=args.friction, limits=args.limits)
     t1 = time.perf_counter()
     if sys.stderr.isatty():
         print(f" {t1 - t0:.1f} s", file=sys.stderr, flush=True)
@@ -296,6 +305,11 @@ def _add_own_commands(sub) -> None:
     p.add_argument("--ops", action="store_true", help="print operation counts of the generated functions")
     p.add_argument("--strategy", default="auto", choices=["auto", "straight", "loops"],
                    help="robots: straight-line code, or the runtime's looped dynamics (auto: loops from 7 links)")
+    p.add_argument("--friction", default="smooth", choices=["smooth", "stick-slip"],
+                   help="robots: Coulomb friction as the smooth tanh term (default), or stick and slip modes "
+                        "(events)")
+    p.add_argument("--limits", default="range", choices=["range", "stops"],
+                   help="robots: joint limits as validity ranges (default), or end stops (events)")
     p.add_argument("--budget-seconds", type=float, default=None,
                    help="stop the build (with a message, temporary files removed) after this many seconds")
     p.add_argument("--budget-memory", default=None,

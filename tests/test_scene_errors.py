@@ -78,7 +78,7 @@ def test_locked_joint_that_does_not_exist(tmp_path):
 
 
 @pytest.mark.parametrize("sets, message", [
-    (["joint.JJ=5"], r"'JJ' is not a parameter, state or input of joint \(did you mean 'J'\?\)"),
+    (["joint.JJ=5"], r"'JJ' is not a parameter, state, input or discrete state of joint \(did you mean 'J'\?\)"),
     (["jont.J=5"], r"no instance 'jont' \(did you mean 'joint'\?\)"),
     (["joint.J=nan"], r"not a finite number"),
     (["joint.J=1e999"], r"not a finite number"),

@@ -22,7 +22,7 @@ link's centre of mass).
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Mapping, Optional, Sequence
 
 import numpy as np
@@ -30,7 +30,7 @@ import sympy as sp
 
 from ..codegen.chain import LOOP_MIN_LINKS, ChainDynamics, robot_tree
 from ..codegen.differentiate import differentiate
-from ..codegen.model import SymbolicModel, Variable
+from ..codegen.model import EventClause, Events, SymbolicModel, Variable
 from ..codegen.program import Program
 from ..codegen.python_code import compile_program
 from ..robot.bounds import parameter_bounds
@@ -49,6 +49,10 @@ def robot_parameters(robot: Robot) -> tuple:
                  for p in robot.parameters)
 
 FORMULATIONS = ("newton_euler", "lagrange")
+#: ``state_space_model(friction=...)``: the smooth tanh Coulomb term, or stick and slip modes (events)
+FRICTION_MODES = ("smooth", "stick-slip")
+#: ``state_space_model(limits=...)``: joint ranges as validity ranges, or as end stops (events)
+LIMIT_MODES = ("range", "stops")
 
 
 def _real(name):
@@ -105,6 +109,156 @@ class Derivation:
     program: Program
     engine: object
     trig: TrigCache
+
+
+@dataclass
+class _EventJoint:
+    """One free joint with stick-slip friction and/or end stops (see ``state_space_model``)."""
+
+    k: int  # index among the free joints (the state order)
+    i: int  # 0-based joint index
+    label: str  # the joint as its file names it
+    tag: str  # parameter-name suffix: the cleaned URDF joint name, or the 1-based DH index
+    revolute: bool
+    F_c: object = None  # Coulomb level (stick-slip joints)
+    F_s: object = None  # breakaway parameter symbol
+    slip: object = None  # discrete m_i
+    lower: object = None  # stop parameter symbols (None: no stop on that side)
+    upper: object = None
+    e: object = None  # restitution parameter symbol
+    rest: object = None  # discrete r_i
+    tau_c: object = None  # constraint torque (program symbol)
+
+    @property
+    def lock(self):
+        """s_i: 1 when the joint is stuck or resting on a stop, else 0 (for m_i, r_i in {-1, 0, 1})."""
+        if self.slip is not None and self.rest is not None:
+            return 1 - self.slip ** 2 * (1 - self.rest ** 2)
+        if self.slip is not None:
+            return 1 - self.slip ** 2
+        return self.rest ** 2
+
+
+@dataclass
+class _HybridPlan:
+    """The per-joint lock masks, discrete states, parameters and events of a hybrid arm model."""
+
+    manipulator: "Manipulator"
+    robot: Robot  # the robot derived: smooth friction removed from the stick-slip joints
+    joints: list  # _EventJoint, in free-joint order
+    parameters: tuple  # the new parameters (breakaway, stops, restitution, rest speed)
+    discrete: tuple  # Variables of slip[i], rest[i]
+    v_rest: object = None
+    by_k: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.by_k = {j.k: j for j in self.joints}
+
+    def _s(self, k):
+        j = self.by_k.get(k)
+        return sp.Integer(0) if j is None else j.lock
+
+    def masked(self, P: Program, M: sp.Matrix, rhs: sp.Matrix) -> tuple:
+        """(M', r') of the design: identity rows/columns and zero right-hand sides for locked joints,
+        the slip friction -m_i F_c_i on the others; entries of joints without events unchanged."""
+        nf = M.rows
+        Mp = sp.zeros(nf, nf)
+        for a in range(nf):
+            for b in range(a + 1):
+                sa, sb = self._s(a), self._s(b)
+                if sa == 0 and sb == 0:
+                    e = M[a, b]
+                else:
+                    e = P.let((1 - sa) * (1 - sb) * M[a, b] + (sa if a == b else 0), "Mm")
+                Mp[a, b] = Mp[b, a] = e
+        rp = []
+        for k in range(nf):
+            j = self.by_k.get(k)
+            if j is None:
+                rp.append(rhs[k])
+                continue
+            r = rhs[k] - (j.slip * j.F_c if j.slip is not None else 0)
+            rp.append(P.let((1 - j.lock) * r, "rm"))
+        return Mp, sp.Matrix(rp)
+
+    def constraint_torques(self, P: Program, M: sp.Matrix, rhs: sp.Matrix, X: sp.Matrix) -> None:
+        """tau_c_i = tau_i - h_i - sum_j M_ij qdd_j (full M): zero for a free joint, the negated torque
+        of its lock (static friction, stop) for a locked one."""
+        for j in self.joints:
+            j.tau_c = P.let(rhs[j.k] - sum(M[j.k, b] * X[b] for b in range(M.cols)), "tauc")
+
+    def masked_rows(self, Jp: Program, B: sp.Matrix) -> sp.Matrix:
+        """The Jacobian's right-hand sides with the rows of locked joints multiplied by (1 - s_i)."""
+        B = sp.Matrix(B)
+        for j in self.joints:
+            for c in range(B.cols):
+                if B[j.k, c] != 0:
+                    B[j.k, c] = Jp.let((1 - j.lock) * B[j.k, c], "Bm")
+        return B
+
+    def state_variables(self, states: list) -> list:
+        """States of stop joints lose their validity range on q: the stops hold q (to the event location's
+        accuracy), and the stop positions are parameters."""
+        stopped = {self.manipulator.q[j.i] for j in self.joints if j.rest is not None}
+        return [replace(v, min=None, max=None) if v.symbol in stopped else v for v in states]
+
+    def events(self, qdd_f: list) -> Events:
+        m = self.manipulator
+        indicators, clauses = [], []
+        one, zero = sp.Integer(1), sp.Integer(0)
+        for j in self.joints:
+            q, qd, qdd, tc, n = m.q[j.i], m.qd[j.i], qdd_f[j.k], j.tau_c, j.i + 1
+            free_of_stops = [sp.Eq(j.rest, 0)] if j.rest is not None else []
+            if j.slip is not None:
+                m_ = j.slip
+                stuck = (1 - m_ ** 2) * (1 - j.rest ** 2) if j.rest is not None else 1 - m_ ** 2
+                indicators.append((f"stick[{n}]", m_ * qd))
+                indicators.append((f"breakaway[{n}]", stuck * (j.F_s - sp.Abs(tc)) + (1 - stuck)))
+                # a stuck joint given a velocity (a start value) slides that way
+                clauses.append(EventClause(sp.And(sp.Eq(m_, 0), sp.Ne(qd, 0), *free_of_stops),
+                                           ((m_, sp.Piecewise((one, qd > 0), (-one, True))),), f"start sliding[{n}]"))
+                # a sliding joint whose velocity reached zero sticks; right after a breakaway qd = 0 with the
+                # acceleration along m_i: that is no stick
+                clauses.append(EventClause(sp.And(sp.Ne(m_, 0), m_ * qd <= 0, sp.Or(m_ * qd < 0, m_ * qdd <= 0)),
+                                           ((m_, zero), (qd, zero)), f"stick[{n}]"))
+                clauses.append(EventClause(sp.And(sp.Eq(m_, 0), sp.Abs(tc) > j.F_s, *free_of_stops),
+                                           ((m_, sp.Piecewise((one, tc > 0), (-one, True))),), f"breakaway[{n}]"))
+            if j.rest is not None:
+                r, e, vr = j.rest, j.e, self.v_rest
+                slip_after = (lambda v: ((j.slip, v),)) if j.slip is not None else (lambda v: ())
+                if j.lower is not None:
+                    lo = j.lower
+                    indicators.append((f"lower_stop[{n}]", q - lo))
+                    clauses.append(EventClause(sp.And(sp.Eq(r, 0), q <= lo, qd < 0, -e * qd >= vr),
+                                               ((q, lo), (qd, -e * qd)) + slip_after(one),
+                                               f"bounce at lower stop[{n}]"))
+                    clauses.append(EventClause(sp.And(sp.Eq(r, 0), q <= lo, qd <= 0, sp.Or(qd < 0, qdd < 0),
+                                                      -e * qd < vr),
+                                               ((r, -one), (q, lo), (qd, zero)) + slip_after(zero),
+                                               f"rest on lower stop[{n}]"))
+                    clauses.append(EventClause(sp.And(sp.Eq(r, -1), tc >= 0), ((r, zero),), f"leave lower stop[{n}]"))
+                if j.upper is not None:
+                    hi = j.upper
+                    indicators.append((f"upper_stop[{n}]", hi - q))
+                    clauses.append(EventClause(sp.And(sp.Eq(r, 0), q >= hi, qd > 0, e * qd >= vr),
+                                               ((q, hi), (qd, -e * qd)) + slip_after(-one),
+                                               f"bounce at upper stop[{n}]"))
+                    clauses.append(EventClause(sp.And(sp.Eq(r, 0), q >= hi, qd >= 0, sp.Or(qd > 0, qdd > 0),
+                                                      e * qd < vr),
+                                               ((r, one), (q, hi), (qd, zero)) + slip_after(zero),
+                                               f"rest on upper stop[{n}]"))
+                    clauses.append(EventClause(sp.And(sp.Eq(r, 1), tc <= 0), ((r, zero),), f"leave upper stop[{n}]"))
+                # (a bounce puts q on the stop as well: the located impact is up to the event tolerance past it,
+                # and an importer would see q cross the stop again, upwards, right after the bounce)
+                # resting: z = -tau_c (lower) or tau_c (upper) > 0 while the stop pushes; free: 0
+                indicators.append((f"leave_stop[{n}]", r * tc))
+        return Events(discrete=self.discrete, indicators=tuple(indicators), clauses=tuple(clauses))
+
+    def provenance(self) -> str:
+        fr = [j.i + 1 for j in self.joints if j.slip is not None]
+        st = [j.i + 1 for j in self.joints if j.rest is not None]
+        return ((f"; stick-slip friction (events) on joints {fr}" if fr else "")
+                + (f"; end stops (events) on joints {st}" if st else ""))
 
 
 class Manipulator:
@@ -220,7 +374,8 @@ class Manipulator:
     # the state-space model that becomes an FMU
     def state_space_model(self, outputs: Sequence[str] = ("p_ee",), formulation=None, name=None,
                           locked: Optional[Mapping[int, float]] = None,
-                          strategy: str = "auto") -> SymbolicModel:
+                          strategy: str = "auto", friction: str = "smooth",
+                          limits: str = "range") -> SymbolicModel:
         """x = [q, qd], u = [tau, external wrenches], x' = [qd, M^{-1}(tau - h)].
 
         ``strategy``: "straight" derives straight-line code (the formulation's
@@ -249,12 +404,62 @@ class Manipulator:
         and its equations are exactly the free joints' rows of the full arm,
         M_ff qdd_f + h_f = tau_f; the locked links' mass and inertia act
         through the numbers they fold into.
+
+        ``friction``: "smooth" (default) keeps the Coulomb friction F_c of a
+        joint (URDF ``<dynamics friction>``, a DH link's ``friction``) as the
+        smooth term F_c tanh(qd / v_c): a joint held against a load below F_c
+        still creeps at qd = v_c atanh(load / F_c).  "stick-slip" makes it
+        hybrid (FMI events): the joint sticks and stays put to round-off until
+        the torque its lock has to supply exceeds the breakaway level F_s
+        (parameter ``fs_<joint>``, default F_c), and slides against -sign(qd)
+        F_c otherwise.  ``limits``: "range" (default) keeps a joint's range
+        (URDF ``<limit lower upper>``, a DH link's ``limits``) as the validity
+        range of q; "stops" makes its ends end stops: an impact reverses qd
+        times the restitution e (``e_stop_<joint>``, default 0: inelastic),
+        and below the rest speed (``v_rest``, 1e-3 rad/s or m/s) the joint
+        rests on the stop (q := stop, qd := 0) until the stop no longer has to
+        push.  Both are the straight-line strategy only.
+
+        Hybrid design (one mode-dependent model, never 2^n modes): each event
+        joint i has discrete states ``slip[i]`` m_i in {-1, 0, +1} (0: stuck)
+        and/or ``rest[i]`` r_i in {-1, 0, +1} (resting on the lower/upper
+        stop), and a lock s_i = 1 - m_i^2 (1 - r_i^2) (friction and stops),
+        1 - m_i^2 (friction) or r_i^2 (stops).  The derivation is made
+        without the tanh term of the stick-slip joints, and
+
+            M'_ij = (1 - s_i)(1 - s_j) M_ij + s_i delta_ij,
+            r'_i  = (1 - s_i)(tau_i - h_i - m_i F_c_i),   qdd = M'^{-1} r'
+
+        is ONE symmetric positive definite solve whose entries the modes
+        switch: a locked joint has qdd_i = 0 exactly (its row and column are
+        the identity's, its right-hand side 0) and qd_i = 0 from the event
+        that locked it, so q_i does not move, while the free joints obey the
+        free rows of the full equations with the locked joints held.  The
+        constraint torque tau_c_i = tau_i - h_i - sum_j M_ij qdd_j (what
+        the lock or the stop supplies, negated) is a program symbol the
+        indicators and clauses read.  Events: a sliding joint sticks when
+        m_i qd_i crosses 0 (qd_i := 0, m_i := 0); in the next round of the
+        same event iteration a stuck joint with |tau_c_i| > F_s breaks away
+        (m_i := sign(tau_c_i)); the breakaway indicator F_s - |tau_c_i| is a
+        constant 1 while the joint slides.  A free joint reaching a stop
+        (indicators q_i - lower, upper - q_i) bounces (qd_i := -e qd_i) or
+        rests (r_i := -+1, q_i := stop, qd_i := 0, m_i := 0), and leaves
+        the stop when tau_c_i points away from it (indicator r_i tau_c_i).
+        The exact Jacobian is the current mode's: d ID / dz at fixed qdd
+        (tanh-free), rows of locked joints zeroed, solved with M'.  Locked
+        joints (``locked=``) are not states and have no events; a tied mimic
+        follower with friction (stick-slip) or limits (stops) is refused.
         """
         kin_outputs = self.frame_outputs(outputs)
         n, robot = self.n, self.robot
         locked = dict(locked or {})
         if strategy not in ("auto", "straight", "loops"):
             raise ValueError(f"strategy must be 'auto', 'straight' or 'loops', not {strategy!r}")
+        if friction not in FRICTION_MODES:
+            raise ValueError(f"friction must be one of {FRICTION_MODES}, not {friction!r}")
+        if limits not in LIMIT_MODES:
+            raise ValueError(f"limits must be one of {LIMIT_MODES}, not {limits!r}")
+        hybrid = friction == "stick-slip" or limits == "stops"
         # the runtime's loops take any tree of the general joint model (damping and Coulomb friction too)
         followers = {i: b.mimic for i, b in enumerate(robot.bodies) if b.mimic is not None}
         loopable = not locked and not kin_outputs and not followers
@@ -263,6 +468,13 @@ class Manipulator:
             raise ValueError(f"{robot.name}: strategy='loops' does not handle {why}; "
                              f"use strategy='straight'")
         if strategy == "loops" or (strategy == "auto" and loopable and n >= LOOP_MIN_LINKS):
+            if hybrid:
+                what = " and ".join(w for w, on in ((f"friction={friction!r}", friction != "smooth"),
+                                                    (f"limits={limits!r}", limits != "range")) if on)
+                how = "strategy='loops'" if strategy == "loops" else \
+                    f"strategy='auto' (the runtime's loops from {LOOP_MIN_LINKS} joints on)"
+                raise ValueError(f"{robot.name}: {what} needs straight-line code, and {how} derives none; "
+                                 f"use strategy='straight' (its size and build time grow with n^2..n^3)")
             return self._looped_state_space_model(outputs, name)
         bad = [j for j in locked if not (isinstance(j, int) and 1 <= j <= n)]
         if bad:
@@ -286,7 +498,9 @@ class Manipulator:
             q[f] = mult * q[lead] + off
             qd[f] = mult * qd[lead]
             G[f, :] = mult * G[lead, :]
-        d = self.derivation(formulation)
+        hyb = self._hybrid_plan(free, followers, friction, limits) if hybrid else None
+        # stick-slip joints: derived without their smooth tanh term (the modes carry the friction)
+        d = (self if hyb is None else Manipulator(hyb.robot, self.formulation)).derivation(formulation)
         P = d.program
         zeros = [sp.Integer(0)] * n
         h = d.engine.torques(q, qd, zeros, gravity=robot.gravity, external=self.ext or None)
@@ -298,7 +512,13 @@ class Manipulator:
         else:
             M = M_full.extract(free, free)
             rhs = sp.Matrix([P.let(self.tau[i] - h[i], "r") for i in free])
-        X = P.solve_spd(M, rhs, "qdd")
+        if hyb is None:
+            M_solve = M
+            X = P.solve_spd(M, rhs, "qdd")
+        else:
+            M_solve, rhs_m = hyb.masked(P, M, rhs)
+            X = P.solve_spd(M_solve, rhs_m, "qdd")
+            hyb.constraint_torques(P, M, rhs, X)
         qdd_f = list(X)
         qdd = [P.let(e, "qdd") for e in G * sp.Matrix(qdd_f)]
         out_vars, out_exprs = [], []
@@ -367,7 +587,9 @@ class Manipulator:
         B[:, 2 * nf: 3 * nf] = sp.eye(nf)
         if ext:
             B[:, 3 * nf:] = -D[:, 2 * nf:]
-        Y = Jp.solve_spd(M, B, "y")
+        if hyb is not None:  # the current mode's Jacobian: locked rows zero, solved with M'
+            B = hyb.masked_rows(Jp, B)
+        Y = Jp.solve_spd(M_solve, B, "y")
         nx, nu = 2 * nf, nf + len(ext)
         dfdx = sp.zeros(nx, nx)
         dfdx[:nf, nf:] = sp.eye(nf)
@@ -387,6 +609,11 @@ class Manipulator:
         states, inputs = self._joint_variables(free)
         inputs += self._wrench_inputs()
         params = robot_parameters(robot)
+        events = None
+        if hyb is not None:
+            states = hyb.state_variables(states)
+            params += hyb.parameters
+            events = hyb.events(qdd_f)
         model = SymbolicModel(
             name=name or robot.name,
             description=robot.description or f"{robot.name}: {n}-link manipulator",
@@ -405,10 +632,119 @@ class Manipulator:
             provenance=f"{robot.source or robot.name}; {formulation or self.formulation} formulation"
                        + (f"; joints {sorted(locked)} locked at {[locked[j] for j in sorted(locked)]}" if locked else "")
                        + (f"; joints {[f + 1 for f in sorted(followers)]} tied to their leaders (mimic)"
-                          if followers else ""),
+                          if followers else "")
+                       + (hyb.provenance() if hyb is not None else ""),
+            events=events,
         )
         # locked joints leave rows of M and h nobody reads: drop their steps
-        return model.pruned() if locked or followers else model
+        return model.pruned() if locked or followers or hyb is not None else model
+
+    def _hybrid_plan(self, free: list, followers: dict, friction: str, limits: str) -> _HybridPlan:
+        """Which free joints get stick-slip friction and end stops, with their parameters and discrete
+        states (``state_space_model``'s hybrid design); ValueError for what it cannot do."""
+        robot = self.robot
+        values = robot.parameter_values()
+        taken = {p.name for p in robot.parameters}
+        taken |= {s.name for s in self.q + self.qd + self.qdd + self.tau + self.ext_symbols}
+
+        def unique(base: str) -> str:
+            name, k = base, 2
+            while name in taken:
+                name, k = f"{base}_{k}", k + 1
+            taken.add(name)
+            return name
+
+        def number(e):
+            v = sp.sympify(e).xreplace({k: sp.Float(x) for k, x in values.items()})
+            return float(v) if v.is_Number else None
+
+        def stops_of(b):
+            lim = b.limits
+            return (None, None) if lim is None else (lim.lower, lim.upper)
+
+        fric = friction == "stick-slip"
+        stops = limits == "stops"
+        if fric:
+            bad = [_joint_label(robot.bodies[f]) for f in followers if robot.bodies[f].friction != 0]
+            if bad:
+                raise ValueError(f"{robot.name}: friction='stick-slip' is not supported on tied mimic joints with "
+                                 f"friction of their own ({', '.join(bad)}); load the robot with "
+                                 f"mimic='independent', or use friction='smooth'")
+        if stops:
+            bad = [_joint_label(robot.bodies[f]) for f in followers if stops_of(robot.bodies[f]) != (None, None)]
+            if bad:
+                raise ValueError(f"{robot.name}: limits='stops' is not supported on tied mimic joints with limits "
+                                 f"of their own ({', '.join(bad)}); load the robot with mimic='independent', "
+                                 f"or use limits='range'")
+        with_friction = [i for i in free if robot.bodies[i].friction != 0] if fric else []
+        with_stops = [i for i in free if stops_of(robot.bodies[i]) != (None, None)] if stops else []
+        if fric and not with_friction:
+            raise ValueError(f"{robot.name}: friction='stick-slip' but no free joint has Coulomb friction "
+                             f"(URDF <dynamics friction>, a DH link's friction)")
+        if stops and not with_stops:
+            raise ValueError(f"{robot.name}: limits='stops' but no free joint has limits "
+                             f"(URDF <limit lower upper>, a DH link's limits)")
+        aliases = _joint_aliases(robot.bodies, free)
+        joints, params, discrete = [], [], []
+        v_rest = None
+        if with_stops:
+            v_rest = sp.Symbol(unique("v_rest"), real=True)
+        for k, i in enumerate(free):
+            if i not in with_friction and i not in with_stops:
+                continue
+            b = robot.bodies[i]
+            rev = b.joint == REVOLUTE
+            label = _joint_label(b)
+            tag = aliases.get(i, str(i + 1)).lstrip("_") or str(i + 1)
+            j = _EventJoint(k=k, i=i, label=label, tag=tag, revolute=rev)
+            force, pos = ("N.m", "rad") if rev else ("N", "m")
+            if i in with_friction:
+                j.F_c = b.friction
+                j.F_s = sp.Symbol(unique(f"fs_{tag}"), real=True)
+                params.append(Variable(j.F_s.name, j.F_s, force,
+                                       f"breakaway (static friction) level of joint {i + 1} ({label}): a stuck joint "
+                                       f"slides when its constraint torque exceeds it (default: the Coulomb level)",
+                                       start=number(b.friction), sign=">=0"))
+                j.slip = sp.Symbol(unique(f"slip_{i + 1}"), real=True)
+                discrete.append(Variable(f"slip[{i + 1}]", j.slip, "1",
+                                         f"friction mode of joint {i + 1} ({label}): +1/-1 sliding with qd > 0 / "
+                                         f"qd < 0, 0 stuck", start=0.0))
+            if i in with_stops:
+                lo, hi = stops_of(b)
+                if lo is not None:
+                    j.lower = sp.Symbol(unique(f"q_lower_{tag}"), real=True)
+                    params.append(Variable(j.lower.name, j.lower, pos, f"lower end stop of joint {i + 1} ({label})",
+                                           start=float(lo)))
+                if hi is not None:
+                    j.upper = sp.Symbol(unique(f"q_upper_{tag}"), real=True)
+                    params.append(Variable(j.upper.name, j.upper, pos, f"upper end stop of joint {i + 1} ({label})",
+                                           start=float(hi)))
+                j.e = sp.Symbol(unique(f"e_stop_{tag}"), real=True)
+                params.append(Variable(j.e.name, j.e, "1", f"coefficient of restitution of the end stops of joint "
+                                       f"{i + 1} ({label}): qd := -e qd at an impact (0: inelastic)",
+                                       start=0.0, min=0.0, max=1.0))
+                j.rest = sp.Symbol(unique(f"rest_{i + 1}"), real=True)
+                discrete.append(Variable(f"rest[{i + 1}]", j.rest, "1",
+                                         f"end-stop mode of joint {i + 1} ({label}): -1/+1 resting on the lower/upper "
+                                         f"stop, 0 free", start=0.0))
+            joints.append(j)
+        if v_rest is not None:
+            params.append(Variable(v_rest.name, v_rest, "",
+                                   "rest speed of the end stops (rad/s or m/s): an impact whose rebound e |qd| is "
+                                   "below it leaves the joint resting on the stop", start=1e-3, sign=">0"))
+        # the robot derived: the stick-slip joints without their smooth term
+        drop = set(with_friction)
+        if not drop:
+            derived = robot
+        elif robot.links:
+            derived = replace(robot, links=tuple(
+                replace(L, friction=sp.Integer(0), friction_velocity=sp.Integer(0)) if i in drop else L
+                for i, L in enumerate(robot.links)))
+        else:
+            derived = replace(robot, bodies=tuple(
+                replace(b, friction=sp.Integer(0), friction_velocity=sp.Integer(0)) if i in drop else b
+                for i, b in enumerate(robot.bodies)))
+        return _HybridPlan(self, derived, joints, tuple(params), tuple(discrete), v_rest)
 
     def _looped_state_space_model(self, outputs: Sequence[str], name=None) -> SymbolicModel:
         """The state-space model as two calls of the runtime's chain loops (strategy "loops").

@@ -69,7 +69,7 @@ payload (the thesis's PLYLD) is merged into the last body.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Optional
 
 import sympy as sp
@@ -119,6 +119,10 @@ class Link:
     rotor_inertia: sp.Expr = sp.Integer(0)
     damping: sp.Expr = sp.Integer(0)
     external_wrench: bool = False  # adds inputs f_ext/t_ext acting at the COM
+    # Coulomb friction F_c (smooth: F_c tanh(qd / friction_velocity)) and the joint's range [lower, upper]
+    friction: sp.Expr = sp.Integer(0)
+    friction_velocity: sp.Expr = sp.Integer(0)
+    limits: Optional["Limits"] = None
 
 
 @dataclass(frozen=True)
@@ -131,11 +135,13 @@ class Payload:
 
 @dataclass(frozen=True)
 class Limits:
-    """Validity ranges of one joint (None: unbounded), from a URDF ``<limit>``.
+    """Validity ranges of one joint (None: unbounded), from a URDF ``<limit>`` or a DH link's ``limits``.
 
     ``lower``/``upper`` bound q [rad or m], ``effort`` bounds |tau| [N.m or N],
     ``velocity`` bounds |qd|.  They are ranges in which the model is valid,
-    not forces: the dynamics do not read them.
+    not forces: the dynamics do not read them -- unless the state-space model
+    is asked for ``limits="stops"`` (then ``lower``/``upper`` are end stops,
+    :meth:`fmugen.dynamics.manipulator.Manipulator.state_space_model`).
     """
 
     lower: Optional[float] = None
@@ -308,7 +314,8 @@ def dh_to_joints(links, convention: str, payload=None) -> tuple:
         bodies.append(Body(
             name=L.name, joint=L.joint, parent=i - 1, rotation=_rows(R), translation=p, axis=Z_AXIS,
             mass=L.mass, com=tuple(com), inertia_com=_rows(inertia), rotor_inertia=L.rotor_inertia,
-            damping=L.damping, external_wrench=L.external_wrench, offset=offset))
+            damping=L.damping, external_wrench=L.external_wrench, offset=offset, friction=L.friction,
+            friction_velocity=L.friction_velocity, limits=L.limits))
         frames.append(Frame(f"frame{i + 1}", i, _rows(Re), (sp.sympify(end_a), _Z, _Z)))
     return tuple(bodies), tuple(frames)
 
@@ -339,18 +346,6 @@ def _merged_payload(links: tuple, payload) -> tuple:
         return mass * ((o.T * o)[0, 0] * sp.eye(3) - o * o.T)
 
     I = sp.Matrix(last.inertia_com) + shift(m, r - rc) + shift(mL, rL - rc)
-    merged = Link(
-        name=last.name,
-        joint=last.joint,
-        a=last.a,
-        alpha=last.alpha,
-        d=last.d,
-        theta=last.theta,
-        mass=mt,
-        com=tuple(rc),
-        inertia_com=tuple(tuple(I.row(i)) for i in range(3)),
-        rotor_inertia=last.rotor_inertia,
-        damping=last.damping,
-        external_wrench=last.external_wrench,
-    )
+    # the joint's own data (rotor, damping, friction, limits) stay as they are
+    merged = replace(last, mass=mt, com=tuple(rc), inertia_com=tuple(tuple(I.row(i)) for i in range(3)))
     return links[:-1] + (merged,)

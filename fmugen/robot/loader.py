@@ -7,7 +7,8 @@ The schema is documented field by field in ``robots/README.md``.  In short::
     [parameters]  name = value | { value, unit, description }
     [[links]]     joint, a, alpha, d, theta, mass, com, inertia | gyration_sq
                   (required); name, inertia_about, rotor_inertia, damping,
-                  external_wrench, allow_unrealisable_inertia
+                  friction, friction_velocity, limits, external_wrench,
+                  allow_unrealisable_inertia
     [payload]     mass, com
 
 Conversion to the canonical description
@@ -48,7 +49,7 @@ from .checks import (
     numeric_matrix,
     where,
 )
-from .description import MODIFIED, PRISMATIC, REVOLUTE, STANDARD, Link, Parameter, Payload, Robot
+from .description import MODIFIED, PRISMATIC, REVOLUTE, STANDARD, Limits, Link, Parameter, Payload, Robot
 from .expressions import ExpressionError, NAME_PATTERN, check_double, quantity, snap_angle, symbol_name_problem
 from ..errors import MAX_IDENTIFIER_LENGTH, InputFileError, read_text_file, toml_problem
 
@@ -75,6 +76,9 @@ LINK_KEYS = {
     "inertia_about": False,
     "rotor_inertia": False,
     "damping": False,
+    "friction": False,
+    "friction_velocity": False,
+    "limits": False,
     "external_wrench": False,
     "allow_unrealisable_inertia": False,
     "massless": False,
@@ -214,7 +218,8 @@ class _Reader:
     def _parameters(self, links, gravity, payload) -> tuple:
         exprs = list(gravity)
         for link in links:
-            exprs += [link.a, link.alpha, link.d, link.theta, link.mass, link.rotor_inertia, link.damping]
+            exprs += [link.a, link.alpha, link.d, link.theta, link.mass, link.rotor_inertia, link.damping,
+                      link.friction, link.friction_velocity]
             exprs += list(link.com) + [e for row in link.inertia_com for e in row]
         if payload is not None:
             exprs += [payload.mass, *payload.com]
@@ -289,6 +294,8 @@ class _Reader:
         rotor = number("rotor_inertia", f"Ia_{i}", rotor_unit, "rotor (actuator) inertia", nonnegative=True)
         damping_unit = "N.s/m" if prismatic else "N.m.s/rad"
         damping = number("damping", f"b_{i}", damping_unit, "viscous joint damping", nonnegative=True)
+        friction, friction_velocity = self._friction(table, i, prismatic, number, loc)
+        limits = self._limits(table, prismatic, loc)
         wrench = self._bool(table.get("external_wrench", False), None, loc("external_wrench"))
         allow = allow_all or self._bool(table.get("allow_unrealisable_inertia", False), None,
                                         loc("allow_unrealisable_inertia"))
@@ -319,7 +326,53 @@ class _Reader:
             rotor_inertia=rotor,
             damping=damping,
             external_wrench=wrench,
+            friction=friction,
+            friction_velocity=friction_velocity,
+            limits=limits,
         )
+
+    def _friction(self, table, i, prismatic, number, loc) -> tuple:
+        """``(F_c, v_c)`` of the link's joint: Coulomb friction ``friction`` (parameter ``fc_i``), smooth as
+        F_c tanh(qd / v_c) with ``friction_velocity`` (``vc_i``) or, when not given, the robot-wide
+        ``v_coulomb`` = 0.01 rad/s or m/s (as URDF robots).  With ``friction="stick-slip"`` the state-space
+        model replaces the smooth term by stick and slip modes (robots/README.md)."""
+        unit = "N" if prismatic else "N.m"
+        friction = number("friction", f"fc_{i}", unit, "Coulomb joint friction", nonnegative=True)
+        speed = "m/s" if prismatic else "rad/s"
+        if "friction_velocity" in table:
+            if friction == 0:
+                raise RobotFileError(f"{loc('friction_velocity')}: given without a non-zero friction")
+            v_c = number("friction_velocity", f"vc_{i}", speed,
+                         "velocity scale v_c of the smooth Coulomb friction F_c tanh(qd / v_c)")
+            value = numeric(v_c, self.values)
+            if v_c == 0 or (value is not None and not value > 0):
+                raise RobotFileError(f"{loc('friction_velocity')}: must be > 0, got {table['friction_velocity']!r}")
+            return friction, v_c
+        if friction == 0:
+            return friction, sp.Integer(0)
+        if "v_coulomb" not in self.auto:
+            self._auto_parameter(sp.Float(0.01), "v_coulomb", "", "velocity scale of the smooth Coulomb friction "
+                                 "F_c tanh(qd / v_c) (rad/s or m/s)", loc("friction"))
+        return friction, self.auto["v_coulomb"].symbol
+
+    def _limits(self, table, prismatic, loc):
+        """``limits = [lower, upper]`` (rad or m, numbers): the joint's range -- the validity range of q, or
+        its end stops with ``limits="stops"``."""
+        if "limits" not in table:
+            return None
+        raw = table["limits"]
+        where_ = loc("limits")
+        if not isinstance(raw, list) or len(raw) != 2 or any(isinstance(v, (list, dict, bool)) for v in raw):
+            raise RobotFileError(f"{where_}: expected [lower, upper] ({'m' if prismatic else 'rad'}), got {raw!r}")
+        values = []
+        for k, v in enumerate(raw):
+            expr = self._parse(v, f"{where_}[{k}]")
+            if expr.free_symbols:
+                raise RobotFileError(f"{where_}[{k}]: must be a number, got {v!r}")
+            values.append(self._double(expr, v, f"{where_}[{k}]"))
+        if not values[0] < values[1]:
+            raise RobotFileError(f"{where_}: lower {values[0]!r} must be below upper {values[1]!r}")
+        return Limits(values[0], values[1])
 
     def _inertia(self, table, i, label, mass, com, loc) -> sp.Matrix:
         has_tensor, has_gyration = "inertia" in table, "gyration_sq" in table
