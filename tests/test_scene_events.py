@@ -133,3 +133,49 @@ def test_the_stick_slip_drive_holds_the_puma_shoulder_where_the_smoothed_twin_cr
             assert ref.settings["events"] >= 1
             assert np.abs(r["arm.q[2]"] - ref["arm.q[2]"]).max() < 1e-4
     assert creep["hybrid"] < 1e-12 and creep["smooth"] > 1e-5, creep
+
+
+PENDULUM = """<?xml version="1.0"?>
+<robot name="pend">
+  <link name="base"/>
+  <link name="l1"><inertial><origin xyz="0.5 0 0"/><mass value="1.0"/>
+    <inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><axis xyz="0 1 0"/>
+    <limit lower="-1.0" upper="1.0" effort="100" velocity="10"/><dynamics friction="6.0"/></joint>
+</robot>
+"""
+
+
+@pytest.mark.parametrize("friction", ["stick-slip", "smooth"])
+def test_a_scene_robot_takes_friction_and_limits_as_events(tmp_path, friction):
+    """A URDF pendulum whose breakaway (6 N.m) exceeds its gravity torque: with friction = "stick-slip" the
+    scene holds it where it starts, to the bit; the smooth tanh friction lets it creep."""
+    (tmp_path / "arm.urdf").write_text(PENDULUM)
+    (tmp_path / "scene.toml").write_text(f"""
+[scene]
+name = "held"
+stop = 2.0
+step = 1e-3
+record = ["arm.q[1]"]
+[instances.arm]
+robot = "arm.urdf"
+friction = "{friction}"
+limits = "stops"
+start = {{ "q[1]" = 0.3 }}
+[fmus.arm]
+members = ["arm"]
+""")
+    sc = fmugen.load_scene(tmp_path / "scene.toml")
+    r = run(sc.build(tmp_path / "fmus").system, "jacobi", "hold")
+    drift = float(np.abs(r["arm.q[1]"] - 0.3).max())
+    assert (drift == 0.0) if friction == "stick-slip" else (drift > 1e-3), drift
+
+
+def test_a_scene_robot_refuses_an_unknown_friction(tmp_path):
+    from fmugen.scene.errors import SceneError
+
+    (tmp_path / "arm.urdf").write_text(PENDULUM)
+    (tmp_path / "scene.toml").write_text('[scene]\nname = "x"\nstop = 1.0\n[instances.arm]\nrobot = "arm.urdf"\n'
+                                         'friction = "sticky"\n[fmus.arm]\nmembers = ["arm"]\n')
+    with pytest.raises(SceneError, match="friction must be 'smooth' or 'stick-slip', got 'sticky'"):
+        fmugen.load_scene(tmp_path / "scene.toml")

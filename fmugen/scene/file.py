@@ -22,7 +22,7 @@ SCENE_KEYS = {"name", "description", "parameter_set", "start", "stop", "step", "
               "initial", "prune", "connections", "monolithic", "connect", "record_bonds",
               "inputs"}
 COMMON_INSTANCE_KEYS = {"parameters", "fixed", "start", "hold"}
-ROBOT_KEYS = {"robot", "formulation", "locked", "outputs", "mimic", "armature"}
+ROBOT_KEYS = {"robot", "formulation", "locked", "outputs", "mimic", "armature", "friction", "limits"}
 FACTORY_KEYS = {"factory", "options", "parameter_set"}
 GROUP_KEYS = {"members", "fmi_type", "solver", "tolerance", "jacobian"}
 SOLVERS = {"dopri5": 1, "rodas3": 2, "rk4": 3}
@@ -382,6 +382,14 @@ def _instance(iname: str, spec, path: Path) -> InstanceSpec:
                              f"like {{ LHand = 1e-3 }}")
         if armature:  # only when set, as mimic; the reader checks the joint names (URDF robots only)
             opts["armature"] = {str(k): _number(v, f"{where} armature.{k}", nonneg=True) for k, v in armature.items()}
+        # joint friction and limits as events (robots/README.md "Friction and limits as events"); only when
+        # set, as mimic, so that the FMU cache keys of existing scenes stay the same
+        for key, choices in (("friction", ("smooth", "stick-slip")), ("limits", ("range", "stops"))):
+            v = spec.get(key, choices[0])
+            if v not in choices:
+                raise SceneError(f"{where} {key} must be {' or '.join(repr(c) for c in choices)}, got {v!r}")
+            if v != choices[0]:
+                opts[key] = v
         return InstanceSpec(iname, "robot", str(rp.resolve()), opts,
                             None, params, fixed, start, hold, locked)
     if "factory" in spec:

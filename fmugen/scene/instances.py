@@ -105,8 +105,11 @@ def _robot_model(spec: InstanceSpec, where: str, outputs, strategy: str = "strai
                                 armature=spec.options.get("armature"))
         if spec.locked:
             strategy = "straight"  # the looped dynamics have no locked joints
+        events = {k: spec.options[k] for k in ("friction", "limits") if k in spec.options}
+        if events:
+            strategy = "straight"  # events need the straight-line derivation (the loops have none)
         return arm.state_space_model(outputs=tuple(outputs), name=spec.name, locked=spec.locked or None,
-                                     strategy=strategy), arm
+                                     strategy=strategy, **events), arm
     except SceneError:
         raise
     except (ValueError, KeyError) as exc:
