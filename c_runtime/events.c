@@ -10,9 +10,10 @@
  *     the round, then the assignments of the firing clauses in order) and the
  *     event iteration: rounds until nothing changes;
  *   - for Co-Simulation, the location of a domain change inside an accepted
- *     internal solver step: root finding on the cubic Hermite interpolant
- *     of the step (x and f at both ends; exact for polynomial solutions up to
- *     degree 3, O(h^4) otherwise), Illinois steps safeguarded by bisection,
+ *     internal solver step: root finding on the step's interpolant
+ *     (Dormand-Prince's fourth-order continuous extension; the cubic Hermite
+ *     interpolant of x and f at both ends for RK4 and RODAS3, exact for
+ *     polynomial solutions up to degree 3), Illinois steps safeguarded by bisection,
  *     to FMUGEN_EVENT_TOL x max(1, |t|) in time.  The state is put at the
  *     right end of the final bracket: just after the crossing, where the
  *     indicator has changed its domain (the guards see the new side).
@@ -135,17 +136,23 @@ int fmugen_event_iteration(fmugen_instance *inst, const double *u, char *msg, si
  * (|tau| > T_s after T_s - |tau| fell through 0) holds there. */
 static int crossed(double ref, double z) { return ref > 0 ? z < 0 : z > 0; }
 
-/* the cubic Hermite interpolant of the step at theta in [0, 1] into out */
-static void hermite(int n, double h, double th, const double *x0, const double *f0, const double *x1,
-                    const double *f1, double *out)
+/* The step's interpolant at theta in [0, 1] into out, in Hairer's form
+ *     x0 + th (r2 + (1 - th) (r3 + th (r4 + (1 - th) r5)))
+ * with r2 = x1 - x0, r3 = h f0 - r2, r4 = r2 - h f1 - r3: the cubic Hermite
+ * interpolant when r5 = 0 (NULL), Dormand-Prince's fourth-order continuous
+ * extension when r5 = h sum d_i k_i (solver_dopri5.c). */
+static void interpolant(int n, double h, double th, const double *x0, const double *f0, const double *x1,
+                        const double *f1, const double *r5, double *out)
 {
-    const double t2 = th * th, t3 = t2 * th;
-    const double h00 = 2 * t3 - 3 * t2 + 1, h10 = t3 - 2 * t2 + th, h01 = -2 * t3 + 3 * t2, h11 = t3 - t2;
-    for (int i = 0; i < n; i++) out[i] = h00 * x0[i] + h10 * h * f0[i] + h01 * x1[i] + h11 * h * f1[i];
+    const double s = 1.0 - th;
+    for (int i = 0; i < n; i++) {
+        const double r2 = x1[i] - x0[i], r3 = h * f0[i] - r2, r4 = r2 - h * f1[i] - r3;
+        out[i] = x0[i] + th * (r2 + s * (r3 + th * (r4 + (r5 ? s * r5[i] : 0.0))));
+    }
 }
 
 int fmugen_step_event(fmugen_ode *ode, double t0, const double *x0, const double *f0, double t1, const double *x1,
-                      const double *f1, char *msg, size_t msgn)
+                      const double *f1, const double *r5, char *msg, size_t msgn)
 {
     fmugen_instance *inst = ode->inst;
     const fmugen_model_def *m = inst->model;
@@ -205,7 +212,7 @@ int fmugen_step_event(fmugen_ode *ode, double t0, const double *x0, const double
         const double lo = a + 0.01 * (b - a), hi = b - 0.01 * (b - a);
         if (th < lo) th = lo;
         if (th > hi) th = hi;
-        hermite(n, h, th, xs0, fs0, x1, f1, xm);
+        interpolant(n, h, th, xs0, fs0, x1, f1, r5, xm);
         const double tm = t0 + th * h;
         fmugen_inputs_at(inst, ode->t0, ode->u0, tm, u);
         rc = fmugen_event_indicators(inst, tm, xm, u, zm);
@@ -234,7 +241,7 @@ int fmugen_step_event(fmugen_ode *ode, double t0, const double *x0, const double
     inst->s.last_indicator = first;
     const double te = b >= 1.0 ? t1 : t0 + b * h;
     if (b >= 1.0) memcpy(xa, x1, (size_t)n * sizeof(double));
-    else hermite(n, h, b, xs0, fs0, x1, f1, xa);
+    else interpolant(n, h, b, xs0, fs0, x1, f1, r5, xa);
     memcpy(inst->x, xa, (size_t)n * sizeof(double));
     inst->s.time = te;
     memcpy(inst->zpre, zb, (size_t)nz * sizeof(double));
@@ -299,7 +306,13 @@ int fmugen_tick_round(fmugen_instance *inst, const double *u, int *changed, int 
     if (m->ns == 0) return fmugen_event_round(inst, u, changed, x_changed);
     int rc = fmugen_next_tick(inst, inst->s.time, &next, &at);
     if (rc != FMUGEN_OK) return rc;
-    const int fresh = at && !(inst->s.tick_done && inst->s.tick_time == inst->s.time);
+    /* the same instant within the tick tolerance is the same tick (a step ending a rounding error away
+     * from j period must not sample again) */
+    double pmin = HUGE_VAL;
+    const double *per = inst->ev_work + 5 * (size_t)m->nx + 3 * (size_t)m->nz + m->ng + m->na;
+    for (int k = 0; k < m->ns; k++) pmin = fmin(pmin, per[k]);
+    const int fresh = at && !(inst->s.tick_done &&
+                              fabs(inst->s.tick_time - inst->s.time) <= tick_tol(inst->s.time, pmin));
     if (fresh) set_ticks(inst, inst->s.time, 1);
     rc = fmugen_event_round(inst, u, changed, x_changed);
     if (fresh) {

@@ -3,6 +3,7 @@
  * inputs held constant or extrapolated linearly from the derivatives given
  * by fmi2SetRealInputDerivatives.  The states allowed for each function are
  * listed in fmi2_functions.c. */
+#include <float.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -323,7 +324,9 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
         /* a sampled component's next tick inside the step is a time event: integrate exactly to it */
         double target = t_end, tick = HUGE_VAL;
         int at;
-        if (m->ns && fmugen_next_tick(inst, inst->s.time, &tick, &at) == FMUGEN_OK && tick < t_end)
+        /* a tick within the tolerance of the step's end is the end's (no step of a rounding error) */
+        if (m->ns && fmugen_next_tick(inst, inst->s.time, &tick, &at) == FMUGEN_OK &&
+            t_end - tick > 1e-9 * H + 8 * DBL_EPSILON * fabs(t_end))
             target = tick;
         const int to_tick = target < t_end || (m->ns && tick_at(inst, t_end));
         switch (inst->s.solver) {

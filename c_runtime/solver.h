@@ -66,11 +66,12 @@ FMUGEN_INTERNAL fmi2Status fmugen_check_ranges(fmugen_instance *inst, const char
 /* After an accepted internal step from (t0, x0, f0) to (t1, x1, f1) of a
  * model with event indicators (events.c; f1 NULL: computed when needed):
  * 0 when no indicator changed its domain (zpre takes the values at t1); 1
- * when one did: the crossing is located on the step's cubic Hermite
- * interpolant, inst->x and inst->s.time are the point just after it; -1 when
- * the indicators could not be evaluated (reason in msg). */
+ * when one did: the crossing is located on the step's interpolant (r5 NULL:
+ * cubic Hermite; else Dormand-Prince's continuous extension, r5 = h sum d_i
+ * k_i), inst->x and inst->s.time are the point just after it; -1 when the
+ * indicators could not be evaluated (reason in msg). */
 FMUGEN_INTERNAL int fmugen_step_event(fmugen_ode *ode, double t0, const double *x0, const double *f0, double t1,
-                                      const double *x1, const double *f1, char *msg, size_t n);
+                                      const double *x1, const double *f1, const double *r5, char *msg, size_t n);
 
 FMUGEN_INTERNAL int fmugen_solve_dopri5(fmugen_ode *ode, double t_end, char *msg, size_t n);
 FMUGEN_INTERNAL int fmugen_solve_rodas3(fmugen_ode *ode, double t_end, char *msg, size_t n);

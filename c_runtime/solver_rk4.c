@@ -258,7 +258,7 @@ int fmugen_solve_rk4(fmugen_ode *ode, double t_end, char *msg, size_t msgn)
             }
         }
         if (inst->model->nz) { /* a state event inside the step: stop just after it */
-            const int ev = fmugen_step_event(ode, t, x, k1, tn, xn, NULL, msg, msgn);
+            const int ev = fmugen_step_event(ode, t, x, k1, tn, xn, NULL, NULL, msg, msgn);
             if (ev < 0) return FMUGEN_SOLVER_FAILED;
             if (ev > 0) { inst->s.n_steps++; return FMUGEN_SOLVER_EVENT; }
         }

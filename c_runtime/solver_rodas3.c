@@ -166,7 +166,7 @@ int fmugen_solve_rodas3(fmugen_ode *ode, double t_end, char *msg, size_t msgn)
             if (reject_last) hnew = fmin(hnew, h);
             reject_last = reject_more = 0;
             if (inst->model->nz) { /* a state event inside the step: stop just after it */
-                const int ev = fmugen_step_event(ode, t, x, f0, t_new, ys, NULL, msg, msgn);
+                const int ev = fmugen_step_event(ode, t, x, f0, t_new, ys, NULL, NULL, msg, msgn);
                 if (ev < 0) return FMUGEN_SOLVER_FAILED;
                 if (ev > 0) {
                     inst->s.n_steps++;

@@ -41,7 +41,7 @@ from typing import Mapping, Optional, Sequence
 import sympy as sp
 
 from ..codegen.differentiate import differentiate
-from ..codegen.model import EventClause, Events, SymbolicModel, Variable
+from ..codegen.model import Clock, EventClause, Events, SymbolicModel, Variable
 from ..codegen.program import Assign, Program, SolveSPD
 from ..fmi.units import base_units
 
@@ -217,7 +217,7 @@ def _assembled_events(components, info, closed, resolved) -> Optional[Events]:
     closed-form path inlines the component's program; the program path keeps program symbols, renamed),
     and connected inputs are replaced by ``resolved`` (empty on the program path, where they are
     assignments of the program)."""
-    discrete, indicators, clauses = [], [], []
+    discrete, indicators, clauses, clocks = [], [], [], []
     for inst, m in components.items():
         if m.events is None:
             continue
@@ -226,13 +226,17 @@ def _assembled_events(components, info, closed, resolved) -> Optional[Events]:
         def term(e):
             return sp.sympify(closed(m, sp.sympify(e))).xreplace(ren).xreplace(resolved)
 
-        discrete += [_renamed(inst, v) for v in m.events.discrete]
+        renamed = {v.symbol: _renamed(inst, v) for v in m.events.discrete}
+        discrete += list(renamed.values())
         indicators += [(f"{inst}: {n}", term(e)) for n, e in m.events.indicators]
         clauses += [EventClause(term(c.guard), tuple((ren[t], term(e)) for t, e in c.assign),
                                 f"{inst}: {c.name}" if c.name else inst) for c in m.events.clauses]
+        # sample clocks: timing of the parameters, the tick flag the renamed discrete state
+        clocks += [Clock(term(k.period), term(k.offset), renamed[k.tick.symbol])
+                   for k in getattr(m.events, "clocks", ())]
     if not (discrete or indicators or clauses):
         return None
-    return Events(tuple(discrete), tuple(indicators), tuple(clauses))
+    return Events(tuple(discrete), tuple(indicators), tuple(clauses), tuple(clocks))
 
 
 def _assembled_variables(info, source_of, inputs, outputs, description, provenance, where, resolved):

@@ -2,7 +2,7 @@
 
     fmugen linearize ROBOT_OR_SCENE.toml [--at NAME=VALUES ...] [--trim NAMES] [--inputs NAMES]
                      [--outputs NAMES] [--set NAME=VALUE ...] [--without INSTANCES] [--no-trim]
-                     --out FILE.npz
+                     [--dt T] --out FILE.npz
 
 ``--at q=0.3,-0.5,0.8,0.2,-0.4,0.6 --at qd=0 --trim tau``: the pose given,
 the torques that hold it solved for.  Every state that ``--at`` does not give
@@ -14,7 +14,10 @@ controllers: the inputs they drove become inputs).
 
 Prints the sizes, the operating point's residual, eigenvalues with damping
 and natural frequency, the stiffness ratio, and the controllability and
-observability ranks; writes ``A``, ``B``, ``C``, ``D``, the operating point
+observability ranks; with ``--dt T`` the plant held by a zero-order hold and sampled every T s
+(``A``, ``B`` the discrete ``exp(A T)``, ``int_0^T exp(A s) ds B``; ``dt``, and the continuous
+``A_continuous``, ``B_continuous``, in the file too; the eigenvalues printed are then |z|).  Writes
+``A``, ``B``, ``C``, ``D``, the operating point
 (``t``, ``x0``, ``u0`` -- every input --, ``y0``) and the FMI names
 ``states``, ``inputs`` (columns of B), ``outputs``, ``all_inputs`` into the
 ``.npz`` (``numpy.load`` reads it without pickle).
@@ -52,6 +55,8 @@ def add_parser(sub) -> None:
     p.add_argument("--formulation", default="newton_euler", choices=["newton_euler", "lagrange"])
     p.add_argument("--time", type=float, default=0.0, help="time of the operating point [s]")
     p.add_argument("--tol", type=float, default=1e-9, help="largest scaled residual accepted by the trim")
+    p.add_argument("--dt", type=float, default=None, metavar="T",
+                   help="sample period [s]: write the zero-order-hold discretised plant (A, B discrete; dt)")
     p.add_argument("--out", required=True, metavar="FILE.npz")
     p.set_defaults(func=run)
 
@@ -183,6 +188,10 @@ def run(args) -> int:
     # every argument first: named in its refusal, nothing derived or written before
     args.tol = arguments.tolerance(args.tol, "--tol")
     args.time = arguments.number(args.time, "--time")
+    if args.dt is not None:
+        args.dt = arguments.number(args.dt, "--dt")
+        if not args.dt > 0:
+            raise FmugenError(f"--dt {args.dt!r}: the sample period must be positive [s]")
     arguments.output_file(args.out, "--out", inputs=[path])
     sets = parse_sets(args.set)
     at = parse_at(args.at)
@@ -207,6 +216,15 @@ def run(args) -> int:
         op = trim(model, at=at, free=free, parameter_values=params, t=args.time, tol=args.tol)
         lm = linear_model(model, op, outputs=wanted or "all", inputs=_split(args.inputs) or None)
     describe(lm, model, op)
+    extra = {}
+    if args.dt is not None:
+        from .sampled import c2d
+
+        extra = dict(dt=np.float64(args.dt), A_continuous=lm.A, B_continuous=lm.B)
+        lm = c2d(lm, args.dt)
+        z = np.linalg.eigvals(lm.A) if lm.A.size else np.zeros(0)
+        print(f"discretised (zero-order hold) at dt = {args.dt:g} s: x[k+1] = A x[k] + B u[k]; "
+              f"|z| of A (largest first): " + ", ".join(f"{v:.6g}" for v in sorted(np.abs(z), reverse=True)))
     if op is not None and not args.no_trim:  # a smoothed kink at the operating point: say so (fmugen/control/kinks.py)
         _warn_kinks(path, sets, model, op)
     out = Path(args.out)
@@ -214,6 +232,6 @@ def run(args) -> int:
     np.savez(out, A=lm.A, B=lm.B, C=lm.C, D=lm.D, t=np.float64(lm.t), x0=lm.x0, u0=lm.u0, y0=lm.y0,
              states=np.array(lm.states, dtype=str), inputs=np.array(lm.inputs, dtype=str),
              outputs=np.array(lm.outputs, dtype=str), all_inputs=np.array(lm.all_inputs, dtype=str),
-             residual=np.float64(op.max_residual if op is not None else np.nan))
+             residual=np.float64(op.max_residual if op is not None else np.nan), **extra)
     print(f"wrote {out}")
     return 0

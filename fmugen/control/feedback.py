@@ -70,12 +70,17 @@ def read_gain(path) -> np.ndarray:
 
 def state_feedback_file(path, K, model, states: Sequence[str], inputs: Sequence[str],
                         x_ref: Optional[Sequence[float]] = None, u_ff: Optional[Sequence[float]] = None,
-                        name: str = "state_feedback", description: str = "") -> Path:
+                        name: str = "state_feedback", description: str = "",
+                        sample_period: Optional[float] = None) -> Path:
     """Write ``u = u_ff - K (x - x_ref)`` as a component file; returns its path.
 
     ``K``: the (inputs x states) gain, or a file holding it (:func:`read_gain`);
     ``model``: the plant (SymbolicModel or scene) whose ``states`` and
     ``inputs`` (FMI names) K was designed for -- their units give the file's.
+    ``sample_period``: None for the continuous law; a period T_s [s] for the sampled one
+    ``u[k] = u_ff - K (x[k] - x_ref)``, computed at every instant k T_s and held (zero-order hold) --
+    K from ``control.dlqr`` on the plant discretised at T_s (:func:`fmugen.control.c2d`); the file's
+    parameter ``T_s`` is the period (``[clocks.sample]``, README "Sample clocks").
     """
     from .linearize import as_model
 
@@ -106,11 +111,21 @@ def state_feedback_file(path, K, model, states: Sequence[str], inputs: Sequence[
             else:
                 eqs.append(f"s_{j + 1}_{c + 1} = " + " + ".join(chunk))
                 parts.append(f"s_{j + 1}_{c + 1}")
-        eqs.append(f"{u} = ff_{u} - " + (" - ".join(parts) if len(chunks) == 1 else "(" + " + ".join(parts) + ")"))
-    lines += ["# State feedback u = u_ff - K (x - x_ref), written by fmugen.control.state_feedback_file.",
+        law = f"ff_{u} - " + (" - ".join(parts) if len(chunks) == 1 else "(" + " + ".join(parts) + ")")
+        eqs.append(f"{u} = {law}" if sample_period is None else f"v_{u} = {law}")
+    sampled = sample_period is not None
+    if sampled:
+        T = float(sample_period)
+        if not np.isfinite(T) or T <= 0:
+            raise FmugenError(f"state feedback: sample_period {sample_period!r} must be a positive number of seconds")
+        eqs += [f"{u} = {u}_k" for u in us]
+    law = "u[k] = u_ff - K (x[k] - x_ref), sampled every T_s and held" if sampled else "u = u_ff - K (x - x_ref)"
+    lines += [f"# State feedback {law}, written by fmugen.control.state_feedback_file.",
               "[component]", f"name = {json.dumps(name)}",
-              f"description = {json.dumps(description or 'state feedback u = u_ff - K (x - x_ref)')}",
+              f"description = {json.dumps(description or 'state feedback ' + law)}",
               "equations = ["] + [f'  "{e}",' for e in eqs] + ["]", "", "[parameters]"]
+    if sampled:
+        lines.append(f'T_s = {{ value = {T!r}, unit = "s", min = 1e-12, description = "sample period" }}')
     for j, u in enumerate(us):
         for i, x in enumerate(xs):
             if K[j, i] != 0.0:
@@ -124,12 +139,19 @@ def state_feedback_file(path, K, model, states: Sequence[str], inputs: Sequence[
                      f'description = "feed-forward of {inputs[j]}" }}')
     lines += ["", "[inputs]"] + [f'{x} = {{ unit = "{units[s] or "1"}", start = {float(r)!r}, description = "measured {s}" }}'
                                  for x, s, r in zip(xs, states, x_ref)]
-    lines += ["", "[outputs]"] + [f'{u} = {{ unit = "{units[s] or "1"}", description = "command of {s}" }}'
-                                  for u, s in zip(us, inputs)]
+    lines += ["", "[outputs]"] + [f'{u} = {{ unit = "{units[s] or "1"}", description = "command of {s}'
+                                  f'{" (held between samples)" if sampled else ""}" }}' for u, s in zip(us, inputs)]
     inter = [e.split(" = ", 1)[0] for e in eqs if e.startswith("s_")]
-    if inter:
+    if inter or sampled:
         lines += ["", "[intermediates]"] + [f'{s} = {{ unit = "{units[inputs[int(s.split("_")[1]) - 1]] or "1"}" }}'
                                             for s in inter]
+    if sampled:
+        lines += [f'v_{u} = {{ unit = "{units[s] or "1"}", description = "the law at the sample instant" }}'
+                  for u, s in zip(us, inputs)]
+        lines += ["", "[discrete]"] + [f'{u}_k = {{ start = {float(f)!r}, unit = "{units[s] or "1"}", '
+                                       f'description = "held command of {s}" }}' for u, s, f in zip(us, inputs, u_ff)]
+        lines += ["", "[clocks.sample]", 'period = "T_s"', "", "[[when]]", 'name = "sample"', 'clock = "sample"',
+                  "set = { " + ", ".join(f'{u}_k = "v_{u}"' for u in us) + " }"]
     p = Path(path)
     p.write_text("\n".join(lines) + "\n")
     from ..components.equations import read_component_file

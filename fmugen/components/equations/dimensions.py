@@ -187,7 +187,7 @@ class Checker:
         args = node.args
         if name == "sqrt":
             return scale(self.dim(args[0]), Fraction(1, 2))
-        if name in ("sin", "cos", "tan", "exp", "log", "tanh", "atan"):
+        if name in ("sin", "cos", "tan", "exp", "log", "tanh", "atan", "round", "floor"):
             d = self.dim(args[0])
             if d is not ANY and d != DIMENSIONLESS:
                 self.fail(node, f"the argument of {name} must be a pure number, but {self.src(args[0])!r} "

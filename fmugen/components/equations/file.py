@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ast
 import keyword
+import math
 import tomllib
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -20,15 +21,15 @@ from typing import Mapping, Optional
 
 import sympy as sp
 
-from ...codegen.model import EventClause, Events, SymbolicModel
+from ...codegen.model import Clock, EventClause, Events, SymbolicModel
 from ...errors import InputFileError, check_identifier, read_text_file, toml_problem
 from ...robot.expressions import ExpressionError
-from ..base import var
+from ..base import TIME, var
 from . import language
-from .dimensions import ANY, DimensionError, SECOND, check_equation, dimension, dimension_of_unit, show, sub
+from .dimensions import ANY, DIMENSIONLESS, DimensionError, SECOND, check_equation, dimension, dimension_of_unit, show, sub
 
 TOP_KEYS = {"component", "parameters", "inputs", "states", "intermediates", "outputs", "sets", "connectors",
-            "discrete", "indicators", "when"}
+            "discrete", "indicators", "when", "clocks"}
 COMPONENT_KEYS = {"name", "description", "equations", "provenance"}
 PARAMETER_KEYS = {"value", "unit", "min", "max", "description"}
 INPUT_KEYS = {"unit", "start", "min", "max", "description"}
@@ -36,7 +37,9 @@ STATE_KEYS = {"unit", "start", "nominal", "min", "max", "description", "output"}
 INTERMEDIATE_KEYS = {"unit", "description"}
 OUTPUT_KEYS = {"unit", "min", "max", "description"}
 DISCRETE_KEYS = {"unit", "start", "min", "max", "description", "output"}
-WHEN_KEYS = {"condition", "set", "name", "description"}
+WHEN_KEYS = {"condition", "set", "name", "description", "clock"}
+CLOCK_KEYS = {"period", "offset", "description"}
+MAX_CLOCKS = 10
 MAX_DECLARATIONS = 200  # per table: a component file is a component, not a model of everything
 MAX_EQUATIONS = 400
 MAX_INDICATORS = 100
@@ -72,6 +75,7 @@ class ComponentFile:
     kinks: list = field(default_factory=list)  # (equation, text, function, [distances], eps): smoothed kinks
     indicators: list = field(default_factory=list)  # (name, Parsed), one per [indicators] entry
     clauses: list = field(default_factory=list)  # Clause, one per [[when]] table, in file order
+    clocks: list = field(default_factory=list)  # SampleClock, one per [clocks.<name>] table
 
     def of_kind(self, kind: str) -> list:
         return [d for d in self.declared.values() if d.kind == kind]
@@ -79,7 +83,7 @@ class ComponentFile:
     @property
     def hybrid(self) -> bool:
         """Whether the file declares events (discrete states, indicators, when clauses)."""
-        return bool(self.indicators or self.clauses or self.of_kind("discrete"))
+        return bool(self.indicators or self.clauses or self.clocks or self.of_kind("discrete"))
 
 
 @dataclass(frozen=True)
@@ -99,8 +103,42 @@ class Clause:
     name: str
     where: str  # "[[when]] 2 (stick)" for messages
     description: str
-    condition: Parsed
+    condition: Optional[Parsed]  # None: a clocked clause without a condition (fires at every tick)
     assign: tuple  # ((target name, Parsed value), ...) in file order
+    clock: Optional[str] = None  # the [clocks.<name>] whose ticks it is guarded by
+
+
+@dataclass(frozen=True)
+class SampleClock:
+    """A ``[clocks.<name>]`` table: ticks at offset + j period; its tick flag is the hidden discrete state
+    ``tick`` (``<name>.tick``, start 0), set by the runtime for the first round at each instant."""
+
+    name: str
+    where: str
+    description: str
+    period: Parsed
+    offset: Parsed
+    tick: str  # the FMI name of the tick flag
+
+
+def tick_name(clock: str) -> str:
+    """The FMI name of a clock's tick flag (a discrete state the file cannot read or set)."""
+    return f"{clock}.tick"
+
+
+def last_name(clock: str) -> str:
+    """The FMI name of a clock's last sample time (a discrete state the file cannot read or set)."""
+    return f"{clock}.last"
+
+
+#: the start of ``<clock>.last``: before any sample instant
+NEVER = -1e300
+
+
+def tick_symbol(clock: str) -> str:
+    """The C-safe symbol of a clock's tick flag (``tick_<clock>``; a declared name of that spelling is
+    refused)."""
+    return f"tick_{clock}"
 
 
 def _err(src, msg):
@@ -217,9 +255,10 @@ def read_component_file(path) -> ComponentFile:
     from ..connectors import check_file_connectors
 
     connectors = check_file_connectors(connectors, declared, src)
-    indicators, clauses = _events(data, declared, src)
+    clocks = _clocks(data.get("clocks", {}), declared, src)
+    indicators, clauses = _events(data, declared, src, clocks)
     cf = ComponentFile(path, name, desc, prov, declared, equations, order, sets, connectors,
-                       indicators=indicators, clauses=clauses)
+                       indicators=indicators, clauses=clauses, clocks=clocks)
     _build_all(cf, cf.kinks)  # the language's refusals first (they say what is wrong with the text) ...
     _check_dimensions(cf)  # ... then the dimensions of what it says
     return cf
@@ -289,7 +328,59 @@ def _value_text(v, where, src) -> str:
     raise _err(src, f"{where} must be an expression string or a number, got {type(v).__name__} {v!r}")
 
 
-def _events(data, declared, src) -> tuple:
+def _clocks(raw, declared, src) -> list:
+    """The checked ``[clocks.<name>]`` tables: period and offset, expressions of parameters and numbers."""
+    if not isinstance(raw, dict):
+        raise _err(src, "[clocks] must hold tables [clocks.<name>] with period = \"T_s\" (a parameter or a "
+                        "number of seconds)")
+    if len(raw) > MAX_CLOCKS:
+        raise _err(src, f"[clocks] declares {len(raw)} clocks; at most {MAX_CLOCKS}")
+    params = {n for n, d in declared.items() if d.kind == "parameter"}
+    out = []
+    for cname, tab in raw.items():
+        where = f"[clocks.{cname}]"
+        problem = _name_problem(cname)
+        if problem:
+            raise _err(src, f"{where}: the name {problem}")
+        if cname in declared:
+            raise _err(src, f"{where}: {cname!r} is also a declared {declared[cname].kind}; give the clock a name "
+                            f"of its own")
+        for hidden in (tick_symbol(cname), f"last_{cname}"):
+            if hidden in declared:
+                raise _err(src, f"{where}: the name {hidden!r} is the clock's own (its tick flag or last sample "
+                                f"time); rename the {declared[hidden].kind} {hidden!r}")
+        if not isinstance(tab, dict):
+            raise _err(src, f"{where} must be a table like {{ period = \"T_s\", offset = \"0\" }}")
+        bad = sorted(set(tab) - CLOCK_KEYS)
+        if bad:
+            raise _err(src, f"{where} has unknown key(s) {', '.join(bad)}; known: {', '.join(sorted(CLOCK_KEYS))}"
+                       + (" (a one-sample computation delay is written in the clause: see the README, "
+                          "\"Sample clocks\")" if "delay" in bad else ""))
+        desc = tab.get("description", "")
+        if not isinstance(desc, str):
+            raise _err(src, f"{where} description must be a string")
+        if "period" not in tab:
+            raise _err(src, f"{where} needs period = \"T_s\": a parameter of unit s, or a number of seconds")
+        parts = []
+        for key, default in (("period", None), ("offset", "0")):
+            value = tab.get(key, default)
+            if isinstance(value, (int, float)) and not isinstance(value, bool):
+                value = repr(_number(value, f"{where} {key}", src))
+            if not isinstance(value, str):
+                raise _err(src, f"{where} {key} must be a parameter name, a number or an expression string of "
+                                f"parameters, got {type(value).__name__} {value!r}")
+            kwhere = f"{where} {key} = {language._short(value)}"
+            tree, python = _parse(value, kwhere, declared, src)
+            other = sorted(language.names_in(tree) - params - language.FUNCTION_NAMES - {"pi"})
+            if other:
+                raise _err(src, f"{kwhere}: a clock's timing is fixed for the run: it may read parameters and "
+                                f"numbers only, not {', '.join(other)}")
+            parts.append(Parsed(kwhere, value, tree, python))
+        out.append(SampleClock(cname, where, desc, parts[0], parts[1], tick_name(cname)))
+    return out
+
+
+def _events(data, declared, src, clocks=()) -> tuple:
     """The checked ``[indicators]`` and ``[[when]]`` tables: ([(name, Parsed)], [Clause])."""
     raw = data.get("indicators", {})
     if not isinstance(raw, dict):
@@ -338,13 +429,24 @@ def _events(data, declared, src) -> tuple:
         desc = tab.get("description", "")
         if not isinstance(desc, str):
             raise _err(src, f"{where} description must be a string")
+        clock = tab.get("clock")
+        names = [c.name for c in clocks]
+        if clock is not None and clock not in names:
+            raise _err(src, f"{where} clock = {clock!r}: "
+                            + (f"not a declared clock; declared: {', '.join(names)}" if names and isinstance(clock, str)
+                               else "must name a [clocks.<name>] table" if names
+                               else "no [clocks.<name>] table declares it"))
         cond = tab.get("condition")
-        if not isinstance(cond, str):
-            raise _err(src, f"{where} needs condition = \"...\", a string (comparisons joined by and, or, not)"
-                            + (f", not {type(cond).__name__} {cond!r}" if cond is not None else ""))
-        cwhere = f"{where} condition {language._short(cond)}"
-        tree, python = _parse(cond, cwhere, declared, src)
-        condition = Parsed(cwhere, cond, tree, python)
+        if cond is None and clock is not None:
+            condition = None
+        else:
+            if not isinstance(cond, str):
+                raise _err(src, f"{where} needs condition = \"...\", a string (comparisons joined by and, or, not)"
+                                + (f", not {type(cond).__name__} {cond!r}" if cond is not None else "")
+                                + (", or clock = \"<name>\" of a [clocks.<name>] table" if cond is None else ""))
+            cwhere = f"{where} condition {language._short(cond)}"
+            tree, python = _parse(cond, cwhere, declared, src)
+            condition = Parsed(cwhere, cond, tree, python)
         sets = tab.get("set")
         if not isinstance(sets, dict) or not sets:
             raise _err(src, f"{where} needs set = {{ target = \"value\", ... }}, the discrete states and states "
@@ -362,7 +464,7 @@ def _events(data, declared, src) -> tuple:
             vwhere = f"{swhere} = {language._short(text)}"
             tree, python = _parse(text, vwhere, declared, src)
             assign.append((target, Parsed(vwhere, text, tree, python)))
-        clauses.append(Clause(cname, where, desc, condition, tuple(assign)))
+        clauses.append(Clause(cname, where, desc, condition, tuple(assign), clock))
 
     discrete = [n for n, d in declared.items() if d.kind == "discrete"]
     assigned = {t for c in clauses for t, _ in c.assign}
@@ -370,9 +472,13 @@ def _events(data, declared, src) -> tuple:
     if never:
         raise _err(src, f"[discrete] {', '.join(never)}: never set by a [[when]] clause, so constant: make "
                         f"{'it a parameter' if len(never) == 1 else 'them parameters'}")
-    if clauses and not indicators:
-        raise _err(src, "[[when]] clauses but no [indicators]: no event would ever run them after the start; "
-                        "declare the quantities whose sign change is an event")
+    if clauses and not indicators and not clocks:
+        raise _err(src, "[[when]] clauses but no [indicators] and no [clocks]: no event would ever run them after "
+                        "the start; declare the quantities whose sign change is an event, or a sample clock")
+    unused = [c.name for c in clocks if not any(cl.clock == c.name for cl in clauses)]
+    if unused:
+        raise _err(src, f"[clocks.{unused[0]}]: no [[when]] clause has clock = {unused[0]!r}: its ticks would "
+                        f"do nothing; add the clause that samples, or remove the clock")
     if indicators and not clauses:
         raise _err(src, "[indicators] but no [[when]] clause: an event would change nothing; add the clauses "
                         "that act at the events")
@@ -470,8 +576,16 @@ def _check_dimensions(cf: ComponentFile) -> None:
 
     for _, ind in cf.indicators:
         dim_of(ind)
+    for k in cf.clocks:
+        for p in (k.period, k.offset):
+            d = dim_of(p)
+            number = d == DIMENSIONLESS and not (language.names_in(p.tree) & set(dims))  # seconds as a number
+            if d is not ANY and d != SECOND and not number:
+                raise _err(cf.path, f"{p.where} is [{show(d)}]: a clock's period and offset are times [s] (a "
+                                    f"parameter of unit s, or a plain number of seconds){units(p.tree)}")
     for c in cf.clauses:
-        dim_of(c.condition)
+        if c.condition is not None:
+            dim_of(c.condition)
         for target, p in c.assign:
             d = dim_of(p)
             if d is not ANY and d != dims[target]:
@@ -516,8 +630,21 @@ def component_model(cf: ComponentFile, name: Optional[str] = None, parameter_set
                    output=d.kind in ("state", "discrete") and d.output)
 
     if events is not None:
-        events = Events(discrete=tuple(v(d, d.value) for d in cf.of_kind("discrete")), indicators=events[0],
-                        clauses=events[1])
+        ticks = [var(k.tick, "1", f"tick flag of the sample clock {k.name} (1 for the first round of the event "
+                                  f"iteration at each of its instants, else 0)", start=0.0, symbol=tick_symbol(k.name),
+                     min=0.0, max=1.0) for k in cf.clocks]
+        lasts = [var(last_name(k.name), "s", f"time of the last sample instant of the clock {k.name}",
+                     start=NEVER, symbol=f"last_{k.name}") for k in cf.clocks]
+        clocks = tuple(Clock(period, offset, tick) for (period, offset), tick in zip(events[2], ticks))
+        env = {sp.Symbol(n, real=True): values[n] for n in params}
+        for k, c in zip(cf.clocks, clocks):
+            for what, e, ok in (("period", c.period, lambda x: x > 0), ("offset", c.offset, lambda x: x >= 0)):
+                x = sp.sympify(sp.sympify(e).xreplace(env))
+                if not (x.is_number and math.isfinite(float(x)) and ok(float(x))):
+                    raise _err(src, f"{k.where} {what} = {getattr(k, what).text} is {x} with these parameter values: "
+                                    f"a clock's period must be positive and its offset >= 0 (finite, in s)")
+        events = Events(discrete=tuple(v(d, d.value) for d in cf.of_kind("discrete")) + tuple(ticks) + tuple(lasts),
+                        indicators=events[0], clauses=events[1], clocks=clocks)
 
     try:
         return explicit_model(
@@ -540,6 +667,8 @@ def _build_all(cf: ComponentFile, kinks: Optional[list] = None) -> tuple:
     """
     symbols = {n: sp.Symbol(n, real=True) for n in cf.declared
                if cf.declared[n].kind in ("parameter", "input", "state", "discrete")}
+    ticks = {k.name: sp.Symbol(tick_symbol(k.name), real=True) for k in cf.clocks}
+    lasts = {k.name: sp.Symbol(f"last_{k.name}", real=True) for k in cf.clocks}
     # constant between events: a kink or an exact if on these is no kink of the integrated equations
     constant = {symbols[d.name] for d in cf.of_kind("parameter") + cf.of_kind("discrete")}
     names = dict(symbols)
@@ -550,10 +679,25 @@ def _build_all(cf: ComponentFile, kinks: Optional[list] = None) -> tuple:
     if not cf.hybrid:
         return ders, outs, None
     indicators = tuple((n, _build_event(cf, p, names, constant, "indicator")) for n, p in cf.indicators)
-    clauses = tuple(EventClause(_build_event(cf, c.condition, names, constant, "condition"),
-                                tuple((symbols[t], _build_event(cf, p, names, constant, "event")) for t, p in c.assign),
-                                c.name) for c in cf.clauses)
-    return ders, outs, (indicators, clauses)
+    timing = tuple(tuple(_build_event(cf, p, names, constant, "event") for p in (k.period, k.offset))
+                   for k in cf.clocks)
+    period = {k.name: t[0] for k, t in zip(cf.clocks, timing)}
+
+    def guard(c):
+        cond = None if c.condition is None else _build_event(cf, c.condition, names, constant, "condition")
+        if c.clock is None:
+            return cond
+        # the tick, and at most once per sample instant: a tick repeated within half a period (a
+        # Co-Simulation step ending a rounding error past the instant it already sampled) is ignored
+        tick = sp.And(sp.Gt(ticks[c.clock], 0), sp.Gt(TIME - lasts[c.clock], period[c.clock] / 2))
+        return tick if cond is None else sp.And(tick, cond)
+
+    def assign(c):
+        out = tuple((symbols[t], _build_event(cf, p, names, constant, "event")) for t, p in c.assign)
+        return out + (((lasts[c.clock], TIME),) if c.clock is not None else ())
+
+    clauses = tuple(EventClause(guard(c), assign(c), c.name) for c in cf.clauses)
+    return ders, outs, (indicators, clauses, timing)
 
 
 def _build_event(cf, p: Parsed, names, constant, what):

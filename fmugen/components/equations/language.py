@@ -17,6 +17,11 @@ Smooth everywhere: ``sqrt sin cos tan exp log tanh atan`` (one argument),
 ``atan2(y, x)`` (a jump of 2 pi across y = 0, x < 0: keep the argument away
 from that cut).
 
+Staircases: ``round(x)`` (half up: ``floor(x + 1/2)``) and ``floor(x)``, exact; only in a
+``[[when]]`` value (sampled once at an event: an encoder's counts ``q_step*round(x/q_step)`` at a
+sample instant) or on parameters and discrete states -- on a state, input or time in an equation or
+an indicator they are refused (a jump at every step).
+
 Kinked (a corner or a jump): ``abs(x)``, ``sign(x)``, ``min(a, b)``,
 ``max(a, b)``, ``sat(x, lo, hi)`` (saturation), ``deadzone(x, lo, hi)``,
 ``step(d)`` (0 below 0, 1 above).  Each takes an optional last argument
@@ -87,8 +92,12 @@ SMOOTH_FUNCTIONS = {"sqrt": sp.sqrt, "sin": sp.sin, "cos": sp.cos, "tan": sp.tan
                     "tanh": sp.tanh, "atan": sp.atan}
 #: kinked functions: name -> number of arguments without the optional eps
 KINKED_FUNCTIONS = {"abs": 1, "sign": 1, "min": 2, "max": 2, "sat": 3, "deadzone": 3, "step": 1}
+#: staircases (quantisation): exact, and only where no solver integrates across their jumps -- in a
+#: [[when]] value (sampled at an event: an encoder's counts at a sample instant) or on constants
+STAIR_FUNCTIONS = {"round": lambda x: sp.floor(x + sp.Rational(1, 2)), "floor": sp.floor}
 #: every callable name of the language (``smooth`` only as an if-condition)
-FUNCTION_NAMES = frozenset(SMOOTH_FUNCTIONS) | frozenset(KINKED_FUNCTIONS) | {"atan2", "smooth", "der"}
+FUNCTION_NAMES = (frozenset(SMOOTH_FUNCTIONS) | frozenset(KINKED_FUNCTIONS) | frozenset(STAIR_FUNCTIONS)
+                  | {"atan2", "smooth", "der"})
 RESERVED = FUNCTION_NAMES | {"pi", "time", "t", "if", "then", "else", "elseif", "and", "or", "not"}
 
 _COMPARE = {ast.Gt: sp.Gt, ast.GtE: sp.Ge, ast.Lt: sp.Lt, ast.LtE: sp.Le}
@@ -270,6 +279,15 @@ class EquationBuilder(_Builder):
         if name == "atan2":
             self._arity(name, args, 2)
             return sp.atan2(args[0], args[1])
+        if name in STAIR_FUNCTIONS:
+            self._arity(name, args, 1)
+            if self.context == "event" or self._is_constant(args[0]):
+                return STAIR_FUNCTIONS[name](args[0])
+            raise ExpressionError(
+                f"{name}({args[0]}) in {self.text!r} is a staircase on a state, input or time: it jumps at "
+                f"every step, which no solver may integrate across and no indicator may hold; use it in a "
+                f"[[when]] value (evaluated once at an event, e.g. a sensor quantised at each sample instant of "
+                f"a [clocks] clock) or on parameters and discrete states")
         n = KINKED_FUNCTIONS[name]
         if len(args) not in (n, n + 1):
             raise ExpressionError(f"{name}() takes {n} argument{'s' if n > 1 else ''} and an optional "
