@@ -5,8 +5,8 @@ FMI Library enforces FMI 2.0 rules that fmpy's validation does not: a URDF arm w
 its inputs both carried a start value lost both variables there, which stopped the checker ("Model structure
 is not valid") and crashed libcosim's add_local_slave.  The kinds: a DH robot file (forward and inverse
 dynamics), URDF chains and a tree (straight-line and looped code), component files (smooth, with state
-events, with modes), a shipped assembly and the FMUs of three split scenes (the one-joint rig; the UR5 with
-electric axes, a URDF arm inside a scene; the PUMA shoulder on a stick-slip drive with backlash).
+events, with modes, sampled by a clock), a shipped assembly and the FMUs of three split scenes (the one-joint rig; the UR5 with
+electric axes, a URDF arm inside a scene; the PUMA shoulder on a stick-slip drive with backlash; the one-joint rig under a 1 kHz discrete PI).
 """
 import subprocess
 import sys
@@ -45,10 +45,12 @@ KINDS = {
     "component_file": ("lib:stribeck", [], False),
     "component_events": ("examples/components/bouncing_ball.toml", [], False),
     "component_modes": ("lib:stick_slip", [], False),
+    "component_clocked": ("lib:discrete_pid", [], False),
     "assembly": ("examples/single_joint_default.toml", [], False),
     "scene_split": ("examples/scenes/single_joint_split.toml", [], True),
     "scene_urdf_electric": ("examples/scenes/ur5_electric.toml", ["--set", "scene.monolithic=false"], True),
     "scene_hybrid": ("examples/scenes/puma_geared_drive_hybrid.toml", [], True),
+    "scene_sampled": ("examples/scenes/single_joint_sampled.toml", [], True),
 }
 
 
