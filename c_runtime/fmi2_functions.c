@@ -418,7 +418,8 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
         } else if (r < fmugen_vr_y(m)) value[i] = inst->u[r - fmugen_vr_u(m)];
         else if (r < fmugen_vr_rt(m)) value[i] = inst->p[r - fmugen_vr_p(m)];
         else if (r < fmugen_vr_d(m)) value[i] = inst->s.rt[r - fmugen_vr_rt(m)];
-        else value[i] = inst->p[m->np + (r - fmugen_vr_d(m))];
+        else if (r < fmugen_vr_event_time(m)) value[i] = inst->p[m->np + (r - fmugen_vr_d(m))];
+        else value[i] = inst->s.n_events ? inst->s.last_event_time : inst->s.start_time;
     }
     return fmi2OK;
 }
@@ -438,6 +439,7 @@ static const char *set_real_refusal(const fmugen_instance *inst, fmi2ValueRefere
     if (r < fmugen_vr_u(m)) return "a derivative is computed by the model and cannot be set";
     if (r < fmugen_vr_y(m)) return NULL; /* input */
     if (r < fmugen_vr_p(m)) return "an output is computed by the model and cannot be set";
+    if (r >= fmugen_vr_event_time(m)) return "the time of the last event is the runtime's and cannot be set";
     if (r >= fmugen_vr_d(m))
         return before_end ? NULL : "a discrete state changes only at events; its start can be set only before "
                                    "fmi2ExitInitializationMode";

@@ -174,7 +174,12 @@ static inline fmi2ValueReference fmugen_vr_y(const fmugen_model_def *m) { return
 static inline fmi2ValueReference fmugen_vr_p(const fmugen_model_def *m) { return (fmi2ValueReference)(2 * m->nx + m->nu + m->ny); }
 static inline fmi2ValueReference fmugen_vr_rt(const fmugen_model_def *m) { return (fmi2ValueReference)(2 * m->nx + m->nu + m->ny + m->np); }
 static inline fmi2ValueReference fmugen_vr_d(const fmugen_model_def *m) { return fmugen_vr_rt(m) + FMUGEN_RT_COUNT; }
-static inline fmi2ValueReference fmugen_vr_end(const fmugen_model_def *m) { return fmugen_vr_d(m) + (fmi2ValueReference)m->nd; }
+/* a hybrid model's runtime Real after its discrete states: the time of the last event (solver.last_event_time) */
+static inline fmi2ValueReference fmugen_vr_event_time(const fmugen_model_def *m) { return fmugen_vr_d(m) + (fmi2ValueReference)m->nd; }
+static inline fmi2ValueReference fmugen_vr_end(const fmugen_model_def *m)
+{
+    return fmugen_vr_event_time(m) + ((m->nz > 0 || m->ng > 0 || m->ns > 0) ? 1u : 0u);
+}
 
 /* ---- events (events.c) ---- */
 /* consecutive events each closer than this (times max(1, |t|)) to the one

@@ -74,7 +74,8 @@ const char *fmugen_real_name(const fmugen_instance *inst, fmi2ValueReference vr,
     else if (vr < fmugen_vr_p(m)) snprintf(buf, n, "%s", m->y_names[vr - fmugen_vr_y(m)]);
     else if (vr < fmugen_vr_rt(m)) snprintf(buf, n, "%s", m->p_names[vr - fmugen_vr_p(m)]);
     else if (vr < fmugen_vr_d(m)) snprintf(buf, n, "%s", rt_names[vr - fmugen_vr_rt(m)]);
-    else if (vr < fmugen_vr_end(m)) snprintf(buf, n, "%s", m->d_names[vr - fmugen_vr_d(m)]);
+    else if (vr < fmugen_vr_event_time(m)) snprintf(buf, n, "%s", m->d_names[vr - fmugen_vr_d(m)]);
+    else if (vr < fmugen_vr_end(m)) snprintf(buf, n, "solver.last_event_time");
     else snprintf(buf, n, "<unknown>");
     return buf;
 }

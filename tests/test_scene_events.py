@@ -179,3 +179,15 @@ def test_a_scene_robot_refuses_an_unknown_friction(tmp_path):
                                          'friction = "sticky"\n[fmus.arm]\nmembers = ["arm"]\n')
     with pytest.raises(SceneError, match="friction must be 'smooth' or 'stick-slip', got 'sticky'"):
         fmugen.load_scene(tmp_path / "scene.toml")
+
+
+def test_an_adaptive_run_lands_a_communication_point_on_the_event(scene, tmp_path):
+    """An FMU reports an event inside an adaptive macro step (solver.n_events, solver.last_event_time): the
+    master rolls back and takes a step that ends just past it, so the breakaway (t_b = 3 s) falls on a
+    communication point, where a fixed 70 ms grid has none within 5 ms."""
+    sc = fmugen.load_scene(scene / "scene.toml")
+    built = sc.build(tmp_path / "fmus")
+    fixed = run(built.system, "gauss-seidel", "linear", step=0.07)
+    adaptive = run(built.system, "gauss-seidel", "linear", step=0.07, adaptive=True, tol=1e-4)
+    assert np.min(np.abs(fixed.time - T_B)) > 5e-3
+    assert adaptive.ok and adaptive.summary.rollbacks >= 1 and np.min(np.abs(adaptive.time - T_B)) < 1e-8

@@ -392,6 +392,18 @@ class Master:
                                      f"a step that divides the period ({period:g} s, {period / 2:g} s, "
                                      f"{period / 5:g} s, ...) and the offset")
 
+    def _event_time_in_step(self, t: float, H: float):
+        """The earliest time of an event an FMU reported in the step just taken from t (not yet accepted),
+        or None: read from solver.last_event_time of the FMUs whose solver.n_events rose."""
+        before = getattr(self, "_n_events", None) or [0] * len(self.event_units)
+        times = []
+        for u, b in zip(self.event_units, before):
+            if _event_count(u) > b and "solver.last_event_time" in u.variables:
+                te = float(u.get_reals([u.variables["solver.last_event_time"].valueReference])[0])
+                if t < te <= t + H:
+                    times.append(te)
+        return min(times) if times else None
+
     def _events_in_step(self, summ) -> bool:
         """Did an FMU report an event in the macro step just accepted?  (solver.n_events rose; an FMU state
         restored by a rollback or a shadow window restores the count too.)"""
@@ -475,6 +487,7 @@ class Master:
         try:
             calls += self._initialize(history.U[0])
             self._n_events = [_event_count(u) for u in self.event_units]
+            self._relanded = None  # the event an adaptive step was last shortened to land on
             G = np.zeros(2 * nu if self.hermite else nu)  # the iteration's image: values (and slopes) at t_{n+1}
             if self.hermite:
                 calls += self._gather(Unew, G)
@@ -562,6 +575,18 @@ class Master:
                         calls += self._restore_all(states)
                         summ.rollbacks += 1
                         H = control.reject(H, err)
+                        if est is not None:
+                            est.discard()
+                        continue
+                # an adaptive run lands on an event an FMU reported inside the step: back to t_n and a step
+                # that ends just past it, so the jump falls on a communication point (once per event)
+                if adaptive and states and self.event_units:
+                    te = self._event_time_in_step(t, H)
+                    if te is not None and te != self._relanded and t + max(Hmin, 1e-6 * H) < te < t + (1 - 1e-6) * H:
+                        calls += self._restore_all(states)
+                        summ.rollbacks += 1
+                        self._relanded = te
+                        H = (te - t) * (1 + 1e-9)
                         if est is not None:
                             est.discard()
                         continue

@@ -257,6 +257,10 @@ def variable_layout(model: SymbolicModel) -> VariableLayout:
         add(name=v.name, value_reference=first_d + k, type="Real", causality="local", variability="discrete",
             initial="exact", start=v.start, unit=v.unit, description=v.description or "discrete state",
             kind="discrete", symbol=v.symbol)
+    if model.events is not None:  # then the runtime's time of the last event (fmugen_model.h)
+        add(name="solver.last_event_time", value_reference=first_d + len(model.events.discrete), type="Real",
+            causality="local", variability="discrete", initial="calculated", unit="s",
+            description="time of the last event the runtime handled (the start time before any)", kind="runtime")
     # FMI 2.0 aliases (sec. 2.2.7: the same value reference; of a non-constant alias set only one variable may
     # carry a start value), last so that no value reference or index above moves. A state's alias keeps the
     # state's causality, initial="calculated" without a start (the state holds it). An input's alias is a
