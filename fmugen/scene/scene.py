@@ -196,20 +196,23 @@ class Scene:
 
     @cached_property
     def rest_inputs(self) -> dict:
-        """Value of every connected input at the initial state ("inst.var" -> value): its source's value
-        (times the connection's factor), evaluated instance by instance in the order of the connections'
-        dependencies (the scene has no algebraic loop).  Baked into the FMUs as the inputs' start values,
-        so an FMU run alone or by another importer starts where the scene starts (the arm's torques at
-        the holding torques)."""
+        """Value of every connected input at the initial state ("inst.var" -> value), from
+        :meth:`input_values`.  Baked into the FMUs as the inputs' start values, so an FMU run alone or by
+        another importer starts where the scene starts (the arm's torques at the holding torques)."""
+        return self.input_values(self.initial.values, self.spec.start)
+
+    def input_values(self, values: dict, t: float) -> dict:
+        """Every connected input's value ("inst.var") with the scene's states at ``values``: its source's
+        value (times the connection's factor), evaluated instance by instance in the order of the
+        connections' dependencies (the scene has no algebraic loop); undriven inputs at their starts."""
         from ..codegen.evaluate import ModelEvaluator
 
-        x0 = self.initial.values
-        t0 = self.spec.start
-        known = {k: float(v) for k, v in x0.items()}
+        known = {k: float(v) for k, v in values.items()}
         for inst in self.spec.instances:
             for v in self.undriven_inputs(inst):
                 known[f"{inst}.{v.name}"] = float(v.start if v.start is not None else 0.0)
         driver = {f"{ti}.{tv}": (f"{si}.{sv}", 1.0 if f is None else f) for si, sv, ti, tv, f in self.connections}
+        evaluators = {}
 
         def value(name, depth=0):
             # only the instances whose computed outputs feed a connection are evaluated (not the arm,
@@ -217,7 +220,7 @@ class Scene:
             if name in known:
                 return known[name]
             if depth > 4 * len(driver) + 8:  # cannot happen without an algebraic loop (refused on reading)
-                raise SceneError(f"{self.src}: no value at rest for {name}")
+                raise SceneError(f"{self.src}: no value for {name} at t = {t:g}")
             if name in driver:
                 s_, f = driver[name]
                 known[name] = f * value(s_, depth + 1)
@@ -226,11 +229,12 @@ class Scene:
             m = self.base_models[inst]
             x = np.array([value(f"{inst}.{v.name}", depth + 1) for v in m.states])
             u = np.array([value(f"{inst}.{v.name}", depth + 1) for v in m.inputs])
-            for v, y in zip(m.outputs, ModelEvaluator(m).g(t0, x, u)):
+            ev = evaluators.setdefault(inst, ModelEvaluator(m))
+            for v, y in zip(m.outputs, ev.g(t, x, u)):
                 known[f"{inst}.{v.name}"] = float(y)
             return known[name]
 
-        return {t: value(t) for t in driver}
+        return {name: value(name) for name in driver}
 
     def _check_loops(self) -> None:
         """An algebraic loop: a cycle of outputs that depend directly on connected inputs."""

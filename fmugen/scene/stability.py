@@ -130,39 +130,6 @@ def _block_of(scene) -> dict:
     return out
 
 
-def _input_values(scene, values: dict, t: float) -> dict:
-    """Every connected input's value ("inst.var") with the scene's states at ``values``: its source's
-    value times the connection's factor, instance by instance in dependency order (no algebraic loop)."""
-    from ..codegen.evaluate import ModelEvaluator
-
-    known = {k: float(v) for k, v in values.items()}
-    for inst in scene.spec.instances:
-        for v in scene.undriven_inputs(inst):
-            known[f"{inst}.{v.name}"] = float(v.start if v.start is not None else 0.0)
-    driver = {f"{ti}.{tv}": (f"{si}.{sv}", 1.0 if f is None else f) for si, sv, ti, tv, f in scene.connections}
-    evaluators = {}
-
-    def value(name, depth=0):
-        if name in known:
-            return known[name]
-        if depth > 4 * len(driver) + 8:
-            raise ValueError(f"no value for {name}")
-        if name in driver:
-            src, f = driver[name]
-            known[name] = f * value(src, depth + 1)
-            return known[name]
-        inst = name.split(".", 1)[0]
-        m = scene.base_models[inst]
-        x = np.array([value(f"{inst}.{v.name}", depth + 1) for v in m.states])
-        u = np.array([value(f"{inst}.{v.name}", depth + 1) for v in m.inputs])
-        ev = evaluators.setdefault(inst, ModelEvaluator(m))
-        for v, y in zip(m.outputs, ev.g(t, x, u)):
-            known[f"{inst}.{v.name}"] = float(y)
-        return known[name]
-
-    return {name: value(name) for name in driver}
-
-
 def linearise_split(scene, values: Optional[dict] = None, t: Optional[float] = None) -> JacobiLinearisation:
     """The scene's FMU groups linearised separately (see the module's docstring): at its initial state, or
     at the states ``values`` ("inst.var" -> value, e.g. a point of a run) and time ``t``, the connected
@@ -174,7 +141,7 @@ def linearise_split(scene, values: Optional[dict] = None, t: Optional[float] = N
         x0, rest = scene.initial.values, scene.rest_inputs
     else:
         x0 = dict(values)
-        rest = _input_values(scene, x0, t0)
+        rest = scene.input_values(x0, t0)
     block = _block_of(scene)
     insts = list(scene.spec.instances)
     xo, uo, so = {}, {}, {}  # offsets of each instance's states, inputs, signals
