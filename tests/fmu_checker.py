@@ -20,8 +20,7 @@ BUILD_SCRIPT = "tests/tools/build_fmu_checker.sh"
 
 def find_checker():
     """Path of fmuCheck.linux64, or None."""
-    for cand in (os.environ.get("FMUCHECK"), shutil.which("fmuCheck.linux64"),
-                 DEFAULT_PREFIX / "fmuCheck.linux64", Path("/opt/fmuchecker/fmuCheck.linux64")):
+    for cand in (os.environ.get("FMUCHECK"), shutil.which("fmuCheck.linux64"), DEFAULT_PREFIX / "fmuCheck.linux64"):
         if cand and Path(cand).is_file() and os.access(cand, os.X_OK):
             return Path(cand)
     return None
