@@ -127,6 +127,19 @@ def _check_args(args, scene) -> None:
         args.repeats = a.count(args.repeats, "--repeats", 1, 1000)
 
 
+def sampling_period(system):
+    """The shortest sample period of the system's FMUs (their clocks), or None."""
+    from .units import clocks_of_fmu
+
+    periods = [p for u in system.units for p, _ in clocks_of_fmu(u.path, u.start_values)]
+    return min(periods) if periods else None
+
+
+def _divides(h: float, period: float) -> bool:
+    k = period / h
+    return k >= 1 - 1e-9 and abs(k - round(k)) <= 1e-9 * k
+
+
 def _flags(args) -> dict:
     """The run settings given on the command line (None: not given)."""
     return {"scheme": getattr(args, "scheme", None), "extrapolation": getattr(args, "extrapolation", None),
@@ -310,7 +323,15 @@ def cmd_report(args) -> int:
     built = scene.build(out / "fmus")
     system = built.system
     H = float(settings.step or system.step)  # the scene's [cosim] step, else its [scene] step
-    steps = [float(h) for h in args.steps.split(",")] if args.steps else [8 * H, 4 * H, 2 * H, H, H / 2]  # checked
+    if args.steps:
+        steps = [float(h) for h in args.steps.split(",")]  # checked
+    else:
+        steps = [8 * H, 4 * H, 2 * H, H, H / 2]
+        period = sampling_period(system)
+        if period is not None:  # a sampled scene: steps that land on its sample instants (the master's rule)
+            steps = [h for h in steps if _divides(h, period)] or [period]
+            while len(steps) < 5:
+                steps.append(steps[-1] / 2)
     problem = scene.reference_problem()
     extra = []
     if not args.no_monolithic:

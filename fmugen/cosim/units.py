@@ -62,6 +62,25 @@ def vr_array(vrs) -> ctypes.Array:
     return (c_uint * max(1, len(vrs)))(*vrs)
 
 
+def clocks_of_fmu(path, start_values=None) -> list:
+    """:func:`_clocks` of an FMU file (its modelDescription.xml read from the zip; [] for a broken one)."""
+    import zipfile
+
+    import defusedxml.ElementTree as safe
+
+    try:
+        with zipfile.ZipFile(path) as zf:
+            root = safe.fromstring(zf.read("modelDescription.xml"))
+    except Exception:  # the master's loading names what is wrong with it
+        return []
+    starts = {}
+    for sv in root.iter("ScalarVariable"):
+        real = sv.find("Real")
+        if real is not None and real.get("start") is not None:
+            starts[sv.get("name")] = float(real.get("start"))
+    return _clock_values(root, starts, dict(start_values or {}), Path(path))
+
+
 def _clocks(unzip_dir, variables, start_values) -> list:
     """(period, offset) of each sample clock an fmugen FMU declares in its vendor annotation
     (fmugen/fmi/model_description.py), with the start values the run sets for their parameters."""
@@ -74,14 +93,20 @@ def _clocks(unzip_dir, variables, start_values) -> list:
         root = safe.parse(path).getroot()
     except (OSError, ET.ParseError, ValueError):
         return []
+    starts = {k: v.start for k, v in variables.items() if getattr(v, "start", None) is not None}
+    return _clock_values(root, starts, start_values, path)
+
+
+def _clock_values(root, starts: dict, start_values: dict, path) -> list:
+    """(period, offset) per <Clock> of fmugen's vendor annotation, parameters at the run's start values."""
     out = []
     for c in root.findall("./VendorAnnotations/Tool[@name='fmugen']/Clock"):
         vals = []
         for key in ("period", "offset"):
             name = c.get(f"{key}Parameter")
             v = start_values.get(name) if name else None
-            if v is None and name in variables and variables[name].start is not None:
-                v = variables[name].start
+            if v is None and name in starts:
+                v = starts[name]
             try:
                 vals.append(float(v if v is not None else c.get(key)))
             except (TypeError, ValueError):
