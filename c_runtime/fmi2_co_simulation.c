@@ -351,8 +351,9 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
                 rc = FMUGEN_SOLVER_FAILED;
                 break;
             }
+            /* not counted in n_events: a sample instant is a time event a master knows beforehand (the
+             * clocks are in the description), not a discontinuity it has to find */
             inst->s.fsal_valid = 0;
-            inst->s.n_events++;
         }
         if (target >= t_end) break;
     }

@@ -124,7 +124,7 @@ def runtime_parameters() -> tuple:
         # listed only by FMUs of hybrid models (variable_layout)
         RuntimeParameter("solver.n_events", d["FMUGEN_INT_N_EVENTS"], "Integer", "local", "discrete", "calculated",
                          None, "", "events handled so far (Co-Simulation: state events located inside "
-                         "communication steps; Model Exchange: event iterations)"),
+                         "communication steps, not sample instants; Model Exchange: event iterations)"),
     )
 
 
