@@ -41,7 +41,8 @@ WHEN_KEYS = {"condition", "set", "name", "description", "clock"}
 CLOCK_KEYS = {"period", "offset", "description"}
 MAX_CLOCKS = 10
 MAX_DECLARATIONS = 200  # per table: a component file is a component, not a model of everything
-MAX_EQUATIONS = 400
+MAX_INTERMEDIATES = 5000  # [intermediates]: named steps of one straight-line program (linear cost each)
+MAX_EQUATIONS = 6000
 MAX_INDICATORS = 100
 MAX_CLAUSES = 100
 
@@ -76,6 +77,8 @@ class ComponentFile:
     indicators: list = field(default_factory=list)  # (name, Parsed), one per [indicators] entry
     clauses: list = field(default_factory=list)  # Clause, one per [[when]] table, in file order
     clocks: list = field(default_factory=list)  # SampleClock, one per [clocks.<name>] table
+    widths: list = field(default_factory=list)  # (equation, site text, eps): widths checked with the values
+    built: Optional[tuple] = field(default=None, repr=False, compare=False)  # _build_all's, value-free
 
     def of_kind(self, kind: str) -> list:
         return [d for d in self.declared.values() if d.kind == kind]
@@ -199,8 +202,9 @@ def read_component_file(path) -> ComponentFile:
         tab = data.get(table, {})
         if not isinstance(tab, dict):
             raise _err(src, f"[{table}] must be a table of {{ unit = ..., ... }} entries")
-        if len(tab) > MAX_DECLARATIONS:
-            raise _err(src, f"[{table}] declares {len(tab)} names; at most {MAX_DECLARATIONS}")
+        limit = MAX_INTERMEDIATES if table == "intermediates" else MAX_DECLARATIONS
+        if len(tab) > limit:
+            raise _err(src, f"[{table}] declares {len(tab)} names; at most {limit}")
         for vname, entry in tab.items():
             where = f"[{table}] {vname}"
             problem = _name_problem(vname)
@@ -259,7 +263,7 @@ def read_component_file(path) -> ComponentFile:
     indicators, clauses = _events(data, declared, src, clocks)
     cf = ComponentFile(path, name, desc, prov, declared, equations, order, sets, connectors,
                        indicators=indicators, clauses=clauses, clocks=clocks)
-    _build_all(cf, cf.kinks)  # the language's refusals first (they say what is wrong with the text) ...
+    cf.built = _build_all(cf, cf.kinks, cf.widths)  # the language's refusals first (they say what is wrong with the text) ...
     _check_dimensions(cf)  # ... then the dimensions of what it says
     return cf
 
@@ -623,7 +627,19 @@ def component_model(cf: ComponentFile, name: Optional[str] = None, parameter_set
                                  f"{', '.join(cf.sets) or 'none'} ([sets.<name>])")
     values.update(_check_values(dict(overrides or {}), params, f"{src}: parameter override"))
 
-    ders, outs, events = _build_all(cf)
+    ders, outs, events, program = cf.built if cf.built is not None else _build_all(cf)
+    program = _copy(program)  # explicit_model appends its f and g steps
+    env = {sp.Symbol(n, real=True): values[n] for n in params}
+    env.update({sp.Symbol(d.name, real=True): d.value for d in cf.of_kind("discrete")})
+    for eq, site, eps in cf.widths:  # the widths that are parameters: > 0 with the chosen values
+        try:
+            x = float(sp.sympify(eps).xreplace(env))
+        except (TypeError, ValueError, OverflowError):
+            x = math.nan
+        if not (math.isfinite(x) and x > 0):
+            raise _err(src, f"equation '{eq}': the smoothing width {eps} of {site} is {x:g} with these parameter "
+                            f"values: a width is a constant > 0 (with 0 the kink is exact and its smooth form "
+                            f"divides by 0), refused by the kink rule")
 
     def v(d, start):
         return var(d.name, d.unit, d.description, start=start, nominal=d.nominal, min=d.min, max=d.max,
@@ -654,17 +670,30 @@ def component_model(cf: ComponentFile, name: Optional[str] = None, parameter_set
             [v(d, values[d.name]) for d in params.values()],
             ders, [v(d, None) for d in cf.of_kind("output")], outs,
             description=cf.description or f"component file {cf.path.name}",
-            provenance=cf.provenance or f"component file {cf.path.name}", events=events)
+            provenance=cf.provenance or f"component file {cf.path.name}", events=events, program=program)
     except ValueError as exc:
         raise _err(src, str(exc)) from None
 
 
-def _build_all(cf: ComponentFile, kinks: Optional[list] = None) -> tuple:
-    """(derivative expressions, output expressions, events); intermediates substituted, parameters symbolic.
+def _signs(cf) -> dict:
+    """name -> the signs (of -1, 0, 1) a declared quantity takes, from its declared range (kinks in disguise)."""
+    return {n: language.sign_of_bounds(d.min, d.max, d.kind in ("parameter", "discrete"))
+            for n, d in cf.declared.items() if d.kind in ("parameter", "input", "state", "discrete")}
 
-    ``events``: None for a smooth file, else (indicators, clauses) as :class:`Events` takes them, every
-    intermediate and output inlined (the events read states, inputs, parameters, discrete states, t).
+
+def _build_all(cf: ComponentFile, kinks: Optional[list] = None, widths: Optional[list] = None) -> tuple:
+    """(derivative expressions, output expressions, events, program); parameters symbolic.
+
+    Every intermediate and output is a named step of one straight-line :class:`Program` (``_w<name>_<k>``):
+    the equations read its symbol, never its expression, so nothing is expanded (a chain of intermediates
+    each reading the previous one k times costs k operations a link, not k**n), and the Jacobians are the
+    chain rule over the program (:func:`.derive.jacobian`, the algorithm of
+    :func:`fmugen.codegen.differentiate.differentiate`, in :func:`explicit_model`).  An intermediate of parameters and discrete states only is a constant to
+    the kink rules.  ``events``: None for a smooth file, else (indicators, clauses, timing) with the
+    intermediates inlined (the events read states, inputs, parameters, discrete states, t).
     """
+    from ...codegen.program import Program
+
     symbols = {n: sp.Symbol(n, real=True) for n in cf.declared
                if cf.declared[n].kind in ("parameter", "input", "state", "discrete")}
     ticks = {k.name: sp.Symbol(tick_symbol(k.name), real=True) for k in cf.clocks}
@@ -672,19 +701,32 @@ def _build_all(cf: ComponentFile, kinks: Optional[list] = None) -> tuple:
     # constant between events: a kink or an exact if on these is no kink of the integrated equations
     constant = {symbols[d.name] for d in cf.of_kind("parameter") + cf.of_kind("discrete")}
     names = dict(symbols)
+    signs = _signs(cf)
+    program = Program("_w")
     for n in cf.order:  # intermediates and outputs, each after what it reads
-        names[n] = _build(cf, n, names, constant, kinks)
-    ders = [_build(cf, d.name, names, constant, kinks) for d in cf.of_kind("state")]
+        expr, sign = _build(cf, n, names, constant, kinks, signs, widths)
+        s = program.let(expr, f"{n}_")
+        names[n] = s
+        signs[n] = sign
+        if s.is_Symbol and expr.free_symbols <= constant:
+            constant.add(s)
+    ders = [_build(cf, d.name, names, constant, kinks, signs, widths)[0] for d in cf.of_kind("state")]
     outs = [names[d.name] for d in cf.of_kind("output")]
+    inline = _Inliner(program)
+    if kinks:  # the distances to the kinks, for fmugen linearize: of states, inputs and parameters only
+        kinks[:] = [k[:3] + ([inline(d) for d in k[3]], inline(k[4])) for k in kinks]
+    if widths:
+        widths[:] = [(eq, site, inline(e)) for eq, site, e in widths]
     if not cf.hybrid:
-        return ders, outs, None
-    indicators = tuple((n, _build_event(cf, p, names, constant, "indicator")) for n, p in cf.indicators)
-    timing = tuple(tuple(_build_event(cf, p, names, constant, "event") for p in (k.period, k.offset))
+        return ders, outs, None, program
+    inlined = _Inlined(names, inline)  # the events read closed forms, built for what they read only
+    indicators = tuple((n, _build_event(cf, p, inlined, constant, "indicator")) for n, p in cf.indicators)
+    timing = tuple(tuple(_build_event(cf, p, inlined, constant, "event") for p in (k.period, k.offset))
                    for k in cf.clocks)
     period = {k.name: t[0] for k, t in zip(cf.clocks, timing)}
 
     def guard(c):
-        cond = None if c.condition is None else _build_event(cf, c.condition, names, constant, "condition")
+        cond = None if c.condition is None else _build_event(cf, c.condition, inlined, constant, "condition")
         if c.clock is None:
             return cond
         # the tick, and at most once per sample instant: a tick repeated within half a period (a
@@ -693,11 +735,52 @@ def _build_all(cf: ComponentFile, kinks: Optional[list] = None) -> tuple:
         return tick if cond is None else sp.And(tick, cond)
 
     def assign(c):
-        out = tuple((symbols[t], _build_event(cf, p, names, constant, "event")) for t, p in c.assign)
+        out = tuple((symbols[t], _build_event(cf, p, inlined, constant, "event")) for t, p in c.assign)
         return out + (((lasts[c.clock], TIME),) if c.clock is not None else ())
 
     clauses = tuple(EventClause(guard(c), assign(c), c.name) for c in cf.clauses)
-    return ders, outs, (indicators, clauses, timing)
+    return ders, outs, (indicators, clauses, timing), program
+
+
+def _copy(program):
+    from ...codegen.program import Program
+
+    out = Program(program.prefix)
+    out.steps, out._count = list(program.steps), program._count
+    return out
+
+
+class _Inlined(dict):
+    """``names`` with every value read through ``inline`` (on demand: only the names an event reads)."""
+
+    def __init__(self, names, inline):
+        super().__init__(names)
+        self.inline = inline
+
+    def __getitem__(self, key):
+        return self.inline(super().__getitem__(key))
+
+
+class _Inliner:
+    """An expression with the program's symbols replaced by their closed forms (memoised, on demand)."""
+
+    def __init__(self, program):
+        self.steps = {st.symbol: st.expr for st in program.steps}
+        self.memo = {}
+
+    def __call__(self, expr):
+        expr = sp.sympify(expr)
+        todo = [s for s in expr.free_symbols if s in self.steps and s not in self.memo]
+        while todo:  # depth first, without recursion (a chain of 1000 intermediates)
+            s = todo[-1]
+            need = [t for t in self.steps[s].free_symbols if t in self.steps and t not in self.memo]
+            if need:
+                todo += need
+                continue
+            todo.pop()
+            if s not in self.memo:
+                self.memo[s] = self.steps[s].xreplace(self.memo)
+        return expr.xreplace(self.memo) if self.memo else expr
 
 
 def _build_event(cf, p: Parsed, names, constant, what):
@@ -718,17 +801,21 @@ def _build_event(cf, p: Parsed, names, constant, what):
     return expr
 
 
-def _build(cf, target, names, constant, kinks=None):
+def _build(cf, target, names, constant, kinks=None, signs=None, widths=None):
+    """(expression, the signs it can take) of the right-hand side of ``target``'s equation."""
     lhs, rhs, tree, python = cf.equations[target]
     try:
-        builder = language.EquationBuilder(python, names, constant)
+        builder = language.EquationBuilder(python, names, constant, signs=signs)
         expr = builder.build(tree)
         if kinks is not None:
             kinks += [(f"{lhs} = {rhs}",) + k for k in builder.kinks]
+        if widths is not None:
+            widths += [(f"{lhs} = {rhs}",) + w for w in builder.widths]
         language.check_finite_constants(expr, rhs)
+        sign = builder.sign(tree)
     except ExpressionError as exc:
         raise _err(cf.path, f"equation '{lhs} = {rhs}': {str(exc).replace(repr(python), repr(rhs))}") from None
-    return expr
+    return expr, sign
 
 
 class _RealAbs(sp.Function):
@@ -740,36 +827,50 @@ class _RealAbs(sp.Function):
     """
 
     is_real = True
+    is_real_abs = True
 
     def fdiff(self, argindex=1):
         return sp.sign(self.args[0])
 
 
 def explicit_model(name, states, inputs, parameters, derivatives, outputs, output_exprs, description,
-                   provenance, events: Optional[Events] = None) -> SymbolicModel:
-    """:meth:`SymbolicModel.from_equations` with |x| differentiated as sign(x) dx (see :class:`_RealAbs`)."""
-    from ...codegen.model import _finite_signs
-    from ...codegen.program import Program
+                   provenance, events: Optional[Events] = None, program=None) -> SymbolicModel:
+    """A SymbolicModel of explicit equations; |x| differentiated as sign(x) dx.
 
-    def real_abs(e):
-        return sp.sympify(e).replace(sp.Abs, _RealAbs)
+    ``program``: the named intermediates the expressions read (a :class:`Program`, steps in order).  The
+    Jacobians are the chain rule over its steps (:func:`.derive.jacobian`, the algorithm of
+    :func:`fmugen.codegen.differentiate.differentiate`: one derivative step per (step, state or input it
+    depends on), each a fresh symbol), never a closed form: the cost grows linearly with the number of
+    intermediates.  The one CSE runs when the C is written.
+    """
+    from ...codegen.model import _finite_signs
+    from ...codegen.program import Assign, Program
+    from .derive import jacobian
 
     def plain(e):
-        return _finite_signs(e.replace(_RealAbs, sp.Abs))
+        e = sp.sympify(e)
+        return _finite_signs(e.replace(_RealAbs, sp.Abs) if e.has(_RealAbs) else e)
 
-    f = [real_abs(e) for e in derivatives]
-    g = [real_abs(e) for e in output_exprs]
+    prog = Program("_w") if program is None else program
+    intermediates = Program(prog.prefix)
+    intermediates.steps = [st for st in prog.steps if isinstance(st, Assign)]
+    f = [sp.sympify(e) for e in derivatives]
+    g = [sp.sympify(e) for e in output_exprs]
     xs, us = [v.symbol for v in states], [v.symbol for v in inputs]
-    prog, jac = Program("_w"), Program("_j")
     fd = tuple(prog.let(plain(e), "f") for e in f)
     gd = tuple(prog.let(plain(e), "g") for e in g)
+    jac = Program("_j")
+    nx, nu = len(xs), len(us)
 
-    def jm(exprs, wrt):
-        if not wrt or not exprs:
-            return sp.zeros(len(exprs), len(wrt))
-        return sp.Matrix(len(exprs), len(wrt), lambda i, j: jac.let(plain(sp.diff(exprs[i], wrt[j]))))
+    def jm(exprs):
+        if not exprs or not xs + us:
+            return sp.zeros(len(exprs), nx), sp.zeros(len(exprs), nu)
+        J = jacobian(intermediates, exprs, xs + us, jac)
+        return J[:, :nx], J[:, nx:]
 
+    (dfdx, dfdu), (dgdx, dgdu) = jm(f), jm(g)
+    jac.steps = [Assign(st.symbol, plain(st.expr)) for st in jac.steps]
     return SymbolicModel(name=name, description=description, states=tuple(states), inputs=tuple(inputs),
                          parameters=tuple(parameters), outputs=tuple(outputs), program=prog, derivatives=fd,
-                         output_exprs=gd, jacobian=jac, dfdx=jm(f, xs), dfdu=jm(f, us), dgdx=jm(g, xs),
-                         dgdu=jm(g, us), provenance=provenance, events=events)
+                         output_exprs=gd, jacobian=jac, dfdx=dfdx, dfdu=dfdu, dgdx=dgdx, dgdu=dgdu,
+                         provenance=provenance, events=events)

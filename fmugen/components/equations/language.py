@@ -69,6 +69,20 @@ and assigned values (context ``"event"``: evaluated once at an event, so
 every function and ``if`` is exact; ``==``/``!=`` on a state, input or time
 is refused there -- never met exactly just after a crossing).
 
+Kinks in disguise
+-----------------
+In an equation, on a state, input or time: a root, a fractional power below 1, a ``log`` or a power with
+a non-number exponent of an expression that can be 0 (from the signs its parts can take,
+:meth:`EquationBuilder.sign`: ``sqrt(w**2)`` is ``abs(w)``, ``(w + sqrt(w**2))/2`` is ``max(w, 0)``) is
+refused like an exact kink; so is a smoothing width that is not a constant > 0 (``0``, ``1e-400``,
+``abs(w, w)``, a width of a state, input or time).  Widths of parameters are checked with the values
+(:func:`fmugen.components.equations.file.component_model`).
+
+Numbers
+-------
+Decimal literals only (:data:`NUMBER_LITERAL`): ``12``, ``0.5``, ``.5``, ``3.``, ``1e-3``; no ``_``, no
+``0x``/``0o``/``0b``, no ``j``, no leading zeros.
+
 Names: ``time`` is the model time [s]; ``pi``; every declared parameter,
 input, state, discrete state and intermediate.  Other names are refused with
 the list of declared ones.
@@ -78,7 +92,10 @@ from __future__ import annotations
 import ast
 import io
 import math
+import re
 import tokenize
+
+from typing import Optional
 
 import sympy as sp
 
@@ -86,6 +103,7 @@ from ...robot.expressions import (MAX_DEPTH, MAX_TEXT_LENGTH, ExpressionError, _
                                   _short, check_double)
 from ..base import TIME
 from ..smooth import huber, smooth_relu, smooth_sign
+from .dimensions import unparse
 
 #: one-argument functions that are smooth everywhere
 SMOOTH_FUNCTIONS = {"sqrt": sp.sqrt, "sin": sp.sin, "cos": sp.cos, "tan": sp.tan, "exp": sp.exp, "log": sp.log,
@@ -99,6 +117,54 @@ STAIR_FUNCTIONS = {"round": lambda x: sp.floor(x + sp.Rational(1, 2)), "floor": 
 FUNCTION_NAMES = (frozenset(SMOOTH_FUNCTIONS) | frozenset(KINKED_FUNCTIONS) | frozenset(STAIR_FUNCTIONS)
                   | {"atan2", "smooth", "der"})
 RESERVED = FUNCTION_NAMES | {"pi", "time", "t", "if", "then", "else", "elseif", "and", "or", "not"}
+
+#: the literal grammar (README "The expression language"): digits, an optional fraction, an optional exponent
+#: -- ``0 | [1-9][0-9]*`` before the point (no leading zeros), no ``_``, no ``0x``/``0o``/``0b``, no ``j``
+NUMBER_LITERAL = re.compile(r"(?:(?:0|[1-9][0-9]*)(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+
+# -- signs, for the kinks in disguise: the set of signs (-1, 0, +1) an expression can take -----------
+POS, NEG, ZERO = frozenset({1}), frozenset({-1}), frozenset({0})
+NONNEG, NONPOS, NONZERO, ANYSIGN = frozenset({0, 1}), frozenset({-1, 0}), frozenset({-1, 1}), frozenset({-1, 0, 1})
+
+
+def _sign_add(a, b):
+    out = set()
+    for x in a:
+        for y in b:
+            out |= {x} if x == y or y == 0 else {y} if x == 0 else {-1, 0, 1}
+    return frozenset(out) or ANYSIGN
+
+
+def _sign_mul(a, b):
+    return frozenset(x * y for x in a for y in b) or ANYSIGN
+
+
+def _sign_flip(a):
+    return frozenset(-x for x in a)
+
+
+def _sign_square(a):
+    return frozenset(abs(x) for x in a)
+
+
+def _sign_root(a):
+    """The signs of a non-integer power of a base of signs ``a`` (real only for a base >= 0)."""
+    return frozenset(x for x in a if x >= 0) or ANYSIGN
+
+
+def sign_of_bounds(lo, hi, constant: bool) -> frozenset:
+    """The signs a declared quantity takes in its range [lo, hi].  A constant (parameter, discrete state) is
+    taken as non-zero (generic values; a smoothing width of value 0 is refused when the values are chosen)."""
+    if lo is not None and (lo > 0 or (constant and lo >= 0)):
+        return POS
+    if hi is not None and (hi < 0 or (constant and hi <= 0)):
+        return NEG
+    if lo is not None and lo >= 0:
+        return NONNEG
+    if hi is not None and hi <= 0:
+        return NONPOS
+    return NONZERO if constant else ANYSIGN
+
 
 _COMPARE = {ast.Gt: sp.Gt, ast.GtE: sp.Ge, ast.Lt: sp.Lt, ast.LtE: sp.Le}
 _EQUALITY = {ast.Eq: sp.Eq, ast.NotEq: sp.Ne}
@@ -139,6 +205,11 @@ def _tokens(text: str) -> list:
                 raise ExpressionError(f"'#' is not allowed in {_short(text)}")
             if tok.type == tokenize.ERRORTOKEN and not tok.string.isspace():
                 raise ExpressionError(f"cannot read {tok.string!r} in {_short(text)}")
+            if tok.type == tokenize.NUMBER and not NUMBER_LITERAL.fullmatch(tok.string):
+                raise ExpressionError(
+                    f"the number {tok.string!r} in {_short(text)} is not a literal of the language: write decimal "
+                    f"digits with an optional fraction and exponent (12, 0.5, .5, 3., 1e-3, 2.5E+6); no '_' "
+                    f"separators, no 0x/0o/0b prefixes, no leading zeros, no imaginary 'j'")
             out.append(tok.string)
     except (tokenize.TokenError, IndentationError, SyntaxError) as exc:
         raise ExpressionError(f"syntax error in {_short(text)}: {exc.args[0] if exc.args else exc}") from None
@@ -229,14 +300,140 @@ class EquationBuilder(_Builder):
 
     CONTEXTS = ("equation", "indicator", "event")
 
-    def __init__(self, text: str, names: dict, constant: set, context: str = "equation"):
+    def __init__(self, text: str, names: dict, constant: set, context: str = "equation",
+                 signs: Optional[dict] = None):
         super().__init__(text)
         if context not in self.CONTEXTS:
             raise ValueError(f"context {context!r}; one of {self.CONTEXTS}")
         self.names = names
         self.constant = constant
         self.context = context
+        self.signs = signs if signs is not None else {}  # name -> the signs it can take (None: any)
         self.kinks = []  # (text, name, [distances to the kink], eps): where a smoothed kink sits
+        self.widths = []  # (text, eps): every smoothing width that is not a number (checked with the values)
+        self._sign_memo = {}
+        self._built = {}  # id(node) -> its sympy expression (a sub-tree is built once: sites recorded once)
+
+    def build(self, node):
+        key = id(node)
+        if key not in self._built:
+            self._built[key] = (node, super().build(node))  # the node is kept: its id stays its own
+        return self._built[key][1]
+
+    # -- kinks in disguise -------------------------------------------------
+    def sign(self, node) -> frozenset:
+        """The signs (subset of {-1, 0, 1}) the sub-tree can take, from its structure: sums, products and even
+        powers of the declared ranges, exp > 0, the smooth abs >= eps/2 > 0, ... (sound, not complete)."""
+        key = id(node)
+        if key not in self._sign_memo:
+            self._sign_memo[key] = self._sign(node)
+        return self._sign_memo[key]
+
+    def _sign(self, node) -> frozenset:
+        if isinstance(node, ast.Constant):
+            v = node.value
+            return ANYSIGN if not isinstance(v, (int, float)) else POS if v > 0 else NEG if v < 0 else ZERO
+        if isinstance(node, ast.Name):
+            if node.id == "pi":
+                return POS
+            if node.id == "time":
+                return NONNEG
+            return self.signs.get(node.id) or ANYSIGN
+        if isinstance(node, ast.UnaryOp):
+            a = self.sign(node.operand)
+            return _sign_flip(a) if isinstance(node.op, ast.USub) else a if isinstance(node.op, ast.UAdd) else ANYSIGN
+        if isinstance(node, ast.BinOp):
+            a, b = self.sign(node.left), self.sign(node.right)
+            if isinstance(node.op, ast.Add):
+                return _sign_add(a, b)
+            if isinstance(node.op, ast.Sub):
+                return _sign_add(a, _sign_flip(b))
+            if isinstance(node.op, ast.Mult):
+                return _sign_mul(a, b)
+            if isinstance(node.op, ast.Div):
+                return _sign_mul(a, b - ZERO or ANYSIGN)
+            if isinstance(node.op, ast.Pow):
+                k = self._number(node.right)
+                if k is not None and k.is_integer:
+                    return POS if k == 0 else _sign_square(a) if k.is_even else a
+                if k is not None:
+                    return _sign_root(a)
+                return POS if a == POS else ANYSIGN
+            return ANYSIGN
+        if isinstance(node, ast.IfExp):
+            return self.sign(node.body) | self.sign(node.orelse)
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name):
+            name, args = node.func.id, node.args
+            signs = [self.sign(x) for x in args]
+            if not signs:
+                return ANYSIGN
+            if name == "exp":
+                return POS
+            if name == "sqrt":
+                return _sign_root(signs[0])
+            if name in ("tanh", "atan"):
+                return signs[0]
+            if name == "abs":
+                return POS if len(args) == 2 else _sign_square(signs[0])  # the smooth abs is >= eps/2
+            if name == "sign":
+                return signs[0] if len(args) == 2 else signs[0]
+            if name == "step":
+                return NONNEG
+            if name == "max" and len(args) >= 2:  # the smooth max is >= the exact one
+                return POS if POS in (signs[0], signs[1]) else ANYSIGN
+            if name == "min" and len(args) == 2:
+                return POS if signs[0] == signs[1] == POS else NEG if NEG in (signs[0], signs[1]) else ANYSIGN
+        return ANYSIGN
+
+    def _number(self, node):
+        """The exact value of a constant sub-tree (a sympy number), or None."""
+        try:
+            e = self.build(node)
+        except ExpressionError:
+            return None
+        return e if e.is_number and e.is_real else None
+
+    def _varies(self, node) -> bool:
+        """Whether the sub-tree depends on a state, an input or time."""
+        return not self._is_constant(self.build(node))
+
+    def _disguise(self, node, base, what: str) -> None:
+        """Refuse a root/fractional power/log of ``base`` on a state, input or time that can vanish."""
+        if self.context != "equation" or not self._varies(base) or 0 not in self.sign(base):
+            return
+        b = unparse(base)
+        raise ExpressionError(
+            f"{unparse(node)} in {self.text!r} is {what} of {b!r}, which can be 0 on a state, input or time: a "
+            f"non-differentiable point in disguise (sqrt(x**2) is abs(x), (x + sqrt(x**2))/2 is max(x, 0); a root "
+            f"has an infinite slope at 0), refused by the kink rule like an exact abs/max: write the kink with "
+            f"its width (abs(x, eps), max(x, 0, eps)), or keep the argument away from 0 (sqrt(x**2 + eps**2), "
+            f"a declared min > 0)")
+
+    def _width(self, node, eps_node, eps) -> None:
+        """A smoothing width must be a constant > 0: not 0, not negative, not a state, input or time."""
+        text = unparse(eps_node)
+        if not self._is_constant(eps):
+            raise ExpressionError(
+                f"the smoothing width {text!r} of {unparse(node)} in {self.text!r} depends on a state, input or "
+                f"time: a width is a constant > 0 (a parameter or a number); a width that moves with the state "
+                f"is no band at all (abs(w, w) is exactly |w|: the corner at 0 is kept), refused by the kink rule")
+        if eps.is_number:
+            try:
+                v = float(eps)
+            except (TypeError, ValueError, OverflowError):
+                v = math.nan
+            if not (math.isfinite(v) and v > 0):
+                raise ExpressionError(
+                    f"the smoothing width {text!r} of {unparse(node)} in {self.text!r} is "
+                    f"{'0' if v == 0 else 'not positive' if math.isfinite(v) else 'not finite'} (as a double: "
+                    f"{v!r}): a width is a constant > 0; with 0 the kink is exact (and the smooth form divides "
+                    f"by 0), refused by the kink rule")
+            return
+        if self.sign(eps_node) <= NONPOS:  # else checked with the parameter values (file.component_model)
+            raise ExpressionError(
+                f"the smoothing width {text!r} of {unparse(node)} in {self.text!r} is never positive (from the "
+                f"declared ranges): a width is a constant > 0, refused by the kink rule")
+        self.widths.append((f"{unparse(node)}", eps))
 
     def _site(self, node, name, distances, eps):
         self.kinks.append((ast.unparse(node), name, distances, eps))
@@ -275,6 +472,10 @@ class EquationBuilder(_Builder):
         args = [self.build(a) for a in node.args]
         if name in SMOOTH_FUNCTIONS:
             self._arity(name, args, 1)
+            if name == "sqrt":
+                self._disguise(node, node.args[0], "a square root")
+            elif name == "log":
+                self._disguise(node, node.args[0], "the logarithm (exp(log(x**2)/2) is abs(x))")
             return SMOOTH_FUNCTIONS[name](args[0])
         if name == "atan2":
             self._arity(name, args, 2)
@@ -293,6 +494,7 @@ class EquationBuilder(_Builder):
             raise ExpressionError(f"{name}() takes {n} argument{'s' if n > 1 else ''} and an optional "
                                   f"smoothing width eps, got {len(args)} in {self.text!r}")
         if len(args) == n + 1:
+            self._width(node, node.args[n], args[n])
             a = args
             dist = ([a[0] - a[1]] if name in ("min", "max") else [a[0] - a[1], a[0] - a[2]]
                     if name in ("sat", "deadzone") else [a[0]])
@@ -361,6 +563,7 @@ class EquationBuilder(_Builder):
         if isinstance(test, ast.Call) and isinstance(test.func, ast.Name) and test.func.id == "smooth":
             if len(test.args) != 2 or test.keywords:
                 raise ExpressionError(f"smooth(condition, eps) takes a comparison and a width in {self.text!r}")
+            self._width(test, test.args[1], self.build(test.args[1]))
             test, eps = test.args[0], self.build(test.args[1])
             if not isinstance(test, ast.Compare) or len(test.ops) != 1 or type(test.ops[0]) not in _COMPARE:
                 raise ExpressionError(f"the condition of smooth(condition, eps) is one comparison l > r, l < r, "
@@ -390,6 +593,15 @@ class EquationBuilder(_Builder):
             f"jump, which the implicit solvers' Newton iterations cannot follow between events; write "
             f"if smooth(l > r, eps) then A else B (a C^1 blend over |l - r| < eps), or make the switch an "
             f"event (a [discrete] mode set by [[when]] clauses)")
+
+    def _BinOp(self, node):
+        if isinstance(node.op, ast.Pow):
+            k = self._number(node.right)
+            if k is None:
+                self._disguise(node, node.left, "a power with a non-constant exponent")
+            elif not k.is_integer and k < 1:
+                self._disguise(node, node.left, f"a fractional power ({k} < 1)")
+        return super()._BinOp(node)
 
     def _Compare(self, node):
         raise ExpressionError(f"a comparison is only an if-condition or a [[when]] condition in {self.text!r}")
@@ -453,7 +665,8 @@ def check_finite_constants(expr, text: str) -> None:
         e = stack.pop()
         if isinstance(e, sp.Basic) and not e.free_symbols and not isinstance(e, sp.logic.boolalg.BooleanAtom) \
                 and not e.is_Relational and isinstance(e, sp.Expr):
-            check_double(e, f"{e} in {_short(text)}")
+            shown = str(e) if len(str(e)) <= 40 else f"{str(e)[:20]}... ({len(str(e))} characters)"
+            check_double(e, f"{shown} in {_short(text)}")
             continue
         stack.extend(a for a in getattr(e, "args", ()) if isinstance(a, sp.Basic))
 
