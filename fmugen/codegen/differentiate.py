@@ -34,8 +34,13 @@ def differentiate(
     wrt: Sequence[sp.Symbol],
     out: Program,
     through_solves: bool = False,
+    partial=None,
 ) -> sp.Matrix:
     """Jacobian d exprs / d wrt (len(exprs) x len(wrt)), with steps appended to ``out``.
+
+    ``partial(e, s)``: the partial derivative of one step's expression with respect to one symbol
+    (default sympy's ``diff``; component files pass their cheaper rules,
+    :func:`fmugen.components.equations.derive.partial`).
 
     ``sources`` are the programs that define the symbols in ``exprs`` (in
     execution order).  By default the solution symbols of linear solves are
@@ -47,6 +52,7 @@ def differentiate(
     """
     wrt = list(wrt)
     wset = set(wrt)
+    d_of = partial or (lambda e, s: e.diff(s))
     steps = [st for P in sources for st in P.steps if through_solves or isinstance(st, Assign)]
     # which steps are needed by the outputs (walking back through the steps)
     needed = set()
@@ -71,13 +77,13 @@ def differentiate(
                 ds = deriv[s]
             else:
                 continue
-            partial = _finite_signs(expr.diff(s))
-            if partial == 0:
+            p = _finite_signs(d_of(expr, s))
+            if p == 0:
                 continue
             if len(ds) > 1:
-                partial = out.let(partial, "p")
+                p = out.let(p, "p")
             for w, dw in ds.items():
-                total[w] = total.get(w, 0) + partial * dw
+                total[w] = total.get(w, 0) + p * dw
         return {w: out.let(v, "d") for w, v in total.items() if v != 0}
 
     for st in steps:

@@ -1,7 +1,7 @@
 """The Jacobians of a component file: the chain rule over its straight-line program.
 
-The same algorithm as :func:`fmugen.codegen.differentiate.differentiate` (the robots' derivations, for
-programs of assignments only): for a step ``s = e(a, b, ...)`` the derivative program gets
+:func:`fmugen.codegen.differentiate.differentiate` (the robots' derivations) with this module's rules for a
+step's partial derivatives: for a step ``s = e(a, b, ...)`` the derivative program gets
 ``ds/dw = de/da da/dw + de/db db/dw + ...`` for each state or input w the step depends on, every term
 bound to a fresh symbol, so nothing is ever expanded and the cost is linear in the number of steps
 (a chain of n intermediates: n small derivative steps, not 3**n terms).  The partial derivative of one
@@ -15,8 +15,8 @@ from typing import Sequence
 
 import sympy as sp
 
-from ...codegen.model import _finite_signs
-from ...codegen.program import Assign, Program
+from ...codegen.differentiate import differentiate
+from ...codegen.program import Program
 
 
 def partial(e, s):
@@ -75,43 +75,6 @@ def partial(e, s):
 
 
 def jacobian(program: Program, exprs: Sequence, wrt: Sequence, out: Program) -> sp.Matrix:
-    """d exprs / d wrt (len(exprs) x len(wrt)) over the assignments of ``program``, steps appended to ``out``."""
-    wrt = list(wrt)
-    wset = set(wrt)
-    needed = set()
-    for e in exprs:
-        needed |= sp.sympify(e).free_symbols
-    steps = [st for st in program.steps if isinstance(st, Assign)]
-    for st in reversed(steps):
-        if st.symbol in needed:
-            needed |= st.expr.free_symbols
-    deriv: dict = {}  # symbol -> {w: derivative expression}
-
-    def grad(expr) -> dict:
-        expr = sp.sympify(expr)
-        total: dict = {}
-        for s in sorted(expr.free_symbols, key=str):
-            ds = {s: sp.Integer(1)} if s in wset else deriv.get(s)
-            if not ds:
-                continue
-            p = _finite_signs(partial(expr, s))
-            if p == 0:
-                continue
-            if len(ds) > 1:
-                p = out.let(p, "p")
-            for w, dw in ds.items():
-                total[w] = total.get(w, 0) + p * dw
-        return {w: out.let(v, "d") for w, v in total.items() if v != 0}
-
-    for st in steps:
-        if st.symbol in needed:
-            g = grad(st.expr)
-            if g:
-                deriv[st.symbol] = g
-    J = sp.zeros(len(exprs), len(wrt))
-    for i, e in enumerate(exprs):
-        g = grad(e)
-        for j, w in enumerate(wrt):
-            if w in g:
-                J[i, j] = g[w]
-    return J
+    """d exprs / d wrt (len(exprs) x len(wrt)) over the assignments of ``program``, steps appended to ``out``:
+    :func:`fmugen.codegen.differentiate.differentiate` with :func:`partial` for each step's derivatives."""
+    return differentiate([program], exprs, wrt, out, partial=partial)
