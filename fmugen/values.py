@@ -19,16 +19,102 @@ so an override can never make a model the file could not:
   masses positive, rotor inertias and damping not negative, every link a
   realisable rigid body (unless the file's own values were not), and a mass
   matrix that is not singular.
+
+The numbers of XML formats (SSP's SSD/SSV/SSM, URDF, an FMU's modelDescription) follow
+XML Schema's grammar, not Python's: :func:`parse_xs_double`, :func:`parse_xs_int`,
+:func:`parse_xs_boolean` and :func:`parse_xs_double_list` read exactly the XSD 1.0
+lexical spaces (``float()`` would take ``1_5``, Arabic-Indic digits, ``infinity``, ``nan``).
 """
 from __future__ import annotations
 
 import math
+import re
 import sys
 from typing import Mapping, Optional
 
-from .errors import FmugenError
+from .errors import FmugenError, InputFileError
 
-__all__ = ["as_number", "sign_problem", "variable_problem", "robot_value_problem", "check_model_values"]
+__all__ = ["parse_xs_double", "parse_xs_int", "parse_xs_boolean", "parse_xs_double_list", "as_number", "sign_problem", "variable_problem", "robot_value_problem", "check_model_values"]
+
+
+# ---------------------------------------------------------------------------- XML Schema numbers
+# XML Schema 1.0 Part 2 (Datatypes), 3.2.5 double: a decimal mantissa with an optional exponent, or
+# the special values INF, -INF, NaN (exactly so spelled; "+INF" is only XSD 1.1).  ASCII digits
+# only ([0-9], not \d, which matches every Unicode digit); no '_' separators, no hex floats.
+_XS_DOUBLE = re.compile(r"[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?|-?INF|NaN")
+# 3.3.13 integer and its restrictions (int: 32 bits; 3.3.17 long: 64 bits; unsignedInt ...)
+_XS_INTEGER = re.compile(r"[+-]?[0-9]+")
+_XS_INT_RANGE = {"int": (-2**31, 2**31 - 1), "long": (-2**63, 2**63 - 1), "unsignedInt": (0, 2**32 - 1),
+                 "integer": (None, None)}
+# XML's white space (the S production), which the 'collapse' facet of every numeric type removes at
+# both ends; other Unicode spaces (no-break space, em space) are not white space to XML
+_XML_SPACE = " \t\n\r"
+
+
+def _shown(text: str) -> str:
+    return repr(text) if len(text) <= 40 else repr(text[:20]) + f"... ({len(text)} characters)"
+
+
+def _collapsed(text, where: str, kind: str) -> str:
+    if text is None:
+        raise InputFileError(f"{where}: missing (an {kind} is required)")
+    if not isinstance(text, str):
+        raise InputFileError(f"{where}: {text!r} is not text holding an {kind}")
+    return text.strip(_XML_SPACE)
+
+
+def parse_xs_double(text, where: str, finite: bool = True) -> float:
+    """The xs:double ``text`` (XSD 1.0 lexical space after white-space collapse) as a float.
+
+    Anything else -- ``1_5``, ``١٢``, ``infinity``, ``nan``, ``0x1p3``, ``1,5``, empty -- is an
+    :class:`InputFileError` ``"<where>: '1_5' is not an xs:double ..."``.  With ``finite`` (the
+    default) ``INF``, ``-INF``, ``NaN`` and a literal beyond the double range (``1e999``) are refused
+    too: most fields of a model need a finite number."""
+    t = _collapsed(text, where, "xs:double")
+    if not _XS_DOUBLE.fullmatch(t):
+        raise InputFileError(f"{where}: {_shown(t)} is not an xs:double (XML Schema number: ASCII digits with "
+                             f"an optional '.', sign and exponent 'E', or INF, -INF, NaN)")
+    x = float(t)
+    if finite and not math.isfinite(x):
+        if t in ("INF", "-INF", "NaN"):
+            raise InputFileError(f"{where}: {t} is not a finite number")
+        raise InputFileError(f"{where}: {_shown(t)} is beyond the double-precision range "
+                             f"(|value| <= {sys.float_info.max:.3g})")
+    return x
+
+
+def parse_xs_int(text, where: str, kind: str = "int") -> int:
+    """The integer ``text`` of XML Schema type ``kind`` ("int", "long", "unsignedInt", "integer"):
+    ASCII digits with an optional sign, within the type's range; else an :class:`InputFileError`."""
+    t = _collapsed(text, where, f"xs:{kind}")
+    if len(t) > 400 or not _XS_INTEGER.fullmatch(t):  # 400 digits: far beyond any range, far below int()'s limit
+        raise InputFileError(f"{where}: {_shown(t)} is not an xs:{kind} (ASCII digits with an optional sign)")
+    v = int(t)
+    lo, hi = _XS_INT_RANGE[kind]
+    if (lo is not None and v < lo) or (hi is not None and v > hi):
+        raise InputFileError(f"{where}: {_shown(t)} is outside the range of xs:{kind} ({lo} .. {hi})")
+    return v
+
+
+def parse_xs_boolean(text, where: str) -> bool:
+    """The xs:boolean ``text``: exactly ``true``, ``false``, ``1`` or ``0`` (XSD 1.0, 3.2.2); else an
+    :class:`InputFileError` (``True``, ``yes``, ``on`` are not booleans to XML Schema)."""
+    t = _collapsed(text, where, "xs:boolean")
+    if t in ("true", "1"):
+        return True
+    if t in ("false", "0"):
+        return False
+    raise InputFileError(f"{where}: {_shown(t)} is not an xs:boolean (true, false, 1 or 0)")
+
+
+def parse_xs_double_list(text, where: str, count: Optional[int] = None, finite: bool = True) -> list:
+    """A white-space separated list of xs:double (an xs:list, as URDF's ``xyz="0 0 1"``), of exactly
+    ``count`` items when given; an item that is not an xs:double is named by its position."""
+    t = _collapsed(text, where, "list of xs:double")
+    items = re.split(f"[{_XML_SPACE}]+", t) if t else []
+    if count is not None and len(items) != count:
+        raise InputFileError(f"{where}: {_shown(t)} has {len(items)} numbers, not {count}")
+    return [parse_xs_double(x, f"{where}[{i}]", finite) for i, x in enumerate(items)]
 
 
 def as_number(value, where: str) -> float:
