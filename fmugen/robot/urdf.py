@@ -74,6 +74,7 @@ from ..errors import MAX_IDENTIFIER_LENGTH, InputFileError, read_text_file
 from .checks import RobotFileError, UnrealisableInertiaWarning, inertia_problems
 from .description import JOINTS, PRISMATIC, REVOLUTE, Body, Frame, Limits, Parameter, Robot
 from .expressions import symbol_name_problem
+from ..values import parse_xs_double, parse_xs_double_list
 
 __all__ = ["load_urdf", "robot_from_urdf", "MAX_BYTES", "MAX_ELEMENTS", "MAX_DEPTH", "MAX_JOINTS",
            "MimicJointWarning"]
@@ -221,24 +222,28 @@ class _Reader:
         return name
 
     def _floats(self, el, attr: str, n: int, what: str, default=None) -> list:
+        """The ``n`` numbers of attribute ``attr``: URDF's attributes are XML Schema values -- one
+        xs:double, or a list of them separated by XML white space (``xyz="0 0 1"``).  ``float()``
+        would also take ``1_5``, Arabic-Indic digits, ``nan``, ``infinity``; those are refused."""
         raw = el.get(attr) if el is not None else None
         if raw is None:
             if default is None:
                 raise self._err(what, f"missing attribute {attr!r}")
             return list(default)
-        parts = raw.split()
-        if len(parts) != n:
-            raise self._err(what, f"{attr}={_short(raw)}: expected {n} number(s)")
-        out = []
-        for s in parts:
-            try:
-                v = float(s)
-            except ValueError:
-                raise self._err(what, f"{attr}={_short(raw)}: {_short(s, 20)} is not a number") from None
-            if not math.isfinite(v):
-                raise self._err(what, f"{attr}={_short(raw)}: non-finite value")
-            out.append(v)
-        return out
+        where = f"{self.file}: {what}: {attr}"
+        try:
+            if n == 1:
+                return [parse_xs_double(raw, where)]
+            items = raw.strip(" \t\n\r")
+            count = len(re.split(r"[ \t\n\r]+", items)) if items else 0
+            if count != n:
+                raise self._err(what, f"{attr}={_short(raw)}: expected {n} numbers separated by spaces, "
+                                      f"found {count}")
+            return parse_xs_double_list(raw, where, n)
+        except RobotFileError:
+            raise
+        except InputFileError as exc:
+            raise RobotFileError(str(exc)) from None
 
     def _float(self, el, attr, what, default=None):
         return self._floats(el, attr, 1, what, None if default is None else [default])[0]
