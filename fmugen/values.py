@@ -24,6 +24,12 @@ The numbers of XML formats (SSP's SSD/SSV/SSM, URDF, an FMU's modelDescription) 
 XML Schema's grammar, not Python's: :func:`parse_xs_double`, :func:`parse_xs_int`,
 :func:`parse_xs_boolean` and :func:`parse_xs_double_list` read exactly the XSD 1.0
 lexical spaces (``float()`` would take ``1_5``, Arabic-Indic digits, ``infinity``, ``nan``).
+
+A number written as *text* elsewhere -- a TOML string of a robot file, a ``--set`` value, a sweep's
+``--grid``/``--sample`` item, a number-valued command-line option -- follows one plain decimal
+grammar, :data:`DECIMAL` (:func:`parse_decimal`): ASCII digits, an optional point, sign and
+exponent; no ``_`` separators, no ``0x`` prefixes, no ``inf``/``nan`` words, no other scripts'
+digits.  (A TOML *number* follows TOML's own grammar, which its reader has already applied.)
 """
 from __future__ import annotations
 
@@ -34,7 +40,7 @@ from typing import Mapping, Optional
 
 from .errors import FmugenError, InputFileError
 
-__all__ = ["parse_xs_double", "parse_xs_int", "parse_xs_boolean", "parse_xs_double_list", "as_number", "sign_problem", "variable_problem", "robot_value_problem", "check_model_values"]
+__all__ = ["DECIMAL", "DECIMAL_LITERAL", "parse_decimal", "parse_xs_double", "parse_xs_int", "parse_xs_boolean", "parse_xs_double_list", "as_number", "sign_problem", "variable_problem", "robot_value_problem", "check_model_values"]
 
 
 # ---------------------------------------------------------------------------- XML Schema numbers
@@ -49,6 +55,32 @@ _XS_INT_RANGE = {"int": (-2**31, 2**31 - 1), "long": (-2**63, 2**63 - 1), "unsig
 # XML's white space (the S production), which the 'collapse' facet of every numeric type removes at
 # both ends; other Unicode spaces (no-break space, em space) are not white space to XML
 _XML_SPACE = " \t\n\r"
+
+
+# ---------------------------------------------------------------------------- plain decimal text
+#: an unsigned decimal literal: ``12``, ``0.5``, ``.5``, ``3.``, ``1e-3`` (ASCII [0-9], never \d, which
+#: matches every script's digits); a robot file's expression strings take their numbers in this form
+DECIMAL_LITERAL = re.compile(r"([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?")
+#: a number written as text: an optional sign and a :data:`DECIMAL_LITERAL`
+DECIMAL = re.compile(r"[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?")
+
+
+def parse_decimal(text, where: str, error=FmugenError) -> float:
+    """The finite number written as ``text`` in the plain decimal grammar :data:`DECIMAL` (surrounding
+    ASCII spaces allowed); anything else -- ``1_5``, ``0x10``, ``inf``, ``nan``, ``1e999``, ``١٢``,
+    ``1,5``, empty -- is an ``error`` (an :class:`FmugenError` class) ``"<where>: '1_5' is not a
+    number ..."``."""
+    if not isinstance(text, str):
+        raise error(f"{where}: {text!r} is not text holding a number")
+    t = text.strip(" \t")
+    if not DECIMAL.fullmatch(t):
+        raise error(f"{where}: {_shown(t)} is not a number (decimal: ASCII digits with an optional sign, "
+                    f"'.' and exponent, as 1.5e-3; no '_', no 0x, no inf/nan)")
+    x = float(t)
+    if not math.isfinite(x):
+        raise error(f"{where}: {_shown(t)} is beyond the double-precision range (|value| <= "
+                    f"{sys.float_info.max:.3g})")
+    return x
 
 
 def _shown(text: str) -> str:
