@@ -21,7 +21,13 @@
 #include "fmi2Functions.h"
 #include "fmugen_model.h"
 
-#if defined(__GNUC__)
+#if defined(__GNUC__) && defined(_WIN32)
+/* PE: a DLL exports only what is marked dllexport (FMI2_Export), so no
+ * visibility is needed; the log formats are C99's (MinGW's own printf,
+ * runtime_support.c) */
+#define FMUGEN_INTERNAL
+#define FMUGEN_PRINTF(a, b) __attribute__((format(gnu_printf, a, b)))
+#elif defined(__GNUC__)
 #define FMUGEN_INTERNAL __attribute__((visibility("hidden")))
 #define FMUGEN_PRINTF(a, b) __attribute__((format(printf, a, b)))
 #else

@@ -1,5 +1,10 @@
 /* runtime_support.c -- logging, state checks, variable names and the cached
  * model evaluation shared by the FMI functions of the runtime. */
+#if defined(__MINGW32__) && !defined(__USE_MINGW_ANSI_STDIO)
+/* MinGW: the C99 printf of its own static library, not msvcrt.dll's, whose
+ * vsnprintf knows no %zu (the log messages format sizes with it) */
+#define __USE_MINGW_ANSI_STDIO 1
+#endif
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
