@@ -8,12 +8,16 @@ no text is ever passed to ``eval``, ``exec`` or ``sympify``.
 
 Accepted grammar
 ----------------
-* numbers: integer literals become ``sympy.Integer``; decimal literals inside
+* numbers: plain decimal literals only (:data:`fmugen.values.DECIMAL_LITERAL`: ``12``,
+  ``0.5``, ``.5``, ``1e-3``); Python's ``1_5``, ``0x10``, ``0o17``, ``0b11`` are refused;
+  integer literals become ``sympy.Integer``; decimal literals inside
   a string (``"0.5"``, ``"1e-3"``) become the *exact* ``sympy.Rational`` of
   the decimal text (``"0.5*m"`` is ``m/2``), because the text is exact;
 * binary ``+ - * / **``, unary ``+ -``, parentheses;
 * the constant ``pi`` and the functions ``sqrt sin cos tan exp log abs``
   (one argument each; ``abs`` is ``sympy.Abs``);
+* ASCII text only: Python reads identifiers after NFKC normalisation, so ``"ｍ"`` (full-width)
+  or ``"𝐦"`` would silently be the parameter ``m``;
 * symbol names matching ``[A-Za-z_][A-Za-z0-9_]*`` that are not reserved
   (:func:`symbol_name_problem`: Python keywords and builtins, C keywords, the
   function names and ``pi``, names starting with ``_`` -- kept for generated
@@ -37,6 +41,7 @@ import sys
 import sympy as sp
 
 from ..errors import FmugenError
+from ..values import DECIMAL_LITERAL
 
 FUNCTIONS = {
     "sqrt": sp.sqrt,
@@ -118,6 +123,11 @@ def parse_expression(text: str) -> sp.Expr:
         raise ExpressionError(f"expression longer than {MAX_TEXT_LENGTH} characters")
     if not text.strip():
         raise ExpressionError("empty expression")
+    if not text.isascii():
+        bad = next(c for c in text if not c.isascii())
+        raise ExpressionError(f"non-ASCII character {bad!r} (U+{ord(bad):04X}) in {_short(text)}: an expression "
+                              f"is ASCII arithmetic (Python would read full-width or styled letters and "
+                              f"digits as plain ones)")
     try:
         tree = ast.parse(text.strip(), mode="eval")
     except SyntaxError as exc:
@@ -237,13 +247,18 @@ class _Builder:
         v = node.value
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise ExpressionError(f"constant {v!r} is not a real number in {self.text!r}")
+        segment = ast.get_source_segment(self.text, node)
+        if segment is not None and not DECIMAL_LITERAL.fullmatch(segment):
+            raise ExpressionError(f"the number {segment!r} in {_short(self.text)} is not a decimal literal: write "
+                                  f"ASCII digits with an optional '.' and exponent (12, 0.5, .5, 1e-3); no '_' "
+                                  f"separators, no 0x/0o/0b prefixes")
         if isinstance(v, int):
             return sp.Integer(v)
         if not math.isfinite(v):
             raise ExpressionError(f"non-finite number in {self.text!r}")
         # exact value of the decimal text as written (e.g. "0.1" -> 1/10)
         segment = ast.get_source_segment(self.text, node)
-        return sp.Rational(segment.replace("_", "")) if segment else sp.Float(v)
+        return sp.Rational(segment) if segment else sp.Float(v)
 
     def _Name(self, node):
         name = node.id

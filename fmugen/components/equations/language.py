@@ -184,6 +184,10 @@ def parse_tree(text: str) -> tuple:
         raise ExpressionError("empty expression")
     if any(ord(c) < 32 or ord(c) == 127 for c in text):
         raise ExpressionError(f"control character (newline, tab, ...) in {_short(text)}; write one line")
+    if not text.isascii():  # Python reads names after NFKC: full-width 'ｘ_d' would be the declared x_d
+        bad = next(c for c in text if not c.isascii())
+        raise ExpressionError(f"non-ASCII character {bad!r} (U+{ord(bad):04X}) in {_short(text)}: the language "
+                              f"is ASCII (names are declared in ASCII; look-alike letters are not them)")
     python = _rewrite_conditionals(text)
     try:
         tree = ast.parse(python, mode="eval")
