@@ -78,8 +78,8 @@ def parse_decimal(text, where: str, error=FmugenError) -> float:
                     f"'.' and exponent, as 1.5e-3; no '_', no 0x, no inf/nan)")
     x = float(t)
     if not math.isfinite(x):
-        raise error(f"{where}: {_shown(t)} is beyond the double-precision range (|value| <= "
-                    f"{sys.float_info.max:.3g})")
+        raise error(f"{where}: {_shown(t)} is not a finite number (beyond the double-precision range, "
+                    f"|value| <= {sys.float_info.max:.3g})")
     return x
 
 

@@ -1,7 +1,8 @@
 """``--set NAME=VALUE``: one override of a scene, robot or assembly value.
 
-Values are read as TOML scalars -- ``5``, ``1e-3``, ``true``, ``"PI"`` --
-with a bare word taken as a string (``--set amp1.control=PI``); nothing is
+Values are numbers in the plain decimal grammar (``5``, ``1e-3``: no ``1_5``,
+no ``0x10``, no ``inf``), ``true``/``false``, quoted strings (``"PI"``) or a
+bare word taken as a string (``--set amp1.control=PI``); nothing is
 evaluated.  Non-finite numbers are refused here, where they are read.
 """
 from __future__ import annotations
@@ -11,6 +12,7 @@ import re
 import tomllib
 from typing import Iterable, Mapping, Union
 
+from ..values import parse_decimal
 from .errors import SceneError
 
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\[[0-9]+\])?(\.[A-Za-z_][A-Za-z0-9_]*(\[[0-9]+\])?)*$")
@@ -20,19 +22,33 @@ Value = Union[float, int, bool, str]
 
 
 def parse_value(text: str, where: str) -> Value:
-    """A TOML scalar, or a bare word as a string; never evaluated."""
-    text = text.strip()
-    try:
-        value = tomllib.loads(f"v = {text}")["v"]
-    except tomllib.TOMLDecodeError:
-        if _WORD.match(text):
-            return text
-        raise SceneError(f"{where}: {text!r} is not a number, true/false or a word") from None
-    if isinstance(value, float) and not math.isfinite(value):
-        raise SceneError(f"{where}: {text!r} is not a finite number")
-    if not isinstance(value, (int, float, bool, str)):
-        raise SceneError(f"{where}: {text!r} must be a single number, true/false or a word")
-    return value
+    """A number, true/false, a quoted TOML string or a bare word (a string); never evaluated.
+
+    Numbers follow the plain decimal grammar of :func:`fmugen.values.parse_decimal` (TOML's own would
+    take ``1_5`` as 15 and ``0x10`` as 16); a whole number stays an integer."""
+    t = text.strip(" \t")
+    if re.fullmatch(r"[+-]?[0-9]+", t):
+        digits = len(t.lstrip("+-"))
+        if digits > 4000:  # int() refuses more than 4300 digits; far beyond any double anyway
+            raise SceneError(f"{where}: an integer of {digits} digits is beyond the double-precision range")
+        return int(t)
+    if t[:1] in tuple("+-.0123456789"):  # it looks like a number: it must be one
+        return parse_decimal(t, where, SceneError)
+    if t in ("true", "false"):
+        return t == "true"
+    if t.lower().lstrip("+-") in ("inf", "infinity", "nan"):
+        raise SceneError(f"{where}: {t!r} is not a finite number")
+    if t[:1] in ("'", '"'):
+        try:
+            value = tomllib.loads(f"v = {t}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = None
+        if not isinstance(value, str):
+            raise SceneError(f"{where}: {t[:40]!r} is not one quoted string")
+        return value
+    if _WORD.match(t):
+        return t
+    raise SceneError(f"{where}: {t[:40]!r} is not a number, true/false or a word")
 
 
 def parse_sets(items: Union[None, Iterable[str], Mapping[str, Value]]) -> dict:
@@ -58,7 +74,7 @@ def parse_sets(items: Union[None, Iterable[str], Mapping[str, Value]]) -> dict:
         name, text = item.split("=", 1)
         name = name.strip()
         _check_name(name, f"--set {item}")
-        out[name] = parse_value(text, f"--set {item}")
+        out[name] = parse_value(text, f"--set {item}" if len(item) <= 80 else f"--set {name}=...")
     return out
 
 
