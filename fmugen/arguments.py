@@ -1,7 +1,9 @@
 """Checks of command-line arguments, made before anything is built or written.
 
 Every refusal names the argument (``--steps 'a,b': 'a' is not a number``) and
-says what would be accepted.  Output paths are checked against the command's
+says what would be accepted.  A number given as text follows the plain decimal
+grammar of :data:`fmugen.values.DECIMAL` (``1e-3``, ``.5``; not ``1_5``,
+``inf`` or other scripts' digits, which ``float()`` takes).  Output paths are checked against the command's
 inputs: a command never writes over its own input file, never writes a file
 where the user named a folder (``-o newdir/``) or puts a folder where a file
 is (``--out results.csv`` that exists as a file).
@@ -14,6 +16,7 @@ from pathlib import Path
 from typing import Iterable, Optional
 
 from .errors import FmugenError
+from .values import DECIMAL
 
 __all__ = ["number", "positive", "tolerance", "time_value", "count", "number_list", "output_file",
            "output_folder", "MAX_POINTS"]
@@ -22,12 +25,21 @@ __all__ = ["number", "positive", "tolerance", "time_value", "count", "number_lis
 MAX_POINTS = 10_000_000
 
 
+def _text_number(value, option: str, problem: str) -> float:
+    """A number given as text in the plain decimal grammar (:func:`fmugen.values.parse_decimal`:
+    ``float()`` would take ``1_5``, ``infinity`` and other scripts' digits)."""
+    t = value.strip(" \t")
+    if not DECIMAL.fullmatch(t):
+        raise FmugenError(f"{option} {value!r}: {problem}")
+    return float(t)
+
+
 def number(value, option: str) -> float:
     """A finite number; the text of the argument is named when it is not one."""
     if isinstance(value, bool):
         raise FmugenError(f"{option} {value!r}: not a number")
     try:
-        v = float(value)
+        v = _text_number(value, option, "not a number") if isinstance(value, str) else float(value)
     except (TypeError, ValueError):
         raise FmugenError(f"{option} {value!r}: not a number") from None
     except OverflowError:
@@ -67,7 +79,7 @@ def count(value, option: str, low: int = 1, high: Optional[int] = None) -> int:
     if isinstance(value, bool):
         raise FmugenError(f"{option} {value!r}: not a whole number")
     try:
-        f = float(value)
+        f = _text_number(value, option, "not a whole number") if isinstance(value, str) else float(value)
     except (TypeError, ValueError, OverflowError):
         raise FmugenError(f"{option} {value!r}: not a whole number") from None
     if not math.isfinite(f) or f != int(f):
@@ -83,16 +95,15 @@ def count(value, option: str, low: int = 1, high: Optional[int] = None) -> int:
 
 def number_list(text, option: str, check=None) -> list:
     """``"1e-3,2e-3"`` -> [0.001, 0.002]; each item checked by ``check(value, where)`` when given."""
-    items = [t.strip() for t in str(text).split(",")]
+    items = [t.strip(" \t") for t in str(text).split(",")]
     if not items or any(not t for t in items):
         raise FmugenError(f"{option} {text!r}: expected comma-separated numbers, e.g. 1e-3,2e-3")
     out = []
     for t in items:
         where = f"{option} {text!r}: item"
-        try:
-            v = float(t)
-        except ValueError:
-            raise FmugenError(f"{option} {text!r}: {t!r} is not a number") from None
+        if not DECIMAL.fullmatch(t):
+            raise FmugenError(f"{option} {text!r}: {t!r} is not a number")
+        v = float(t)
         if not math.isfinite(v):
             raise FmugenError(f"{option} {text!r}: {t!r} is not a finite number")
         out.append(check(v, where) if check else v)
