@@ -17,13 +17,15 @@ from .cases import CASES, QUICK_METHODS, TOLERANCE_METHODS, Case, Method, RK4_ME
 
 def parse_sets(items) -> dict:
     """``["amp.theta_ref=0.1", ...]`` -> {name: float}; a clear error otherwise."""
+    from ..values import parse_decimal
+
     out = {}
     for item in items or ():
         name, sep, value = item.partition("=")
         try:
             if not sep or not name.strip():
                 raise ValueError
-            out[name.strip()] = float(value)
+            out[name.strip()] = parse_decimal(value, "")  # plain decimal: float() took 1_5 and 'infinity'
         except ValueError:
             raise ValueError(f"fmugen suite --set {item!r}: expected NAME=NUMBER, e.g. amp.theta_ref=0.1") from None
     return out

@@ -33,6 +33,7 @@ from typing import Iterable, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
+from ..values import parse_decimal
 from .errors import SweepError
 
 #: name -> (number of arguments, their names, numpy draw)
@@ -67,14 +68,10 @@ class Distribution:
 
 
 def _number(text: str, where: str) -> float:
-    """A finite decimal number (``1.6e9``, ``-3``, ``.5``); anything else is refused."""
-    t = text.strip()
-    if not re.fullmatch(r"[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?", t):
-        raise SweepError(f"{where}: {t!r} is not a number")
-    v = float(t)
-    if not math.isfinite(v):
-        raise SweepError(f"{where}: {t!r} is not a finite number")
-    return v
+    """A finite decimal number (``1.6e9``, ``-3``, ``.5``) in the plain decimal grammar of
+    :func:`fmugen.values.parse_decimal` (ASCII digits: ``\\d`` took Arabic-Indic ones); anything
+    else is refused."""
+    return parse_decimal(text, where, SweepError)
 
 
 def parse_name(name: str, where: str) -> str:
@@ -148,6 +145,8 @@ def parse_grid(items: Union[Iterable[str], Mapping[str, Sequence[float]], None])
 def _finite(v, where) -> float:
     if isinstance(v, bool):
         raise SweepError(f"{where}: {v!r} is not a number")
+    if isinstance(v, str):
+        return _number(v, where)
     try:
         f = float(v)
     except (TypeError, ValueError):
