@@ -36,6 +36,7 @@ from .interpolants import CUBIC_THETA, EXTRAPOLATIONS, ORDER, InputHistory  # no
 from .monitor import DivergenceMonitor
 from .results import CosimResult, FailureReport, Summary
 from .schemes import SCHEMES, FixedPoint, GaussSeidel, Jacobi, Newton
+from .settings import check_choices, resolve
 from .stepsize import StepSizeController
 from .system import CosimSystem
 from .units import STATUS, ModelUnit, SlaveUnit, UnitFailure, dptr, vr_array
@@ -45,9 +46,6 @@ __all__ = ["CosimResult", "FailureReport", "Master", "Summary", "run", "check_ch
 
 STATUS_NAMES = dict(enumerate(STATUS))
 
-_ALIASES = {"gs": "gauss-seidel", "gauss_seidel": "gauss-seidel", "seidel": "gauss-seidel",
-            "fixed-point": "iterative", "held": "hold", "constant": "hold", "zoh": "hold"}
-
 DEFAULT_TOL = 1e-4  # the adaptive macro step's defect target when no tol is given
 
 # what to do about a coupling above its stability limit
@@ -56,24 +54,6 @@ ADVICE = {"jacobi": "take a smaller step, extrapolation, or an iterative/newton 
           "gauss-seidel": "take a smaller step, extrapolation, or an iterative/newton scheme",
           "iterative": "take a smaller step, or the newton scheme",
           "newton": "take a smaller step, or quadratic/cubic inputs (L-stable, damped)"}
-
-
-def _norm_choice(value, choices, what) -> str:
-    v = str(value).strip().lower().replace("_", "-")
-    v = _ALIASES.get(v, v)
-    if v not in choices:
-        raise CosimError(f"unknown {what} {value!r}; choose one of {', '.join(choices)}")
-    return v
-
-
-def check_choices(scheme: str, extrapolation: str) -> tuple:
-    """(scheme, extrapolation) normalised, or a CosimError naming the choices (callable before any build)."""
-    scheme = _norm_choice(scheme, SCHEMES, "scheme")
-    extrapolation = _norm_choice(extrapolation, EXTRAPOLATIONS, "extrapolation")
-    if extrapolation == "cubic" and scheme not in ("iterative", "newton"):
-        raise CosimError("cubic inputs interpolate between both ends of a macro step (values and slopes): "
-                         "they need an iterated scheme, iterative or newton, not " + scheme)
-    return scheme, extrapolation
 
 
 def _positive(name, value):
@@ -882,8 +862,6 @@ def run(system, scheme: Optional[str] = None, extrapolation: Optional[str] = Non
     ``summary``); a run that fails returns its values up to the failure and
     ``summary.failure``.
     """
-    from .settings import resolve
-
     if not isinstance(system, CosimSystem) and isinstance(getattr(system, "system", None), CosimSystem):
         system = system.system  # a built scene
     elif not isinstance(system, CosimSystem) and hasattr(system, "build"):

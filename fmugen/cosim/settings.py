@@ -35,6 +35,8 @@ from dataclasses import dataclass, fields, replace
 from typing import Mapping, Optional
 
 from .errors import CosimError
+from .interpolants import EXTRAPOLATIONS
+from .schemes import SCHEMES
 
 DEFAULT_SCHEME, DEFAULT_EXTRAPOLATION = "gauss-seidel", "linear"
 
@@ -92,6 +94,30 @@ class RunSettings:
 
 
 FIELDS = {f.name for f in fields(RunSettings)}
+
+# other spellings of the choices (the master, the commands and the scene files take them all)
+ALIASES = {"gs": "gauss-seidel", "gauss_seidel": "gauss-seidel", "seidel": "gauss-seidel",
+           "fixed-point": "iterative", "held": "hold", "constant": "hold", "zoh": "hold"}
+
+
+def _norm_choice(value, choices, what) -> str:
+    v = str(value).strip().lower().replace("_", "-")
+    v = ALIASES.get(v, v)
+    if v not in choices:
+        raise CosimError(f"unknown {what} {value!r}; choose one of {', '.join(choices)}")
+    return v
+
+
+def check_choices(scheme: str, extrapolation: str) -> tuple:
+    """(scheme, extrapolation) normalised, or a CosimError naming the choices (callable before any build).
+    Here, not in the master: the settings are resolved before a master exists, and the master imports them
+    (the other way round made master and settings import each other)."""
+    scheme = _norm_choice(scheme, SCHEMES, "scheme")
+    extrapolation = _norm_choice(extrapolation, EXTRAPOLATIONS, "extrapolation")
+    if extrapolation == "cubic" and scheme not in ("iterative", "newton"):
+        raise CosimError("cubic inputs interpolate between both ends of a macro step (values and slopes): "
+                         "they need an iterated scheme, iterative or newton, not " + scheme)
+    return scheme, extrapolation
 
 
 def _number(where, v):
@@ -170,8 +196,6 @@ def check_table(table: Mapping, where: str = "[cosim]") -> dict:
             raise unknown_key(k, where)
         out[KEYS[k]] = _check(KEYS[k], v, f"{where} {k}")
     if "scheme" in out or "extrapolation" in out:
-        from .master import check_choices
-
         try:
             check_choices(out.get("scheme", DEFAULT_SCHEME), out.get("extrapolation", DEFAULT_EXTRAPOLATION))
         except CosimError as exc:
@@ -184,8 +208,6 @@ def resolve(table: Optional[Mapping] = None, sets: Optional[Mapping] = None, whe
     """The run settings: ``table`` (a scene's ``[cosim]``) < ``sets`` (``{"cosim.step": 4e-3}``; other
     names are ignored) < ``explicit`` (flags and keywords by RunSettings field or [cosim] key; None: not
     given).  Scheme and extrapolation are checked together (cubic needs an iterated scheme)."""
-    from .master import check_choices
-
     values = check_table(table or {}, where)
     for name, v in dict(sets or {}).items():
         head, _, key = name.partition(".")
