@@ -62,6 +62,7 @@ def settable(system, name: str, where: str, error=None, hint: str = "") -> tuple
     from fmpy import read_model_description
 
     from ..errors import InputFileError
+    from .loader import can_set
 
     error = error or InputFileError
     units = {u.name: u for u in system.units}
@@ -70,9 +71,7 @@ def settable(system, name: str, where: str, error=None, hint: str = "") -> tuple
         raise error(f"{where}: {name}: name a component's variable, 'component.variable' (components: "
                     f"{', '.join(units)}){hint}")
     v = {x.name: x for x in read_model_description(str(units[comp].path), validate=False).modelVariables}.get(var)
-    ok = v is not None and ((v.causality == "parameter" and v.variability in ("fixed", "tunable"))
-                            or v.causality == "input" or (v.initial == "exact" and v.causality in ("output", "local")))
-    if not ok:
+    if v is None or not can_set(v):
         raise error(f"{where}: {name}: {comp} has no parameter, input or state {var!r}")
     return comp, var, v
 

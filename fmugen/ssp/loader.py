@@ -21,116 +21,287 @@ are read back from it exactly as written, so the archive runs as the scene.
 from __future__ import annotations
 
 import atexit
+import math
+import os
+import re
 import shutil
 import tempfile
+import unicodedata
 from pathlib import Path
 from typing import Optional
 
-from ..errors import InputFileError
-from .ssd import FMUGEN_ANNOTATION, FMUGEN_NS, Ssd, open_ssp, without_aliases
+from ..errors import FmugenError, InputFileError
+from ..values import parse_xs_boolean, parse_xs_double, parse_xs_int
+from .ssd import FMUGEN_ANNOTATION, FMUGEN_NS, SSD_NAME, Ssd, _name, etree_local, open_ssp, without_aliases
 
 _F = f"{{{FMUGEN_NS}}}"
+_INTEGER = re.compile(r"[ \t\n\r]*[+-]?[0-9]+[ \t\n\r]*")
 
 
-def _number(text: str, where: str):
-    try:
-        x = float(text)
-    except (TypeError, ValueError):
-        raise InputFileError(f"{where}: {text!r} is not a number") from None
-    if x != x or x in (float("inf"), float("-inf")):
-        raise InputFileError(f"{where}: {text!r} is not finite")
-    return int(x) if x == int(x) and "." not in text and "e" not in text.lower() else x
+def _number(text, where: str):
+    """A start value of fmugen's annotation: an int when written as an integer (an Integer variable's),
+    else a finite xs:double."""
+    x = parse_xs_double(text, where)
+    return int(x) if _INTEGER.fullmatch(text) and abs(x) < 2 ** 53 else x
 
 
-def _setting(text: str):
-    try:
-        x = float(text)
-    except ValueError:
-        return {"true": True, "false": False}.get(text, text)
-    return int(x) if x == int(x) and "." not in text and "e" not in text.lower() else x
+def _setting(text, where: str):
+    """A run setting as the exporter writes it: true/false, an integer, an xs:double, else text (a scheme)."""
+    if text is None:
+        raise InputFileError(f"{where}: no value attribute")
+    t = text.strip(" \t\n\r")
+    if t in ("true", "false"):
+        return t == "true"
+    if _INTEGER.fullmatch(t):
+        return parse_xs_int(t, where, "long")
+    if re.fullmatch(r"[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?|-?INF|NaN", t):
+        return parse_xs_double(t, where)  # refuses INF, NaN and 1e999: no setting takes them
+    return text
+
+
+def _names(text, where: str) -> tuple:
+    """A white-space separated list of names (the Gauss-Seidel order, a unit's members)."""
+    if text is None:
+        return ()
+    if any(unicodedata.category(ch) in ("Cc", "Cf") and ch not in " \t\n\r" for ch in text):
+        raise InputFileError(f"{where}: {text[:40]!r} contains control characters")
+    return tuple(text.split())
 
 
 def fmugen_run(ssd: Ssd) -> Optional[dict]:
-    """fmugen's run annotation of ``ssd`` as plain data, or None."""
-    run = ssd.annotations.get(FMUGEN_ANNOTATION)
-    if run is None or run.tag != f"{_F}Run":
+    """fmugen's run annotation of ``ssd`` as plain data, or None when there is none.
+
+    The annotation is not covered by the SSP schemas (it is fmugen's), so it is checked here element by
+    element: every number by the xs:double grammar, every name against the system's components, every
+    run setting by the rules of a scene's [cosim] table."""
+    where = f"{ssd.path}: {SSD_NAME}: annotation {FMUGEN_ANNOTATION}"
+    if FMUGEN_ANNOTATION not in ssd.annotations:
         return None
-    where = f"{ssd.path}: annotation {FMUGEN_ANNOTATION}"
-    out = {k: run.get(k) for k in ("scene", "scheme", "extrapolation")}
+    run = ssd.annotations[FMUGEN_ANNOTATION]
+    if run is None or run.tag != f"{_F}Run":
+        got = "nothing" if run is None else etree_local(run) + (f" in {run.tag.split('}')[0][1:]!r}" if "}" in
+                                                                 str(run.tag) else "")
+        raise InputFileError(f"{where}: holds {got}, not fmugen's Run element ({FMUGEN_NS})")
+    if run.get("version", "1") != "1":
+        raise InputFileError(f"{where}: version {run.get('version')!r}; this fmugen reads version 1")
+    comps = ssd.components
+    out = {}
+    for k in ("scene", "scheme", "extrapolation"):
+        out[k] = _name(run, k, f"{where}: Run", required=False)
     for k in ("step", "startTime", "stopTime", "jacobiHoldLimit", "jacobiHoldStep"):
         if run.get(k) is not None:
-            out[k] = float(_number(run.get(k), f"{where}: {k}"))
-    order = run.find(f"{_F}Order")
-    out["order"] = tuple(order.text.split()) if order is not None and order.text else None
+            out[k] = parse_xs_double(run.get(k), f"{where}: Run {k}")
+    for k in ("step", "jacobiHoldLimit", "jacobiHoldStep"):
+        if k in out and not out[k] > 0:
+            raise InputFileError(f"{where}: Run {k}: {run.get(k)!r} is not positive")
+    if "startTime" in out and "stopTime" in out and not out["stopTime"] > out["startTime"]:
+        raise InputFileError(f"{where}: Run stopTime {run.get('stopTime')!r} is not after startTime "
+                             f"{run.get('startTime')!r}")
+    orders = run.findall(f"{_F}Order")
+    if len(orders) > 1:
+        raise InputFileError(f"{where}: Order given {len(orders)} times")
+    out["order"] = None
+    if orders and (orders[0].text or "").strip():
+        order = _names(orders[0].text, f"{where}: Order")
+        for n in order:
+            if n not in comps:
+                raise InputFileError(f"{where}: Order names {n!r}, which is no component ({', '.join(comps)})")
+        if sorted(order) != sorted(comps):
+            raise InputFileError(f"{where}: Order {' '.join(order)!r} must name every component once "
+                                 f"({', '.join(comps)})")
+        out["order"] = order
     out["units"] = {}
     for u in run.iterfind(f"{_F}Unit"):
-        starts = {s.get("name"): _number(s.get("value"), f"{where}: unit {u.get('name')}: {s.get('name')}")
-                  for s in u.iterfind(f"{_F}Start")}
-        out["units"][u.get("name")] = {"fmi_type": u.get("fmiType"), "solver": u.get("solver"),
-                                       "directional": u.get("directionalDerivatives") == "true",
-                                       "members": tuple((u.get("members") or "").split()), "starts": starts}
-    out["record"] = [(r.get("column"), r.get("unit"), r.get("variable"), r.get("physicalUnit") or "")
-                     for r in run.iterfind(f"{_F}Record")]
-    out["settings"] = {s.get("name"): _setting(s.get("value")) for s in run.iterfind(f"{_F}Setting")}
+        name = _name(u, "name", f"{where}: Unit")
+        uw = f"{where}: Unit {name}"
+        if name not in comps:
+            raise InputFileError(f"{uw}: no component of that name ({', '.join(comps)})")
+        if name in out["units"]:
+            raise InputFileError(f"{uw}: given twice (which one is meant?)")
+        fmi_type = u.get("fmiType")
+        if fmi_type not in ("cs", "me"):
+            raise InputFileError(f"{uw}: fmiType {fmi_type!r} is neither 'cs' (Co-Simulation) nor 'me' "
+                                 f"(Model Exchange)")
+        starts = {}
+        for st in u.iterfind(f"{_F}Start"):
+            sname = _name(st, "name", f"{uw}: Start")
+            if sname in starts:
+                raise InputFileError(f"{uw}: Start {sname}: given twice (which value is meant?)")
+            if st.get("value") is None:
+                raise InputFileError(f"{uw}: Start {sname}: no value attribute")
+            starts[sname] = _number(st.get("value"), f"{uw}: Start {sname} value")
+        out["units"][name] = {"fmi_type": fmi_type, "solver": _name(u, "solver", uw, required=False),
+                              "directional": parse_xs_boolean(u.get("directionalDerivatives", "false"),
+                                                              f"{uw} directionalDerivatives"),
+                              "members": _names(u.get("members"), f"{uw} members"), "starts": starts}
+    out["record"], columns = [], set()
+    for r in run.iterfind(f"{_F}Record"):
+        column = _name(r, "column", f"{where}: Record")
+        rw = f"{where}: Record {column}"
+        if column in columns:
+            raise InputFileError(f"{rw}: given twice (which one is meant?)")
+        columns.add(column)
+        unit, variable = _name(r, "unit", rw), _name(r, "variable", rw)
+        if unit not in comps:
+            raise InputFileError(f"{rw}: unit {unit!r} is no component ({', '.join(comps)})")
+        out["record"].append((column, unit, variable, _name(r, "physicalUnit", rw, required=False) or ""))
+    out["settings"] = {}
+    for st in run.iterfind(f"{_F}Setting"):
+        sname = _name(st, "name", f"{where}: Setting")
+        sw = f"{where}: Setting {sname}"
+        if sname in out["settings"]:
+            raise InputFileError(f"{sw}: given twice (which value is meant?)")
+        out["settings"][sname] = _setting(st.get("value"), f"{sw} value")
+    from ..cosim.settings import check_table
+
+    table = dict(out["settings"])
+    for k in ("scheme", "extrapolation"):
+        if out[k] is not None:
+            table.setdefault(k, out[k])
+    try:
+        check_table(table, f"{where}: Setting")
+    except FmugenError as exc:
+        raise InputFileError(str(exc)) from None
     return out
 
 
 def _fmi(fmu: Path, name: str, where: str):
     import zipfile
+    import zlib
 
     from fmpy import read_model_description
 
     from .ssd import MAX_XML_BYTES, parse_xml
 
+    cw = f"{where}: component {name} ({fmu.name})"
     try:  # the version first, with the same safe parser as the SSD: FMI 1.0/3.0 are refused by name
         with zipfile.ZipFile(fmu) as zf:
             info = zf.getinfo("modelDescription.xml")
             if info.file_size > MAX_XML_BYTES:
-                raise InputFileError(f"{where}: component {name}: modelDescription.xml is larger than "
-                                     f"{MAX_XML_BYTES} bytes")
-            version = parse_xml(zf.read(info), f"{where}: component {name}: modelDescription.xml").get("fmiVersion")
-    except (zipfile.BadZipFile, KeyError, OSError) as exc:
-        raise InputFileError(f"{where}: component {name}: not an FMU (zip with modelDescription.xml): {exc}") from None
+                raise InputFileError(f"{cw}: modelDescription.xml is larger than {MAX_XML_BYTES} bytes")
+            version = parse_xml(zf.read(info), f"{cw}: modelDescription.xml").get("fmiVersion")
+    except (zipfile.BadZipFile, KeyError, OSError, EOFError, zlib.error, NotImplementedError, RuntimeError) as exc:
+        raise InputFileError(f"{cw}: not an FMU (zip with modelDescription.xml): "
+                             f"{' '.join(str(exc).split())[:200] or type(exc).__name__}") from None
     if version != "2.0":
-        raise InputFileError(f"{where}: component {name}: FMI {version} is not supported (FMI 2.0 only)")
+        raise InputFileError(f"{cw}: FMI {version} is not supported (FMI 2.0 only)")
     try:
         md = read_model_description(str(fmu), validate=False)
     except Exception as exc:  # fmpy raises many kinds on a broken FMU
-        raise InputFileError(f"{where}: component {name}: cannot read its FMU: {exc}") from None
+        raise InputFileError(f"{cw}: cannot read its FMU: {' '.join(str(exc).split())[:200]}") from None
     if md.fmiVersion != "2.0":
-        raise InputFileError(f"{where}: component {name}: FMI {md.fmiVersion} is not supported (FMI 2.0 only)")
+        raise InputFileError(f"{cw}: FMI {md.fmiVersion} is not supported (FMI 2.0 only)")
+    if md.coSimulation is None and md.modelExchange is None:
+        raise InputFileError(f"{cw}: its modelDescription.xml has neither a CoSimulation nor a ModelExchange "
+                             f"interface")
     return md
+
+
+def can_set(v) -> bool:
+    """Whether a run may set the start value of fmpy variable ``v``: a parameter (fixed or tunable), an
+    input, or a state (an output or local with an exact start) -- FMI 2.0's rules for fmi2SetXXX before
+    initialisation.  One rule for the SSP's bindings, ``--set`` and ``fmugen sweep x.ssp``."""
+    return ((v.causality == "parameter" and v.variability in ("fixed", "tunable")) or v.causality == "input"
+            or (v.initial == "exact" and v.causality in ("output", "local")))
+
+
+def _bound(v, value, where: str):
+    """The start value ``value`` checked for FMU variable ``v``: settable, of its type, in its range."""
+    if not can_set(v):
+        raise InputFileError(f"{where}: {v.name} is {v.causality}/{v.variability}"
+                             f"{'/' + v.initial if v.initial else ''}; FMI 2.0 allows no start value for it")
+    if v.type == "Integer":
+        if isinstance(value, float) and not value.is_integer():
+            raise InputFileError(f"{where}: {v.name} is an Integer variable; {value!r} is not a whole number")
+        value = int(value)
+        if not -2 ** 31 <= value < 2 ** 31:
+            raise InputFileError(f"{where}: {value} is outside an FMI Integer (32 bits)")
+    elif v.type != "Real":
+        raise InputFileError(f"{where}: {v.name} is a {v.type} variable; bindings of Real and Integer values only")
+    for bound, ok in (("min", lambda b: value >= b), ("max", lambda b: value <= b)):
+        text = getattr(v, bound, None)
+        if text is None:
+            continue
+        try:
+            b = parse_xs_double(str(text), "the FMU's " + bound)
+        except InputFileError:
+            continue  # the FMU's own attribute is not a number: the FMU would not enforce it either
+        if not ok(b):
+            raise InputFileError(f"{where}: {v.name} = {value!r} is {'below its minimum' if bound == 'min' else 'above its maximum'} "
+                                 f"{b!r} (the FMU's modelDescription.xml)")
+    return value
+
+
+def _fmi_type(c, md, run_unit, where: str) -> str:
+    """"cs" or "me": the SSD's implementation, fmugen's annotation, else Co-Simulation when the FMU has it."""
+    choice = {"CoSimulation": "cs", "ModelExchange": "me"}.get(c.implementation)
+    if run_unit is not None:
+        if choice is not None and run_unit["fmi_type"] != choice:
+            raise InputFileError(f"{where}: implementation {c.implementation} but fmugen's annotation says "
+                                 f"fmiType {run_unit['fmi_type']!r} (which is meant?)")
+        choice = run_unit["fmi_type"]
+    if choice is None:
+        choice = "cs" if md.coSimulation is not None else "me"
+    if choice == "cs" and md.coSimulation is None:
+        raise InputFileError(f"{where}: Co-Simulation is asked for; the FMU has no such interface")
+    if choice == "me" and md.modelExchange is None:
+        raise InputFileError(f"{where}: Model Exchange is asked for; the FMU has no such interface")
+    return choice
 
 
 def to_system(ssd: Ssd, record: Optional[list] = None):
     """The :class:`CosimSystem` of a read archive (``record``: columns "component.connector" to keep)."""
     from ..cosim.system import CosimSystem, Coupling, Recorded, Unit
 
-    where = str(ssd.path)
+    if record is not None and (isinstance(record, (str, bytes)) or not all(isinstance(c, str) for c in record)):
+        raise FmugenError(f"record: a list of columns 'component.connector' is needed, got {record!r:.60}")
+    where = f"{ssd.path}: {SSD_NAME}"
     run = fmugen_run(ssd)
-    units, mds = [], {}
+    units, mds, variables_of = [], {}, {}
     for name, c in ssd.components.items():
+        cw = f"{where}: component {name}"
         md = _fmi(c.fmu_path, name, where)
         mds[name] = md
-        fmi_type = "cs" if md.coSimulation is not None else "me"
-        starts = dict(c.parameters)
+        variables = {v.name: v for v in md.modelVariables}
+        variables_of[name] = variables
+        for k in c.connectors:
+            v = variables.get(k.name)
+            if v is None:
+                raise InputFileError(f"{cw}: Connector {k.name!r}: its FMU ({c.fmu_path.name}) has no such variable")
+            if k.type and k.type != v.type:
+                raise InputFileError(f"{cw}: Connector {k.name!r} is declared {k.type}; the FMU's variable is {v.type}")
+            if k.kind in ("input", "output") and v.causality != k.kind:
+                raise InputFileError(f"{cw}: Connector {k.name!r} is declared {k.kind}; the FMU's variable is "
+                                     f"{v.causality}")
+            if k.unit and v.unit and k.unit != v.unit:
+                raise InputFileError(f"{cw}: Connector {k.name!r} is declared in [{k.unit}]; the FMU's variable "
+                                     f"is in [{v.unit}] (state the conversion on the connection)")
+        ru = run["units"].get(name) if run else None
+        fmi_type = _fmi_type(c, md, ru, cw)
+        directional = bool((md.coSimulation if fmi_type == "cs" else md.modelExchange).providesDirectionalDerivative)
         members = (name,)
-        directional = bool((md.coSimulation or md.modelExchange).providesDirectionalDerivative)
-        if run and name in run["units"]:
-            ru = run["units"][name]
-            fmi_type, members, directional = ru["fmi_type"], ru["members"] or members, ru["directional"]
-            if fmi_type == "me" and md.modelExchange is None:
-                raise InputFileError(f"{where}: component {name}: the annotation says Model Exchange, the FMU "
-                                     f"has no such interface")
+        starts = {}
+        if ru is not None:
+            members, directional = ru["members"] or members, ru["directional"]
             # what fmugen's master set for the scene (states at rest, solver), then the bindings: the same
             # values unless someone edited the .ssv, and then the edit wins
-            starts = dict(ru["starts"])
-            starts.update(c.parameters)
-        variables = {v.name: v for v in md.modelVariables}
-        for k in starts:
+            for k, value in ru["starts"].items():
+                if k not in variables:
+                    raise InputFileError(f"{where}: annotation {FMUGEN_ANNOTATION}: Unit {name}: Start {k!r}: its "
+                                         f"FMU has no such variable")
+                starts[k] = _bound(variables[k], value, f"{where}: annotation {FMUGEN_ANNOTATION}: Unit {name}: "
+                                                        f"Start {k}")
+        for k, value in c.parameters.items():
+            bw = f"{cw}: parameter binding {k}"
             if k not in variables:
-                raise InputFileError(f"{where}: component {name}: a parameter binding names {k!r}, which the FMU "
-                                     f"does not have")
+                raise InputFileError(f"{cw}: a parameter binding names {k!r}, which the FMU does not have")
+            unit = c.parameter_units.get(k, "")
+            fmu_unit = variables[k].unit or ""
+            if unit and fmu_unit and unit != fmu_unit:  # a value stated in another unit: converted, or refused
+                value = value * _unit_conversion(unit, fmu_unit, ssd.units, bw)
+                if not math.isfinite(value):
+                    raise InputFileError(f"{bw}: the value in [{fmu_unit}] is beyond the double range")
+            starts[k] = _bound(variables[k], value, bw)
         units.append(Unit(name, Path(c.fmu_path), fmi_type, starts, directional, members))
     couplings = []
     for e in ssd.connections:
@@ -138,9 +309,7 @@ def to_system(ssd: Ssd, record: Optional[list] = None):
         cw = f"{where}: connection {su}.{sv} -> {tu}.{tv}"
         ends = []
         for comp, conn, kind in ((su, sv, "output"), (tu, tv, "input")):
-            if comp not in ssd.components:
-                raise InputFileError(f"{cw}: no component {comp!r}")
-            v = {x.name: x for x in mds[comp].modelVariables}.get(conn)
+            v = variables_of[comp].get(conn)
             if v is None:
                 raise InputFileError(f"{cw}: the FMU of {comp} has no variable {conn!r}")
             if v.type != "Real":
@@ -156,6 +325,11 @@ def to_system(ssd: Ssd, record: Optional[list] = None):
             factor = _unit_conversion(ends[0].unit or "", unit, ssd.units, cw)
         couplings.append(Coupling((su, sv), (tu, tv), factor, unit))
     if run and run["record"] and record is None:
+        for column, comp, variable, _ in run["record"]:
+            v = variables_of[comp].get(variable)
+            rw = f"{where}: annotation {FMUGEN_ANNOTATION}: Record {column}"
+            if v is None or v.type != "Real":
+                raise InputFileError(f"{rw}: {comp} has no Real variable {variable!r}")
         recorded = tuple(Recorded(*r) for r in run["record"])
     else:
         recorded = []
@@ -167,40 +341,43 @@ def to_system(ssd: Ssd, record: Optional[list] = None):
             by = {r.column: r for r in recorded}
             missing = [c for c in record if c not in by]
             if missing:
-                raise InputFileError(f"{where}: record: no output {missing[0]!r}; outputs: "
+                raise InputFileError(f"{where}: record: no output {missing[0]!r:.80}; outputs: "
                                      f"{', '.join(by)}")
+            if len(set(record)) != len(record):
+                raise FmugenError(f"record: {next(c for c in record if record.count(c) > 1)!r} is named twice")
             recorded = [by[c] for c in record]
         recorded = tuple(recorded)
     start = ssd.start_time if ssd.start_time is not None else 0.0
     stop = ssd.stop_time if ssd.stop_time is not None else start + 1.0
+    osp = _osp_step(ssd)
     if run:
-        step = run.get("step") or run.get("jacobiHoldStep")
+        step = run.get("step") or run.get("jacobiHoldStep") or osp
         order, settings = run["order"], dict(run["settings"])
-        settings.setdefault("scheme", run["scheme"])
-        settings.setdefault("extrapolation", run["extrapolation"])
+        for k in ("scheme", "extrapolation"):
+            if run[k] is not None:
+                settings.setdefault(k, run[k])
     else:
-        step, order, settings = _osp_step(ssd), None, {}
-        if step is None:
-            step = (stop - start) / 1000.0
+        step, order, settings = osp, None, {}
+    if step is None:
+        step = (stop - start) / 1000.0
     return CosimSystem(ssd.system or ssd.name, tuple(units), tuple(couplings), recorded, start, stop, float(step),
                        order, settings)
 
 
 def _unit(name: str, defined: dict, where: str):
-    """(base-unit exponents, factor, offset) of unit ``name``: the archive's own definition (SSD ``Units``),
-    else fmugen's reading of the Modelica unit syntax; None when neither knows it."""
+    """(base-unit exponents, factor, offset) of unit ``name``: the archive's own definition (SSD ``Units``,
+    read and checked by :mod:`fmugen.ssp.ssd`), else fmugen's reading of the Modelica unit syntax; None
+    when neither knows it."""
     from ..fmi.units import BASE, base_units
 
     d = defined.get(name)
     if d:
-        try:
-            return (tuple(int(d.get(b, 0)) for b in BASE), float(d.get("factor", 1.0)),
-                    float(d.get("offset", 0.0)))
-        except ValueError:
-            raise InputFileError(f"{where}: unit {name!r}: its BaseUnit is not numbers: {d}") from None
+        return tuple(d[b] for b in BASE), d["factor"], d["offset"]
     try:
         u = base_units(name)
-    except ValueError:
+    except (ValueError, ZeroDivisionError, OverflowError, RecursionError):
+        return None
+    if not (math.isfinite(u.factor) and u.factor > 0 and math.isfinite(u.offset)):
         return None
     return tuple(getattr(u, b) for b in BASE), u.factor, u.offset
 
@@ -221,7 +398,11 @@ def _unit_conversion(source: str, target: str, defined: dict, where: str) -> flo
     if a[2] != 0.0 or b[2] != 0.0:
         raise InputFileError(f"{where}: converting [{source}] to [{target}] needs an offset, which the master's "
                              f"couplings (target = factor x source) do not have")
-    return a[1] / b[1]
+    factor = a[1] / b[1]
+    if not (math.isfinite(factor) and factor > 0):
+        raise InputFileError(f"{where}: the factor from [{source}] to [{target}] ({a[1]!r} / {b[1]!r}) is beyond "
+                             f"the double range")
+    return factor
 
 
 def _osp_step(ssd: Ssd) -> Optional[float]:
@@ -231,11 +412,12 @@ def _osp_step(ssd: Ssd) -> Optional[float]:
     if a is None:
         return None
     fs = a.find(f"{{{OSP_NS}}}FixedStepAlgorithm")
-    if fs is None or not fs.get("baseStepSize"):
+    if fs is None or fs.get("baseStepSize") is None:
         return None
-    step = float(_number(fs.get("baseStepSize"), f"{ssd.path}: {OSP_ANNOTATION} FixedStepAlgorithm baseStepSize"))
-    if step <= 0:
-        raise InputFileError(f"{ssd.path}: {OSP_ANNOTATION} FixedStepAlgorithm baseStepSize {step} is not positive")
+    where = f"{ssd.path}: {SSD_NAME}: DefaultExperiment annotation {OSP_ANNOTATION}: FixedStepAlgorithm baseStepSize"
+    step = parse_xs_double(fs.get("baseStepSize"), where)
+    if not step > 0:
+        raise InputFileError(f"{where}: {fs.get('baseStepSize')!r} is not positive")
     return step
 
 
@@ -245,7 +427,15 @@ def load_system(path, record: Optional[list] = None, workdir=None):
     The archive is extracted (safely, see :mod:`fmugen.ssp.ssd`) into
     ``workdir`` (an empty or new folder), by default into a temporary folder
     removed when the Python process ends (not before: copies of the system,
-    ``dataclasses.replace(system, ...)``, keep using its FMUs)."""
+    ``dataclasses.replace(system, ...)``, keep using its FMUs).  Bad input --
+    the archive, ``record``, ``workdir`` -- is an :class:`~fmugen.errors.FmugenError`
+    (an :class:`~fmugen.errors.InputFileError` naming the file inside the archive,
+    the element and the attribute)."""
+    for arg, value in (("path", path), ("workdir", workdir)):
+        if value is not None and not isinstance(value, (str, os.PathLike)):
+            raise FmugenError(f"load_system: {arg} must be a file path, got {type(value).__name__} {value!r:.60}")
+    if isinstance(path, str) and not path.strip():
+        raise FmugenError("load_system: path is empty")
     if workdir is None:
         tmp = Path(tempfile.mkdtemp(prefix="fmugen_ssp_"))
         atexit.register(shutil.rmtree, str(tmp), True)

@@ -30,12 +30,15 @@ An ``.ssp`` is a zip archive from anyone, so:
 from __future__ import annotations
 
 import stat
+import unicodedata
 import zipfile
-from dataclasses import dataclass, field
+import zlib
+from dataclasses import dataclass, field, replace
 from pathlib import Path, PurePosixPath
 from typing import Optional
 
 from ..errors import InputFileError
+from ..values import parse_xs_boolean, parse_xs_double, parse_xs_int
 
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -73,6 +76,8 @@ class Component:
     connectors: tuple  # of Connector
     parameters: dict = field(default_factory=dict)  # bound values: variable name -> number (Real or Integer)
     fmu_path: Optional[Path] = None  # extracted FMU
+    implementation: str = "any"  # the SSD's choice of FMI interface: any, CoSimulation, ModelExchange
+    parameter_units: dict = field(default_factory=dict)  # variable name -> the unit its bound Real value is in
 
 
 @dataclass(frozen=True)
@@ -92,7 +97,7 @@ class Ssd:
     system: str
     components: dict  # name -> Component, in file order
     connections: list
-    units: dict  # unit name -> {base unit exponents, factor, offset}
+    units: dict  # unit name -> {"kg": int, ..., "rad": int, "factor": float, "offset": float} (checked numbers)
     start_time: Optional[float] = None
     stop_time: Optional[float] = None
     annotations: dict = field(default_factory=dict)  # type -> the annotation's child element (lxml)
@@ -161,7 +166,7 @@ def extract(ssp: Path, dest: Path) -> None:
     where = str(ssp)
     try:
         zf = zipfile.ZipFile(ssp)
-    except (zipfile.BadZipFile, OSError) as exc:
+    except (zipfile.BadZipFile, OSError, EOFError, ValueError, NotImplementedError) as exc:
         raise InputFileError(f"{where}: not an SSP archive (zip): {exc}") from None
     with zf:
         infos = zf.infolist()
@@ -185,56 +190,136 @@ def extract(ssp: Path, dest: Path) -> None:
             if root != target and root not in target.parents:
                 raise InputFileError(f"{where}: archive member {info.filename!r} leads outside the extraction "
                                      f"folder: refused")
-            if info.is_dir():
-                target.mkdir(parents=True, exist_ok=True)
-                continue
-            target.parent.mkdir(parents=True, exist_ok=True)
-            written = 0
-            with zf.open(info) as src, open(target, "xb") as out:
-                while True:
-                    chunk = src.read(1 << 20)
-                    if not chunk:
-                        break
-                    written += len(chunk)
-                    total += len(chunk)
-                    if written > info.file_size or total > MAX_TOTAL_BYTES:
-                        raise InputFileError(f"{where}: archive member {info.filename!r} inflates beyond its "
-                                             f"declared size: refused")
-                    out.write(chunk)
+            try:
+                total = _extract_member(zf, info, target, total, where)
+            except OSError as exc:  # a member over a file of the same name ("a", then "a/b"), a full disk
+                raise InputFileError(f"{where}: archive member {info.filename!r} cannot be extracted: "
+                                     f"{exc.strerror or exc}") from None
+            except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError, RuntimeError) as exc:
+                # a CRC error, corrupt deflate data, a compression method or an encryption zipfile lacks
+                raise InputFileError(f"{where}: archive member {info.filename!r} cannot be read: "
+                                     f"{' '.join(str(exc).split()) or type(exc).__name__}") from None
+
+
+def _extract_member(zf, info, target: Path, total: int, where: str) -> int:
+    """Write one member to ``target`` (no more bytes than it declares); the running total of bytes."""
+    if info.is_dir():
+        target.mkdir(parents=True, exist_ok=True)
+        return total
+    target.parent.mkdir(parents=True, exist_ok=True)
+    written = 0
+    with zf.open(info) as src, open(target, "xb") as out:
+        while True:
+            chunk = src.read(1 << 20)
+            if not chunk:
+                break
+            written += len(chunk)
+            total += len(chunk)
+            if written > info.file_size or total > MAX_TOTAL_BYTES:
+                raise InputFileError(f"{where}: archive member {info.filename!r} inflates beyond its "
+                                     f"declared size: refused")
+            out.write(chunk)
+    return total
 
 
 # ---------------------------------------------------------------------------- SSD and SSV
+# Every attribute read below goes through one of these: numbers by the XML Schema grammar of their
+# type (fmugen.values: xs:double, xs:int, xs:boolean), names checked for what would break a message,
+# a column name or a line of a CSV header.  A refusal names the archive, the file inside it, the
+# element and the attribute.
+MAX_NAME_LENGTH = 1024
+
+
 def _float(el, attr: str, where: str, default=None) -> Optional[float]:
+    """The finite xs:double attribute ``attr`` of ``el`` (``default`` when absent)."""
     v = el.get(attr)
     if v is None:
         return default
-    try:
-        x = float(v)
-    except ValueError:
-        raise InputFileError(f"{where}: {attr}={v!r} is not a number") from None
-    if x != x or x in (float("inf"), float("-inf")):
-        raise InputFileError(f"{where}: {attr}={v!r} is not finite")
-    return x
+    return parse_xs_double(v, f"{where} {attr}")
+
+
+def _bool(el, attr: str, where: str, default: bool = False) -> bool:
+    v = el.get(attr)
+    return default if v is None else parse_xs_boolean(v, f"{where} {attr}")
+
+
+def _name(el, attr: str, where: str, required: bool = True, dot: bool = True) -> Optional[str]:
+    """The name attribute ``attr`` of ``el``: present (when ``required``), not empty, without control
+    characters (a newline in a name would split a one-line message and a CSV header), bounded; with
+    ``dot=False`` also without '.' (component names: fmugen's signals are 'component.connector')."""
+    v = el.get(attr)
+    if v is None:
+        if required:
+            raise InputFileError(f"{where}: no {attr} attribute")
+        return None
+    if not v.strip():
+        raise InputFileError(f"{where} {attr}: empty")
+    if len(v) > MAX_NAME_LENGTH:
+        raise InputFileError(f"{where} {attr}: {len(v)} characters ({v[:20]!r}...), more than {MAX_NAME_LENGTH}")
+    if any(unicodedata.category(ch) in ("Cc", "Cf", "Cs", "Co", "Cn", "Zl", "Zp") for ch in v):
+        raise InputFileError(f"{where} {attr}: {v!r} contains control or unassigned characters")
+    if not dot and "." in v:
+        raise InputFileError(f"{where} {attr}: {v!r} contains '.'; fmugen names a component's signals "
+                             f"'component.connector', so component names cannot (rename the component)")
+    return v
 
 
 def _q(prefix: str, tag: str) -> str:
     return f"{{{NS[prefix]}}}{tag}"
 
 
-def _parameter_set(root, where: str) -> dict:
-    out = {}
+def _units(parent, where: str, units: dict) -> dict:
+    """The ``ssc:Unit`` definitions under ``parent`` added to ``units`` (name -> exponents, factor, offset):
+    exponents xs:int, factor a finite xs:double > 0 (a conversion divides by it), offset finite; a name
+    defined twice (differently, when ``units`` came from another file) is refused."""
+    from ..fmi.units import BASE
+
+    own = set()
+    for u in parent.iterfind("ssc:Unit", NS):
+        name = _name(u, "name", f"{where}: Unit")
+        uw = f"{where}: Unit {name!r}: BaseUnit"
+        b = u.find("ssc:BaseUnit", NS)
+        if b is None:
+            raise InputFileError(f"{where}: Unit {name!r}: no BaseUnit")
+        d = {k: parse_xs_int(b.get(k), f"{uw} {k}") if b.get(k) is not None else 0 for k in BASE}
+        d["factor"] = parse_xs_double(b.get("factor", "1"), f"{uw} factor")
+        d["offset"] = parse_xs_double(b.get("offset", "0"), f"{uw} offset")
+        if not d["factor"] > 0:
+            raise InputFileError(f"{uw} factor: {b.get('factor')!r} is not positive (a unit is a positive multiple "
+                                 f"of its SI base units)")
+        if name in own or (name in units and units[name] != d):
+            raise InputFileError(f"{where}: Unit {name!r}: defined twice" + ("" if name in own else
+                                                                            " (differently in another file)"))
+        own.add(name)
+        units[name] = d
+    return units
+
+
+def _parameter_set(root, where: str, units: dict) -> tuple:
+    """({parameter name: value}, {parameter name: unit of its Real value}) of an ssv:ParameterSet; its own
+    unit definitions go into ``units``."""
+    out, out_units = {}, {}
+    for ue in root.iterfind("ssv:Units", NS):
+        _units(ue, where, units)
     for p in root.iterfind("ssv:Parameters/ssv:Parameter", NS):
-        name = p.get("name")
+        name = _name(p, "name", f"{where}: Parameter")
+        pw = f"{where}: parameter {name}"
+        if name in out:
+            raise InputFileError(f"{pw}: given twice (which value is meant?)")
         real, integer = p.find("ssv:Real", NS), p.find("ssv:Integer", NS)
         if real is not None:
-            out[name] = _float(real, "value", f"{where}: parameter {name}")
+            if real.get("value") is None:
+                raise InputFileError(f"{pw}: Real: no value attribute")
+            out[name] = _float(real, "value", f"{pw}: Real")
+            unit = _name(real, "unit", f"{pw}: Real", required=False)
+            if unit:
+                out_units[name] = unit
         elif integer is not None:
-            out[name] = int(integer.get("value"))
+            out[name] = parse_xs_int(integer.get("value"), f"{pw}: Integer value")
         else:
-            kind = etree_local(p[0]) if len(p) else "?"
-            raise InputFileError(f"{where}: parameter {name}: {kind} values are not supported (Real and "
-                                 f"Integer are)")
-    return out
+            kind = etree_local(p[0]) if len(p) else "no value element"
+            raise InputFileError(f"{pw}: {kind} values are not supported (Real and Integer are)")
+    return out, out_units
 
 
 def etree_local(el) -> str:
@@ -251,6 +336,97 @@ def _read_member(folder: Path, rel: str, where: str) -> bytes:
     return path.read_bytes()
 
 
+def _annotations(parent, where: str, prefix: str, out: dict) -> None:
+    for a in parent.iterfind("ssd:Annotations/ssc:Annotation", NS):
+        t = _name(a, "type", f"{where}: Annotation")
+        if prefix + t in out:
+            raise InputFileError(f"{where}: Annotation type {t!r} appears twice (which one is meant?)")
+        out[prefix + t] = a[0] if len(a) else None
+
+
+def _component(c, folder: Path, origin: Path, where: str, units: dict) -> Component:
+    name = _name(c, "name", f"{where}: Component", dot=False)
+    cw = f"{where}: component {name}"
+    ctype = c.get("type", "application/x-fmu-sharedlibrary")
+    if ctype != "application/x-fmu-sharedlibrary":
+        raise InputFileError(f"{cw}: type {ctype!r} is not supported (FMUs only)")
+    implementation = c.get("implementation", "any")
+    if implementation not in ("any", "CoSimulation", "ModelExchange"):
+        raise InputFileError(f"{cw}: implementation {implementation!r} is not supported")
+    source = _name(c, "source", cw)
+    conns, seen = [], set()
+    for k in c.iterfind("ssd:Connectors/ssd:Connector", NS):
+        kname = _name(k, "name", f"{cw}: Connector")
+        if kname in seen:
+            raise InputFileError(f"{cw}: Connector {kname!r} is declared twice")
+        seen.add(kname)
+        t = next((etree_local(x) for x in k if etree_local(x) in
+                  ("Real", "Integer", "Boolean", "String", "Enumeration", "Binary")), "")
+        unit = ""
+        if t == "Real":
+            unit = _name(k.find("ssc:Real", NS), "unit", f"{cw}: Connector {kname!r}: Real", required=False) or ""
+        conns.append(Connector(kname, k.get("kind"), t, unit))
+    params, param_units = {}, {}
+    for b in c.iterfind("ssd:ParameterBindings/ssd:ParameterBinding", NS):
+        bw = f"{cw}: parameter binding"
+        if b.find("ssd:ParameterMapping", NS) is not None:
+            raise InputFileError(f"{bw}: parameter mappings (.ssm) are not supported")
+        if b.get("type", "application/x-ssp-parameter-set") != "application/x-ssp-parameter-set":
+            raise InputFileError(f"{bw}: type {b.get('type')!r} is not supported")
+        if b.get("sourceBase", "SSD") != "SSD":
+            raise InputFileError(f"{bw}: sourceBase {b.get('sourceBase')!r} is not supported (SSD)")
+        prefix = b.get("prefix", "")
+        if prefix:
+            _name(b, "prefix", bw)
+        src = _name(b, "source", bw, required=False)
+        inline = b.find("ssd:ParameterValues/ssv:ParameterSet", NS)
+        if src is not None and inline is not None:
+            raise InputFileError(f"{bw}: both a source {src!r} and inline ParameterValues (which is meant?)")
+        if src is not None:
+            ssv = parse_xml(_read_member(folder, src, bw), f"{origin}: {src}")
+            if ssv.tag != _q("ssv", "ParameterSet"):
+                raise InputFileError(f"{origin}: {src}: the root element is {etree_local(ssv)}, not an SSP 1.0 "
+                                     f"ParameterSet")
+            validate(ssv, "SystemStructureParameterValues.xsd", f"{origin}: {src}")
+            values, vunits = _parameter_set(ssv, f"{origin}: {src}", units)
+        else:
+            values, vunits = _parameter_set(inline, bw, units) if inline is not None else ({}, {})
+        for k, v in values.items():
+            # SSP 1.0 (SystemStructureDescription.xsd, ParameterBinding/@prefix): "the specified prefix is
+            # prepended to all names in the parameter source" -- not stripped from them
+            if prefix + k in params:
+                raise InputFileError(f"{bw}: {prefix + k!r} is bound by two parameter bindings (which value is "
+                                     f"meant?)")
+            params[prefix + k] = v
+            if k in vunits:
+                param_units[prefix + k] = vunits[k]
+    return Component(name, source, ctype, tuple(conns), params, None, implementation, param_units)
+
+
+def _connection(e, components: dict, where: str) -> Connection:
+    cw0 = f"{where}: Connection"
+    se, ee = (_name(e, a, cw0, required=False) for a in ("startElement", "endElement"))
+    sc, ec = (_name(e, a, cw0) for a in ("startConnector", "endConnector"))
+    cw = f"{where}: connection {se}.{sc} -> {ee}.{ec}"
+    if se is None or ee is None:
+        raise InputFileError(f"{cw}: connections to the system's own connectors are not supported")
+    for comp, conn in ((se, sc), (ee, ec)):
+        if comp not in components:
+            raise InputFileError(f"{cw}: no component {comp!r} (components: {', '.join(components) or 'none'})")
+        if conn not in {k.name for k in components[comp].connectors}:
+            raise InputFileError(f"{cw}: component {comp} declares no Connector {conn!r}")
+    lin = e.find("ssc:LinearTransformation", NS)
+    if lin is None:  # FMPy writes and reads it in the ssd namespace
+        lin = e.find("ssd:LinearTransformation", NS)
+    if any(e.find(f"ssc:{t}", NS) is not None for t in ("BooleanMappingTransformation",
+                                                        "IntegerMappingTransformation",
+                                                        "EnumerationMappingTransformation")):
+        raise InputFileError(f"{cw}: mapping transformations are not supported (LinearTransformation is)")
+    f = _float(lin, "factor", f"{cw}: LinearTransformation", 1.0) if lin is not None else 1.0
+    o = _float(lin, "offset", f"{cw}: LinearTransformation", 0.0) if lin is not None else 0.0
+    return Connection((se, sc), (ee, ec), f, o, lin is not None, _bool(e, "suppressUnitConversion", cw))
+
+
 def read_ssd(folder: Path, origin: Path) -> Ssd:
     """The system of ``folder/SystemStructure.ssd`` (an extracted archive; ``origin``: for messages)."""
     where = f"{origin}: {SSD_NAME}"
@@ -262,7 +438,7 @@ def read_ssd(folder: Path, origin: Path) -> Ssd:
                              f"SystemStructureDescription ({root.tag})")
     validate(root, "SystemStructureDescription.xsd", where)
     system = root.find("ssd:System", NS)
-    sname = system.get("name")
+    sname = _name(system, "name", f"{where}: System")
     if system.find("ssd:SignalDictionaries", NS) is not None or \
             system.find("ssd:Elements/ssd:SignalDictionaryReference", NS) is not None:
         raise InputFileError(f"{where}: signal dictionaries are not supported")
@@ -271,100 +447,64 @@ def read_ssd(folder: Path, origin: Path) -> Ssd:
     if system.find("ssd:ParameterBindings", NS) is not None:
         raise InputFileError(f"{where}: parameter bindings of the system itself are not supported (bind them "
                              f"on the components)")
+    units = {}
+    for ue in root.iterfind("ssd:Units", NS):
+        _units(ue, where, units)
     components = {}
     for c in system.iterfind("ssd:Elements/ssd:Component", NS):
-        name = c.get("name")
-        cw = f"{where}: component {name}"
-        ctype = c.get("type", "application/x-fmu-sharedlibrary")
-        if ctype != "application/x-fmu-sharedlibrary":
-            raise InputFileError(f"{cw}: type {ctype!r} is not supported (FMUs only)")
-        if c.get("implementation", "any") not in ("any", "CoSimulation", "ModelExchange"):
-            raise InputFileError(f"{cw}: implementation {c.get('implementation')!r} is not supported")
-        if name in components:
-            raise InputFileError(f"{cw}: the name is used twice")
-        conns = []
-        for k in c.iterfind("ssd:Connectors/ssd:Connector", NS):
-            t = next((etree_local(x) for x in k if etree_local(x) in
-                      ("Real", "Integer", "Boolean", "String", "Enumeration", "Binary")), "")
-            unit = ""
-            if t == "Real":
-                unit = k.find("ssc:Real", NS).get("unit", "")
-            conns.append(Connector(k.get("name"), k.get("kind"), t, unit))
-        params = {}
-        for b in c.iterfind("ssd:ParameterBindings/ssd:ParameterBinding", NS):
-            bw = f"{cw}: parameter binding"
-            if b.find("ssd:ParameterMapping", NS) is not None:
-                raise InputFileError(f"{bw}: parameter mappings (.ssm) are not supported")
-            if b.get("type", "application/x-ssp-parameter-set") != "application/x-ssp-parameter-set":
-                raise InputFileError(f"{bw}: type {b.get('type')!r} is not supported")
-            if b.get("sourceBase", "SSD") != "SSD":
-                raise InputFileError(f"{bw}: sourceBase {b.get('sourceBase')!r} is not supported (SSD)")
-            prefix = b.get("prefix", "")
-            src = b.get("source")
-            if src is not None:
-                ssv = parse_xml(_read_member(folder, src, bw), f"{origin}: {src}")
-                validate(ssv, "SystemStructureParameterValues.xsd", f"{origin}: {src}")
-                values = _parameter_set(ssv, f"{origin}: {src}")
-            else:
-                inline = b.find("ssd:ParameterValues/ssv:ParameterSet", NS)
-                values = _parameter_set(inline, bw) if inline is not None else {}
-            for k, v in values.items():
-                # SSP 1.0 (SystemStructureDescription.xsd, ParameterBinding/@prefix): "the specified prefix is
-                # prepended to all names in the parameter source" -- not stripped from them
-                params[prefix + k] = v
-        components[name] = Component(name, c.get("source"), ctype, tuple(conns), params)
-    connections = []
+        comp = _component(c, folder, origin, where, units)
+        if comp.name in components:
+            raise InputFileError(f"{where}: component {comp.name}: the name is used twice")
+        components[comp.name] = comp
+    if not components:
+        raise InputFileError(f"{where}: System {sname!r} has no components (nothing to run)")
+    connections, driven = [], {}
     for e in system.iterfind("ssd:Connections/ssd:Connection", NS):
-        se, sc, ee, ec = (e.get(a) for a in ("startElement", "startConnector", "endElement", "endConnector"))
-        cw = f"{where}: connection {se}.{sc} -> {ee}.{ec}"
-        if se is None or ee is None:
-            raise InputFileError(f"{cw}: connections to the system's own connectors are not supported")
-        lin = e.find("ssc:LinearTransformation", NS)
-        if lin is None:  # FMPy writes and reads it in the ssd namespace
-            lin = e.find("ssd:LinearTransformation", NS)
-        if any(e.find(f"ssc:{t}", NS) is not None for t in ("BooleanMappingTransformation",
-                                                            "IntegerMappingTransformation",
-                                                            "EnumerationMappingTransformation")):
-            raise InputFileError(f"{cw}: mapping transformations are not supported (LinearTransformation is)")
-        f = _float(lin, "factor", cw, 1.0) if lin is not None else 1.0
-        o = _float(lin, "offset", cw, 0.0) if lin is not None else 0.0
-        connections.append(Connection((se, sc), (ee, ec), f, o, lin is not None,
-                                      e.get("suppressUnitConversion", "false") in ("true", "1")))
-    units = {}
-    for u in root.iterfind("ssd:Units/ssc:Unit", NS):
-        b = u.find("ssc:BaseUnit", NS)
-        units[u.get("name")] = dict(b.attrib) if b is not None else {}
+        c = _connection(e, components, where)
+        if c.end in driven:  # two sources for one input: neither value would be the input's
+            raise InputFileError(f"{where}: connection {c.start[0]}.{c.start[1]} -> {c.end[0]}.{c.end[1]}: "
+                                 f"{c.end[0]}.{c.end[1]} is already driven by {'.'.join(driven[c.end])}")
+        driven[c.end] = c.start
+        connections.append(c)
     de = root.find("ssd:DefaultExperiment", NS)
     start = stop = None
     annotations = {}
     if de is not None:
         start = _float(de, "startTime", f"{where}: DefaultExperiment")
         stop = _float(de, "stopTime", f"{where}: DefaultExperiment")
-        for a in de.iterfind("ssd:Annotations/ssc:Annotation", NS):
-            annotations["DefaultExperiment/" + a.get("type")] = a[0] if len(a) else None
-    for a in root.iterfind("ssd:Annotations/ssc:Annotation", NS):
-        annotations[a.get("type")] = a[0] if len(a) else None
-    return Ssd(origin, root.get("name"), sname, components, connections, units, start, stop, annotations, folder)
+        if stop is not None and not stop > (start if start is not None else 0.0):
+            raise InputFileError(f"{where}: DefaultExperiment stopTime {de.get('stopTime')!r} is not after its "
+                                 f"startTime {de.get('startTime', '0')!r}")
+        _annotations(de, f"{where}: DefaultExperiment", "DefaultExperiment/", annotations)
+    _annotations(root, where, "", annotations)
+    return Ssd(origin, _name(root, "name", f"{where}: SystemStructureDescription"), sname, components, connections,
+               units, start, stop, annotations, folder)
 
 
 def open_ssp(path, dest: Path) -> Ssd:
-    """Extract ``path`` (an .ssp archive) into the new folder ``dest`` and read its system."""
+    """Extract ``path`` (an .ssp archive) into the new or empty folder ``dest`` and read its system."""
     path = Path(path)
     if not path.is_file():
-        raise InputFileError(f"{path}: no such SSP file")
-    dest.mkdir(parents=True, exist_ok=True)
-    if any(dest.iterdir()):
-        raise InputFileError(f"{dest}: the extraction folder must be empty")
+        raise InputFileError(f"{path}: no such SSP file" if not path.exists() else f"{path}: not a file")
+    dest = Path(dest)
+    try:
+        if dest.exists() and not dest.is_dir():
+            raise InputFileError(f"{dest}: the extraction folder (workdir) is a file, not a folder")
+        dest.mkdir(parents=True, exist_ok=True)
+        if any(dest.iterdir()):
+            raise InputFileError(f"{dest}: the extraction folder (workdir) must be empty")
+    except OSError as exc:
+        raise InputFileError(f"{dest}: cannot make the extraction folder (workdir): {exc.strerror or exc}") from None
     extract(path, dest)
     ssd = read_ssd(dest, path)
     out = {}
     for name, c in ssd.components.items():
-        where = f"{path}: component {name}"
+        where = f"{path}: {SSD_NAME}: component {name}"
         rel = _safe_member(c.source, where)
         fmu = (dest / Path(*rel.parts)).resolve()
         if dest.resolve() not in fmu.parents or not fmu.is_file():
             raise InputFileError(f"{where}: source {c.source!r} is not a file of the archive")
-        out[name] = Component(c.name, c.source, c.type, c.connectors, c.parameters, fmu)
+        out[name] = replace(c, fmu_path=fmu)
     ssd.components = out
     return ssd
 
