@@ -215,9 +215,12 @@ def check_model_values(model, values: Mapping[str, object], where_of) -> None:
             raise FmugenError(f"{where_of(name)} = {shown} {problem}")
 
 
-def robot_value_problem(robot, values: Mapping[str, float]) -> Optional[str]:
+def robot_value_problem(robot, values: Mapping[str, float], named=None) -> Optional[str]:
     """Why ``robot`` with parameter ``values`` (name -> float, over the file's own) is not a
-    physical arm -- the robot-file checks applied to the new numbers -- or None."""
+    physical arm -- the robot-file checks applied to the new numbers -- or None.
+
+    ``named``: the names of ``values`` the message shows as the cause (a sweep point passes every
+    parameter's value but names the swept ones); all of them by default."""
     import numpy as np
     import sympy as sp
 
@@ -245,7 +248,8 @@ def robot_value_problem(robot, values: Mapping[str, float]) -> Optional[str]:
                 return math.nan  # zoo, nan: a division by zero
         return f
 
-    changed = ", ".join(f"{k} = {v!r}" for k, v in values.items() if k in by_name)
+    shown = set(values if named is None else named)
+    changed = ", ".join(f"{k} = {v!r}" for k, v in values.items() if k in by_name and k in shown) or "these values"
     data, complete = [], True
     dh = bool(robot.links)  # a DH file (links), or a robot written as joints (bodies: URDF)
     for i, L in enumerate(robot.links or robot.bodies, start=1):

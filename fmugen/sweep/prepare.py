@@ -150,7 +150,9 @@ class SweepPlan:
 
     def check_point(self, index: int, values: Mapping[str, float]) -> None:
         """Refuse (:class:`PointRefused`) a point a file could not hold: each swept parameter's physical
-        sign, and a robot's masses, inertias and mass matrix with the point's values (:mod:`fmugen.values`)."""
+        sign, a robot's masses, inertias and mass matrix with the point's values (:mod:`fmugen.values`),
+        and a swept start value's declared sign and range.  The message names the point and the swept
+        parameter(s), not every value of the model."""
         from ..values import robot_value_problem, variable_problem
 
         by_inst: dict = {}
@@ -163,7 +165,7 @@ class SweepPlan:
             for par, val in given.items():
                 problem = variable_problem(pvars[par], val)
                 if problem:
-                    raise PointRefused(f"refused: {inst}.{par} = {val!r} {problem}")
+                    raise PointRefused(f"refused: point {index}: {inst}.{par} = {val!r} {problem}")
             if self.scene.spec.instances[inst].kind == "robot":
                 import fmugen
 
@@ -172,9 +174,15 @@ class SweepPlan:
                     self._arms[inst] = fmugen.load_robot(spec.source, armature=spec.options.get("armature")).robot
                 full = {v.name: v.start for v in m.parameters if v.start is not None}
                 full.update(given)
-                problem = robot_value_problem(self._arms[inst], full)
+                problem = robot_value_problem(self._arms[inst], full, named=given)
                 if problem:
-                    raise PointRefused(f"refused: {inst}: {problem}")
+                    raise PointRefused(f"refused: point {index}: {inst}: {problem}")
+        for n in self.states:  # a swept start value within the state's declared sign and range (min/max)
+            inst, var = n.split(".", 1)
+            sv = next(v for v in self.scene.base_models[inst].states if v.name == var)
+            problem = variable_problem(sv, values[n])
+            if problem:
+                raise PointRefused(f"refused: point {index}: {n} = {values[n]!r} (start value) {problem}")
 
     def task(self, index: int, key: str, values: Mapping[str, float]) -> PointTask:
         """The point's start values; raises :class:`fmugen.scene.SceneError` when it has no state of rest
