@@ -138,14 +138,12 @@ def cmd_report_ssp(args) -> int:
         if args.schemes else DEFAULT_SCHEMES
     schemes = [check_choices(*sc) for sc in schemes]
     system = system_from_args(args)
-    from ..cosim.commands import _flags
+    from ..cosim.run_arguments import check_args, run_flags
     from ..cosim.settings import resolve
-
-    workers = resolve(system.settings, **_flags(args)).workers  # its settings, then the flags (checked)
-    from ..cosim.commands import _check_args
     from .cli import scene_like
 
-    _check_args(args, scene_like(system))
+    workers = resolve(system.settings, **run_flags(args)).workers  # its settings, then the flags (checked)
+    check_args(args, scene_like(system))
     H = float(system.step)
     steps = [float(h) for h in args.steps.split(",")] if args.steps else [8 * H, 4 * H, 2 * H, H, H / 2]
     rep = report_ssp(system, steps, schemes, repeats=args.repeats, stop=args.stop, workers=workers,
