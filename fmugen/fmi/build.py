@@ -4,6 +4,7 @@
     model --model_description_xml--> modelDescription.xml
     c_runtime/*.c, *.h + FMI 2.0 headers (from fmpy) + model.c
         --cc -O2 -fPIC -shared--> binaries/<platform>/<modelIdentifier>.so
+        (and per requested platform: win64 .dll, darwin64 universal .dylib; fmugen/fmi/platforms.py)
     zip --> <name>.fmu
 
 The FMU is self-contained: ``sources/`` holds every C file and header needed
@@ -35,6 +36,7 @@ from ..codegen.c_code import GUID_PLACEHOLDER, c_identifier, deterministic_guid,
 from ..codegen.model import SymbolicModel
 from ..errors import IDENTIFIER_PATTERN, MAX_IDENTIFIER_LENGTH, FmugenError
 from .model_description import model_description_xml
+from .platforms import Slice, Target, link_flags, resolve, sources_readme, universal_binary
 
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 CFLAGS = ("-O2", "-fPIC", "-shared", "-Wall", "-Wextra", "-std=c99")
@@ -53,7 +55,9 @@ class BuildResult:
     guid: str
     op_counts: dict  # function name -> FunctionOps
     timings: dict = field(default_factory=dict)  # generate / compile / zip, seconds
-    command: str = ""  # the compiler command
+    command: str = ""  # the compiler command (link) of the first platform
+    platforms: tuple = ()  # the binaries/ folders, e.g. ("linux64", "win64")
+    commands: dict = field(default_factory=dict)  # "<platform>/<arch>" -> its link command
 
     def __str__(self) -> str:
         t = ", ".join(f"{k} {v:.2f} s" for k, v in self.timings.items())
@@ -258,10 +262,12 @@ def object_cache_dir() -> Optional[Path]:
     return Path(os.environ.get("FMUGEN_CACHE") or Path.home() / ".cache" / "fmugen") / "objects"
 
 
-def _runtime_key(cc: str, flags: list, src: Path, runtime: list) -> str:
-    """Hash of what the runtime objects depend on: the compiler (its resolved path, size and
-    time), the flags, and every source and header of the build folder but model.c."""
+def _runtime_key(cc: str, flags: list, src: Path, runtime: list, target: str = "") -> str:
+    """Hash of what the runtime objects depend on: the target platform and architecture, the
+    compiler (its resolved path, size and time), the flags, and every source and header of
+    the build folder but model.c."""
     h = hashlib.sha256()
+    h.update(f"target {target}\0".encode())
     path = shutil.which(cc) or cc
     try:
         st = os.stat(os.path.realpath(path))
@@ -276,8 +282,8 @@ def _runtime_key(cc: str, flags: list, src: Path, runtime: list) -> str:
     return h.hexdigest()[:32]
 
 
-def _compile(cc: str, extra: list, sources: list, src: Path, lib: Path, what: str,
-             budget: _Budget) -> list:
+def _compile(cc: Union[str, Slice], extra: list, sources: list, src: Path, lib: Path, what: str,
+             budget: _Budget, objdir: Optional[Path] = None, target: str = "") -> list:
     """Compile each source to an object file in parallel, then link ``lib``.
 
     Equivalent to one ``cc ... -o lib *.c`` call (the command of the README),
@@ -285,14 +291,18 @@ def _compile(cc: str, extra: list, sources: list, src: Path, lib: Path, what: st
     compiles while the runtime files do.  The runtime's objects depend only
     on the runtime's files, the compiler and the flags: they are compiled
     once and kept in :func:`object_cache_dir` (2.4 s of CPU of every build
-    before), so a build compiles model.c alone.  Returns the link command.
+    before), so a build compiles model.c alone.  ``cc`` is a compiler name or a
+    :class:`~fmugen.fmi.platforms.Slice` (a cross compiler, its target flags),
+    ``target`` the platform/architecture the cache keys on.  Returns the link command.
     """
-    flags = [f for f in CFLAGS if f != "-shared"] + extra + ["-I."]
-    objs = [src.parent / "obj" / (Path(c).stem + ".o") for c in sources]
-    objs[0].parent.mkdir(exist_ok=True)
+    s = cc if isinstance(cc, Slice) else Slice("", (cc,), cc, (), ())
+    flags = [*s.cflags, *(f for f in CFLAGS if f != "-shared" and (s.pic or f != "-fPIC")), *extra, "-I."]
+    objs = [(objdir or src.parent / "obj") / (Path(c).stem + ".o") for c in sources]
+    objs[0].parent.mkdir(parents=True, exist_ok=True)
     runtime = [i for i, c in enumerate(sources) if c != "model.c"]
     cache = object_cache_dir()
-    cached = cache / _runtime_key(cc, flags, src, [sources[i] for i in runtime]) if cache and runtime else None
+    cached = cache / _runtime_key(s.compiler, flags, src, [sources[i] for i in runtime], target) \
+        if cache and runtime else None
     hit = cached is not None and all((cached / objs[i].name).is_file() for i in runtime)
     if hit:
         for i in runtime:
@@ -300,11 +310,12 @@ def _compile(cc: str, extra: list, sources: list, src: Path, lib: Path, what: st
     todo = [i for i in range(len(sources)) if not (hit and i in runtime)]
     # largest first, so the long model.c starts at once
     order = sorted(todo, key=lambda i: -(src / sources[i]).stat().st_size)
-    jobs = [[cc, *flags, "-c", sources[i], "-o", str(objs[i])] for i in order]
+    jobs = [[*s.cc, *flags, "-c", sources[i], "-o", str(objs[i])] for i in order]
     _run_jobs(jobs, src, what, budget, "compile")
     if cached is not None and not hit:
         _store_objects(cached, [objs[i] for i in runtime])
-    link = [cc, "-shared", *extra, "-o", str(lib), *map(str, objs), "-lm"]
+    link = [*s.cc, *s.cflags, "-shared", *extra, "-o", str(lib), *map(str, objs), "-lm",
+            *link_flags(s, objs[0].parent)]
     _run_jobs([link], src, what, budget, "link")
     return link
 
@@ -341,6 +352,7 @@ def build_fmu(
     budget_memory: Optional[float] = None,
     progress: Optional[bool] = None,
     budget_start: Optional[float] = None,
+    platforms: Optional[Sequence[str]] = None,
 ) -> BuildResult:
     """Generate, compile and zip ``model`` into an FMI 2.0 FMU.
 
@@ -367,6 +379,12 @@ def build_fmu(
                          is a terminal
         budget_start     time.perf_counter() at which the time budget began
                          (default: this call), e.g. before deriving the model
+        platforms        FMI 2.0 platform folders to build binaries for, e.g.
+                         ["linux64", "win64", "darwin64"] (None: this machine's
+                         only); cross compilers as fmugen/fmi/platforms.py
+                         finds them, a missing one refused (PlatformError) before
+                         anything is generated; ``cc`` compiles the host's binary,
+                         ``extra_cflags`` go to every compiler
 
     Temporary files are removed on every way out, including SIGINT and
     SIGTERM (raised as :class:`BuildInterrupted` while the build runs); the
@@ -382,18 +400,19 @@ def build_fmu(
     with _terminate_as_exception():
         return _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_sources,
                       model_identifier, default_experiment, budget, _Progress(progress, model.name), t0,
-                      runtime_start)
+                      runtime_start, platforms)
 
 
 def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_sources, model_identifier,
            default_experiment, budget: _Budget, progress: _Progress, t0: float,
-           runtime_start: Optional[dict] = None) -> BuildResult:
+           runtime_start: Optional[dict] = None, platforms: Optional[Sequence[str]] = None) -> BuildResult:
     progress.start("generate", f"{model.nx} states")
     model = _fold(model, fold_parameters)
     ident = model_identifier or c_identifier(model.name)
     _check_identifier(ident, model.name, model_identifier is not None)
+    targets = resolve(platforms, cc, "platforms", ident)  # a missing cross compiler: refused before any work
     rt, fmi_h = runtime_dir(), fmi_headers_dir()
-    platform, suffix = platform_binary()
+    suffix = targets[0].suffix
 
     runtime_c = sorted(p.name for p in rt.glob("*.c"))
     runtime_h = sorted(p.name for p in rt.glob("*.h"))
@@ -425,26 +444,29 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
             shutil.copy2(fmi_h / name, src / name)
         (src / "model.c").write_text(c_src)
         (root / "modelDescription.xml").write_text(xml, encoding="utf-8")
-        bindir = root / "binaries" / platform
-        bindir.mkdir(parents=True)
-        lib = bindir / f"{ident}{suffix}"
 
         t1 = time.perf_counter()
-        progress.start("compile", f"model.c {c_src.count(chr(10))} lines, {len(sources)} files")
-        cmd = _compile(cc, list(extra_cflags), sources, src, lib, model.name, budget)
+        libs, commands = [], {}
+        for target in targets:
+            lib = _compile_target(target, cc, list(extra_cflags), sources, src, root, ident, model.name,
+                                  budget, progress, f"model.c {c_src.count(chr(10))} lines, {len(sources)} files",
+                                  commands)
+            libs.append(lib)
+        cmd = commands[next(iter(commands))]
         t_cc = time.perf_counter() - t1
-        progress.done()
-        portable = shlex.join([cc, *CFLAGS, "-I.", "-o", f"{ident}{suffix}", *sources, "-lm"])
+        portable = shlex.join(["cc" if not targets[0].host else cc, *CFLAGS, "-I.", "-o", f"{ident}.so",
+                               *sources, "-lm"])
         (src / "README.txt").write_text(
             f"Sources of the FMU {ident} ({model.name}), generated by fmugen {__version__}.\n"
             f"model.c holds the model (generated); the other .c/.h files are the generic fmugen FMI 2.0\n"
             f"runtime and the FMI 2.0 standard headers.  Compile all .c files into one shared library\n"
             f"named after the modelIdentifier, e.g. on Linux:\n\n    {portable}\n\n"
-            f"and place it in binaries/<platform>/ (linux64, darwin64, win64).\n")
+            + sources_readme(ident, sources, CFLAGS) +
+            f"\nand place it in binaries/<platform>/ (linux64, darwin64, win64).\n")
 
         t2 = time.perf_counter()
         out.parent.mkdir(parents=True, exist_ok=True)  # only now: a failed compile leaves no empty folder
-        files = [root / "modelDescription.xml", lib]
+        files = [root / "modelDescription.xml", *libs]
         if keep_sources:
             files += sorted(src.iterdir())
         # a name of its own: never a user's file (an existing "x.fmu.part" stays as it was)
@@ -456,7 +478,7 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
                 for f in files:
                     info = zipfile.ZipInfo(f.relative_to(root).as_posix(), date_time=_ZIP_DATE)
                     info.compress_type = zipfile.ZIP_DEFLATED
-                    info.external_attr = (0o755 if f == lib else 0o644) << 16
+                    info.external_attr = (0o755 if f in libs else 0o644) << 16
                     zf.writestr(info, f.read_bytes())
             budget.check("zip")
             os.replace(tmp_zip, out)
@@ -466,4 +488,27 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
 
     return BuildResult(path=out, model_identifier=ident, guid=guid, op_counts=gen.op_counts,
                        timings={"generate": t_gen, "compile": t_cc, "zip": t_zip},
-                       command=shlex.join(cmd))
+                       command=shlex.join(cmd), platforms=tuple(t.name for t in targets),
+                       commands={k: shlex.join(v) for k, v in commands.items()})
+
+
+def _compile_target(target: Target, cc: str, extra: list, sources: list, src: Path, root: Path, ident: str,
+                    what: str, budget: _Budget, progress: _Progress, detail: str, commands: dict) -> Path:
+    """binaries/<platform>/<ident><suffix> of one platform: each slice compiled and linked (the host's
+    by ``cc``), several slices joined into one universal Mach-O.  Records each link command."""
+    bindir = root / "binaries" / target.name
+    bindir.mkdir(parents=True)
+    lib = bindir / f"{ident}{target.suffix}"
+    thin = {}
+    for s in target.slices:
+        key = f"{target.name}/{s.arch}"
+        progress.start("compile", detail if target.host else f"{key}, {detail}")
+        objdir = root / "obj" / f"{target.name}-{s.arch}"
+        out = lib if len(target.slices) == 1 else objdir / lib.name
+        commands[key] = _compile(s, extra, sources, src, out, what, budget, objdir,
+                                 "" if target.host else key)
+        thin[s.arch] = out
+        progress.done()
+    if len(target.slices) > 1:
+        universal_binary(thin, lib)
+    return lib
