@@ -2,7 +2,7 @@
 
     fmugen equations ROBOT.toml [--latex] [--formulation lagrange] [--form closed|program]
     fmugen build FILE.toml --fmi-type me|cs|both -o OUT.fmu [--outputs p_ee,qdd] [--fold all]
-                           [--model inverse_dynamics]
+                           [--model inverse_dynamics] [--platforms linux64,win64,darwin64]
     fmugen info FILE.toml
     fmugen export-urdf ROBOT.toml -o ROBOT.urdf [--set NAME=VALUE ...]   (any robot as URDF, fmugen/robot)
     fmugen build SCENE.toml -o DIR [--set NAME=VALUE ...] [--no-prune] [--no-cache]
@@ -169,7 +169,15 @@ def _cmd_build_scene(args) -> int:
 
     if args.output:
         output_folder(args.output, "-o", inputs=[args.file])
-    scene = load_scene(args.file, set=args.set, allow_factories=args.allow_factories)
+    sets = args.set
+    if args.platforms is not None:  # the scene's [scene] platforms, as --set scene.platforms would give it
+        from .scene import parse_sets
+
+        sets = parse_sets(args.set)
+        if "scene.platforms" in sets:
+            raise ValueError(f"{args.file}: --platforms and --set scene.platforms both given; give one")
+        sets["scene.platforms"] = args.platforms
+    scene = load_scene(args.file, set=sets, allow_factories=args.allow_factories)
     out = Path(args.output) if args.output else Path(scene.name)
     if out.suffix == ".fmu":
         raise ValueError(f"{args.file}: a scene builds one FMU per group: -o names a folder, not {out}")
@@ -208,6 +216,11 @@ def _cmd_build(args) -> int:
     if args.budget_seconds is not None and not (args.budget_seconds > 0 and args.budget_seconds < float("inf")):
         raise ValueError(f"--budget-seconds {args.budget_seconds!r}: must be a positive number of seconds")
     outputs = tuple(o for o in args.outputs.split(",") if o)
+    platforms = None
+    if args.platforms is not None:  # checked, and the cross compilers found, before anything is derived
+        from .fmi.platforms import resolve
+
+        platforms = [t.name for t in resolve(args.platforms, where=f"{path}: --platforms")]
     if sys.stderr.isatty():  # progress of the first stage; build_fmu reports the others
         print(f"fmugen build {path.name}: derive ...", end="", file=sys.stderr, flush=True)
     model = symbolic_model(path, outputs, args.formulation, args.model, sets=args.set, strategy=args.strategy,
@@ -218,7 +231,7 @@ def _cmd_build(args) -> int:
     fold = None if args.fold == "none" else ("all" if args.fold == "all" else args.fold.split(","))
     out = output_file(args.output or f"{model.name}.fmu", "-o", inputs=[path])
     result = build_fmu(model, out, fmi_type=args.fmi_type or "both", fold_parameters=fold, budget_start=t0,
-                       budget_seconds=args.budget_seconds, budget_memory=memory)
+                       budget_seconds=args.budget_seconds, budget_memory=memory, platforms=platforms)
     t2 = time.perf_counter()
     print(f"wrote {result.path}  (derive {t1 - t0:.2f} s, generate+compile+zip {t2 - t1:.2f} s)")
     if args.ops:
@@ -316,6 +329,9 @@ def _add_own_commands(sub) -> None:
                    help="stop the build when it holds more memory than this (e.g. 1G, 800M)")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="set a parameter, start value or option (repeatable), e.g. m=1 or joint.J=5")
+    p.add_argument("--platforms", default=None, metavar="P1,P2,...",
+                   help="FMI 2.0 binaries to build: linux64, win64 (MinGW-w64), darwin64 (zig cc: x86_64 + "
+                        "arm64 in one file); default this machine's; a scene's [scene] platforms")
     p.add_argument("--no-prune", action="store_true", help="scenes: keep what the scene does not need")
     p.add_argument("--no-cache", action="store_true", help="scenes: rebuild every FMU")
     p.add_argument("--allow-factories", action="store_true",

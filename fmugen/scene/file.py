@@ -20,7 +20,7 @@ from .errors import SceneError, did_you_mean
 
 SCENE_KEYS = {"name", "description", "parameter_set", "start", "stop", "step", "tolerance", "record",
               "initial", "prune", "connections", "monolithic", "connect", "record_bonds",
-              "inputs"}
+              "inputs", "platforms"}
 COMMON_INSTANCE_KEYS = {"parameters", "fixed", "start", "hold"}
 ROBOT_KEYS = {"robot", "formulation", "locked", "outputs", "mimic", "armature", "friction", "limits"}
 FACTORY_KEYS = {"factory", "options", "parameter_set"}
@@ -78,6 +78,7 @@ class SceneSpec:
     record_bonds: bool = False  # also record each bond's effort and flow (fmugen/scene/bonds.py)
     inputs: tuple = ()  # undriven inputs kept as inputs of the FMUs (not fixed) when pruning
     external: Optional[dict] = None  # [external]: an SSP's components beside the instances (scene/external.py)
+    platforms: Optional[tuple] = None  # FMI 2.0 binaries/ folders of every FMU (None: this machine's only)
 
 
 def _number(v, where, positive=False, nonneg=False) -> float:
@@ -236,6 +237,12 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
     desc = sc.get("description", "")
     if not isinstance(desc, str):
         raise SceneError(f"{src}: [scene] description must be a string")
+    from ..fmi.platforms import parse_platforms  # the names build_fmu(platforms=) and --platforms take
+
+    try:
+        platforms = parse_platforms(sc.get("platforms"), f"{src}: [scene]")
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
 
     inst_tab = data.get("instances")
     if not isinstance(inst_tab, dict) or not inst_tab:
@@ -317,7 +324,7 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
                      prune=sc.get("prune", True), connections=tuple(conns), instances=instances,
                      groups=groups, monolithic=bool(monolithic), cosim=dict(cosim),
                      connect=tuple(tuple(c) for c in connect), record_bonds=bool(sc.get("record_bonds", False)),
-                     inputs=exposed, external=data.get("external"))
+                     inputs=exposed, external=data.get("external"), platforms=platforms)
 
 
 def _instance(iname: str, spec, path: Path) -> InstanceSpec:
