@@ -12,6 +12,19 @@ integrators with the value that makes the error vanish.
 
 No equilibrium -- Newton not converging, or converging outside a state's
 declared range -- is refused, naming the equation with the largest residual.
+
+The physics check.  A state of rest that is unstable runs away whatever
+couples it (a sign error in a position loop: the joint leaves for -87 rad in
+3 s), so the build says so: the growing modes of the linearisation there
+(:func:`unstable_modes`), their time to double and dominant states.  It is
+made at the solved equilibrium, and at given start values whenever those
+are a state of rest themselves (every derivative below
+:data:`REST_TOLERANCE` times its state's nominal per second); given start
+values that are not at rest are said to be so, in one line -- stability is
+then not judged (a linearisation away from rest says nothing about
+runaway).  A model with sampled (discrete) states is not judged either: its
+loops close through the discrete states, which a continuous linearisation
+holds fixed.
 """
 from __future__ import annotations
 
@@ -32,17 +45,28 @@ class InitialState:
     iterations: int = 0
     changes: dict = field(default_factory=dict)  # state -> (guess, solution) for the report
     unstable: list = field(default_factory=list)  # the state of rest's unstable modes (sentences), if any
+    note: str = ""  # why stability was not judged (given start values not at rest, sampled states), if so
 
     def report(self) -> str:
         if self.mode == "given":
-            return "initial state: as given (start values)"
+            lines = ["initial state: as given (start values)"]
+            lines += [f"  {self.note}"] if self.note else []
+            lines += [f"warning: the state of rest is unstable: {u}" for u in self.unstable]
+            return "\n".join(lines)
         lines = [f"initial state: equilibrium after {self.iterations} Newton iterations, "
                  f"scaled residual {self.residual:.1e}"]
         for k, (a, b) in self.changes.items():
             lines.append(f"  {k}: {a:.6g} -> {b:.9g}")
+        if self.note:
+            lines.append(f"  {self.note}")
         for u in self.unstable:
             lines.append(f"warning: the state of rest is unstable: {u}")
         return "\n".join(lines)
+
+
+#: given start values are a state of rest when every derivative is at most this many times its state's
+#: nominal per second -- the residual an equilibrium is accepted with (:func:`solve_equilibrium`'s stall_tol)
+REST_TOLERANCE = 1e-6
 
 
 def initial_state(scene) -> InitialState:
@@ -50,8 +74,50 @@ def initial_state(scene) -> InitialState:
     x = np.array([v.start if v.start is not None else 0.0 for v in model.states], dtype=float)
     values = {v.name: float(x[k]) for k, v in enumerate(model.states)}
     if scene.spec.initial == "given":
-        return InitialState(model, values)
+        return given_state(scene, model, x, values)
     return solve_equilibrium(scene, model, x)
+
+
+def _sampled(model) -> bool:
+    return model.events is not None and bool(tuple(model.events.discrete))
+
+
+def given_state(scene, model, x, values) -> InitialState:
+    """The given start values; their stability judged when they are a state of rest (see the module)."""
+    init = InitialState(model, values)
+    if not model.nx:
+        return init
+    nom = np.array([abs(v.nominal) if v.nominal else 1.0 for v in model.states])
+    names = [v.name for v in model.states]
+    u = np.array([v.start if v.start is not None else 0.0 for v in model.inputs], dtype=float)
+    t0 = scene.spec.start
+    try:
+        ev = ModelEvaluator(model)
+        with np.errstate(all="ignore"):
+            f = np.asarray(ev.f(t0, x, u), dtype=float)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+        init.note = f"stability not judged: the model cannot be evaluated at the start values ({exc})"
+        return init
+    if not np.all(np.isfinite(f)):
+        bad = names[int(np.argmax(~np.isfinite(f)))]
+        init.note = f"the start values are not a state of rest (der({bad}) is not finite): stability not judged"
+        return init
+    r = np.abs(f) / nom
+    worst = int(np.argmax(r))
+    if r[worst] > REST_TOLERANCE:
+        init.note = (f"the start values are not a state of rest (largest derivative der({names[worst]}) = "
+                     f"{f[worst]:.3g}, {r[worst]:.3g} x its nominal {nom[worst]:g} per s): stability not judged")
+        return init
+    if _sampled(model):
+        init.note = ("the start values are a state of rest; stability not judged: the model's sampled "
+                     "(discrete) states close loops a continuous linearisation holds fixed")
+        return init
+    with np.errstate(all="ignore"):
+        A = ev.jacobians(t0, x, u)[0]
+    init.unstable = unstable_modes(A, names, nom)
+    if not init.unstable:
+        init.note = "the start values are a state of rest with no growing mode (linearised there)"
+    return init
 
 
 def solve_equilibrium(scene, model, x0, max_iter: int = 60, tol: float = 1e-10,
