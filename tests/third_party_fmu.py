@@ -372,3 +372,61 @@ def compile_fmu(folder: Path, ident: str, source: str, xml: str, cflags=("-O2", 
     return _zip(folder / f"{ident}.fmu", {"modelDescription.xml": xml,
                                          f"binaries/{fmpy.platform}/{ident}{fmpy.sharedLibraryExtension}":
                                          lib.read_bytes()})
+
+
+# --------------------------------------------------------------------------
+# gains and lags for algebraic loops (tests/test_hardening_loops.py)
+# --------------------------------------------------------------------------
+# 0 y (output), 1 u (input), 2 a, 3 b, 4 e, 5 T (parameters), 6 k (an Integer parameter, for type mismatches)
+GAIN_C = r"""
+static void start(Comp *c) { c->r[2] = 1; c->r[3] = 0; c->r[4] = 0; c->r[5] = 0.1; }
+static void rhs(const Comp *c, double t, const double *y, double *dy) {
+#ifdef LAG
+    dy[0] = (in(c, 1, t) - y[0]) / c->r[5];   /* T y' = u - y: the output is a state */
+#else
+    (void)c; (void)t; (void)y; dy[0] = 0;
+#endif
+}
+static void load(Comp *c, double *y) { (void)c; (void)y; }
+static void store(Comp *c, const double *y) { (void)c; (void)y; }
+static void outputs(Comp *c) {
+#ifdef LAG
+    c->r[0] = c->y[0];
+#else
+    c->r[0] = c->r[2] * in(c, 1, c->time) + c->r[3] + c->r[4] * c->time;   /* y = a u + b + e t, now */
+#endif
+#ifdef NAN_AFTER
+    if (c->time > NAN_AFTER) c->r[0] = NAN;
+#endif
+}
+"""
+GAIN_VARIABLES = [("y", 0, "output", "continuous", None, None, "m"), ("u", 1, "input", "continuous", None, 0.0, "m"),
+                  ("a", 2, "parameter", "fixed", "exact", 1.0, None), ("b", 3, "parameter", "fixed", "exact", 0.0, "m"),
+                  ("e", 4, "parameter", "fixed", "exact", 0.0, None), ("T", 5, "parameter", "fixed", "exact", 0.1, "s")]
+
+
+def build_gain(folder: Path, ident: str, dependencies="2", lag: bool = False, capabilities: dict = None,
+               unit: str = "m", cflags=()) -> Path:
+    """``folder/ident.fmu``, a third-party Co-Simulation FMU with input ``u`` and output ``y`` [``unit``]:
+    ``y = a u + b + e t`` evaluated when read (a gain: direct feedthrough), or with ``lag`` the state of
+    ``T y' = u - y`` (RK4).  ``dependencies``: the output's ModelStructure attribute ("2": on u; "": on
+    nothing; None: absent, which FMI 2.0 reads as on every input).  ``capabilities``: <CoSimulation>
+    attributes replacing the defaults (canGetAndSetFMUstate, canHandleVariableCommunicationStepSize,
+    canInterpolateInputs, maxOutputDerivativeOrder, providesDirectionalDerivative)."""
+    variables = [v if v[0] not in ("y", "u") else v[:6] + (unit,) for v in GAIN_VARIABLES]
+    xml = model_description(ident, "{gain-%s}" % ident, variables, [(1, dependencies)])
+    caps = {"canInterpolateInputs": "true", "maxOutputDerivativeOrder": "0", **(capabilities or {})}
+    for key, value in caps.items():
+        if f'{key}="' in xml:
+            start = xml.index(f'{key}="')
+            end = xml.index('"', start + len(key) + 2)
+            xml = xml[:start] + f'{key}="{value}"' + xml[end + 1:]
+        else:
+            xml = xml.replace(f'<CoSimulation modelIdentifier="{ident}"',
+                              f'<CoSimulation modelIdentifier="{ident}" {key}="{value}"')
+    if unit != "m" and unit:
+        xml = xml.replace('<Unit name="m"/>', f'<Unit name="m"/><Unit name="{unit}"/>')
+    xml = xml.replace("  </ModelVariables>", '    <ScalarVariable name="k" valueReference="0" causality="parameter" '
+                      'variability="fixed" initial="exact"><Integer start="1"/></ScalarVariable>\n  </ModelVariables>')
+    flags = ["-O1", "-std=c99", "-DINTERP", *(["-DLAG"] if lag else []), *cflags]
+    return compile_fmu(folder, ident, rk4_source(6, 1, GAIN_C), xml, flags, source_name=f"{ident}.c")

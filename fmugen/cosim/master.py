@@ -32,6 +32,7 @@ import numpy as np
 from .accuracy import ErrorEstimate, coupling_tolerance, internal_rtol
 from .errors import CosimError
 from .executor import SweepExecutor
+from .loops import SingularLoop, algebraic_loops, check_scheme, solve_initial
 from .interpolants import CUBIC_THETA, EXTRAPOLATIONS, ORDER, InputHistory  # noqa: F401 (public names)
 from .monitor import DivergenceMonitor
 from .results import CosimResult, FailureReport, Summary
@@ -152,6 +153,7 @@ class Master:
                 else:
                     raise CosimError(f"{system.name}: FMU {u.name!r}: fmi_type must be 'cs' or 'me', not {u.fmi_type!r}")
             self._resolve()
+            check_scheme(self)  # algebraic loops the scheme would run as a delay are refused here
         except UnitFailure as e:
             self.close()
             raise CosimError(f"{system.name}: set-up of FMU {e.unit!r} failed: {e}") from None
@@ -288,6 +290,8 @@ class Master:
             except (TypeError, ValueError):
                 pass
         self.u_nominal = np.array(nominal, dtype=float)
+        # couplings around which every output depends on the input before it (loops.py): solved, or refused
+        self.loops = algebraic_loops(self)
 
     def close(self) -> None:
         for u in getattr(self, "units", []):
@@ -465,7 +469,7 @@ class Master:
         t = t0
         H = min(H0, Hmax)
         try:
-            calls += self._initialize(history.U[0])
+            calls += self._initialize(history.U[0], coupling_tol)
             self._n_events = [_event_count(u) for u in self.event_units]
             self._relanded = None  # the event an adaptive step was last shortened to land on
             G = np.zeros(2 * nu if self.hermite else nu)  # the iteration's image: values (and slopes) at t_{n+1}
@@ -522,6 +526,9 @@ class Master:
                     else:
                         calls += scheme.step(t, H, ext, no_prior)
                         self._coupled(Unew)
+                except SingularLoop as e:  # Newton's interface Jacobian: the loop's values are not determined
+                    failure = FailureReport(t, "singular", str(e), coupling=e.loop)
+                    break
                 except UnitFailure as e:
                     # an FMU refused the step (fmi2Discard): with rollback, retry smaller -- the FMU may
                     # only have been given inputs that jumped
@@ -661,9 +668,10 @@ class Master:
             return GaussSeidel(self)
         return (Newton if self.scheme == "newton" else FixedPoint)(self, coupling_tol, max_iterations)
 
-    def _initialize(self, U0) -> int:
-        """Consistent coupled values at t0 into U0 (outputs without feedthrough: two passes suffice for chains
-        of feedthrough no longer than one; more would be an algebraic loop).  Returns the FMU calls."""
+    def _initialize(self, U0, coupling_tol) -> int:
+        """Consistent coupled values at t0 into U0: two passes (enough for chains of feedthrough no longer
+        than one), then, when the system has algebraic loops, Newton on U = G(U) at t0 (loops.py; a singular
+        loop is refused there).  Returns the FMU calls."""
         calls = 0
         for _ in range(2):
             calls += self._read_all()
@@ -676,6 +684,8 @@ class Master:
                         raise UnitFailure(u.name, "fmi2SetReal", st, u.messages())
         calls += self._read_all()
         self._coupled(U0)
+        if self.loops:
+            calls += solve_initial(self, U0, coupling_tol)
         return calls
 
     def _guess(self, P, H):
@@ -749,7 +759,7 @@ class Master:
                     self.dU0[:nu] = Gs[nu:]
             Ys = self.Y[self.rec_idx].copy()
             ok = ok and bool(np.all(np.isfinite(Ys)))
-        except UnitFailure:  # a shadow that fails says nothing about the run's steps
+        except (UnitFailure, SingularLoop):  # a shadow that fails says nothing about the run's steps
             ok = False
         self.history, self.U_n = history, history.U[0]
         calls += self._restore_all(saved)

@@ -236,6 +236,12 @@ def interface_jacobian(m, t, H, U0, Zg, G, states, scale):
             Jg[rows, j] = (m.F[rows] * Y[m.S[rows]] - G[rows]) / delta
             for k in me_k:
                 Y[m.units[k].out_sl] = Y_base[m.units[k].out_sl]
+    if m.loops:  # an algebraic loop with a gain of 1 has no unique solution: reported, not inverted
+        from .loops import SingularLoop, singular_loop
+
+        bad = singular_loop(m, Jg[:nu, :nu], np.asarray(scale[:nu], dtype=float))
+        if bad is not None:
+            raise SingularLoop(*bad)
     # Newton on R(Z) = G(Z) - Z: Z <- Z + (I - dG/dZ)^-1 R
     return np.linalg.inv(np.eye(size) - Jg), calls
 
