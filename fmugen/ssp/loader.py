@@ -235,17 +235,18 @@ def _bound(v, value, where: str):
 def _fmi_type(c, md, run_unit, where: str) -> str:
     """"cs" or "me": the SSD's implementation, fmugen's annotation, else Co-Simulation when the FMU has it."""
     choice = {"CoSimulation": "cs", "ModelExchange": "me"}.get(c.implementation)
+    said = f"implementation {c.implementation}"
     if run_unit is not None:
         if choice is not None and run_unit["fmi_type"] != choice:
-            raise InputFileError(f"{where}: implementation {c.implementation} but fmugen's annotation says "
-                                 f"fmiType {run_unit['fmi_type']!r} (which is meant?)")
-        choice = run_unit["fmi_type"]
+            raise InputFileError(f"{where}: implementation {c.implementation} but annotation {FMUGEN_ANNOTATION} "
+                                 f"says fmiType {run_unit['fmi_type']!r} (which is meant?)")
+        choice, said = run_unit["fmi_type"], f"fmiType {run_unit['fmi_type']!r} of annotation {FMUGEN_ANNOTATION}"
     if choice is None:
         choice = "cs" if md.coSimulation is not None else "me"
     if choice == "cs" and md.coSimulation is None:
-        raise InputFileError(f"{where}: Co-Simulation is asked for; the FMU has no such interface")
+        raise InputFileError(f"{where}: {said} asks for Co-Simulation; the FMU has no such interface")
     if choice == "me" and md.modelExchange is None:
-        raise InputFileError(f"{where}: Model Exchange is asked for; the FMU has no such interface")
+        raise InputFileError(f"{where}: {said} asks for Model Exchange; the FMU has no such interface")
     return choice
 
 

@@ -147,8 +147,11 @@ def validate(root, schema_name: str, where: str) -> None:
     s = schema(schema_name)
     if not s.validate(root):
         e = s.error_log.last_error
+        message = " ".join(e.message.split())  # one line, whatever the file put into the value
+        for prefix, uri in NS.items():  # libxml2 names elements {namespace}Name: as the files write them
+            message = message.replace(f"{{{uri}}}", f"{prefix}:")
         raise InputFileError(f"{where}: does not validate against the SSP 1.0 schema ({schema_name}): line "
-                             f"{e.line}: {e.message}")
+                             f"{e.line}: {message[:400]}")
 
 
 # ---------------------------------------------------------------------------- archive
