@@ -1,0 +1,359 @@
+"""The batched kernels: one object per robot, arrays of states in, arrays of results out.
+
+:class:`Kernels` holds the robot as the numbers of the runtime's general joint model (the
+joint array and the ``n x NC`` body constants of ``c_runtime/chain_dynamics.h``, written by
+:func:`fmugen.codegen.chain.robot_tree` and evaluated at the parameters' values) and calls
+``batch.c`` (this folder), whose C loop runs the runtime's functions over all states of a call.
+The library is compiled once per machine (:func:`library`) and kept in the cache folder of
+fmugen (``$FMUGEN_CACHE/batch``, default ``~/.cache/fmugen/batch``), in a subfolder named by
+the hash of the compiler, its flags and the sources, so an edited runtime is compiled anew.
+
+``threads=k`` cuts a batch into k contiguous ranges run at once by Python threads, each with its
+own work array; ctypes releases the GIL for the duration of a foreign call (``ctypes.CDLL``, not
+``PyDLL``), so the ranges run on separate cores.  Each state is computed alone, the same
+operations in the same order whatever the split, so the results are the same to the bit.
+"""
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+import shutil
+import subprocess
+import tempfile
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Mapping, Optional
+
+import numpy as np
+import sympy as sp
+
+from ..codegen.chain import NC, NG, robot_tree
+
+__all__ = ["Kernels", "StateError", "library", "MASS_MATRIX_METHODS"]
+
+_HERE = Path(__file__).resolve().parent
+_RUNTIME = _HERE.parents[1] / "c_runtime"
+_CC = "cc"
+# the flags of the FMU build (fmugen.fmi.build.CFLAGS): the same optimisation as the FMUs the kernels stand beside
+_FLAGS = ("-std=c99", "-O2", "-fPIC", "-shared")
+
+# kinds of batch.c
+_FD, _FD_JAC, _ID, _ID_JAC, _M_COLUMNS, _M_JAC, _MINV_COLUMNS, _MINV_JAC = range(8)
+_STATUS = {1: "the mass matrix is not positive definite", 2: "a result is NaN or infinite",
+           3: "an input is NaN or infinite", 4: "unknown kernel (a bug of fmugen.batch)"}
+
+#: ways of :meth:`Kernels.mass_matrix` and :meth:`Kernels.mass_matrix_inverse`: ``"jacobian"`` (the
+#: default) -- the third block of the analytical Jacobian of the inverse dynamics (M = dtau/dqdd,
+#: ``fmugen_chain_id_jacobian``) or of the forward dynamics (M^-1 = dqdd/dtau, ``fmugen_chain_fd_jacobian``)
+#: at qd = 0; ``"columns"`` -- n calls of recursive Newton-Euler, M e_j = ID(q, 0, e_j), or of the
+#: articulated-body algorithm, M^-1 e_j = FD(q, 0, e_j), gravity off.  Measured on a loaded 2-core machine
+#: (CPU µs per state, M by jacobian / columns): UR5 (6 DoF) 2.3 / 4.8, iiwa (7) 3.3 / 6.6, Panda (9)
+#: 4.0 / 10.2, HyQ (12) 7.1 / 21, Atlas (30) 18 / 107, Talos (44) 21 / 255; M^-1: UR5 4.2 / 7.4, iiwa
+#: 5.5 / 9.5, HyQ 8.9 / 31, Atlas 31 / 200: n full recursions cost more than one pass of derivatives.
+MASS_MATRIX_METHODS = ("jacobian", "columns")
+
+
+class StateError(ArithmeticError):
+    """A state of a batch where the dynamics fail: ``index`` (0-based row of the inputs) is the first
+    such state, ``reason`` says what failed (mass matrix not positive definite, a NaN or infinite
+    result or input)."""
+
+    def __init__(self, what: str, index: int, status: int):
+        self.index, self.status, self.reason = index, status, _STATUS.get(status, f"status {status}")
+        super().__init__(f"{what}: state {index}: {self.reason}")
+
+
+_lock = threading.Lock()
+_lib = None
+
+
+def _sources() -> list:
+    return [_HERE / "batch.c", *sorted(_RUNTIME.glob("*.h")), _RUNTIME / "chain_dynamics.c"]
+
+
+def _key() -> str:
+    h = hashlib.sha256()
+    path = shutil.which(_CC) or _CC
+    try:
+        st = os.stat(os.path.realpath(path))
+        h.update(f"{os.path.realpath(path)}\0{st.st_size}\0{st.st_mtime_ns}\0".encode())
+    except OSError:
+        h.update(path.encode())
+    h.update("\0".join(_FLAGS).encode() + b"\1")
+    for p in _sources():
+        h.update(p.name.encode() + b"\0" + p.read_bytes() + b"\1")
+    return h.hexdigest()[:32]
+
+
+def _cache_root() -> Optional[Path]:
+    if os.environ.get("FMUGEN_OBJECT_CACHE", "1") == "0":
+        return None
+    return Path(os.environ.get("FMUGEN_CACHE") or Path.home() / ".cache" / "fmugen") / "batch"
+
+
+def _compile(folder: Path) -> Path:
+    out = folder / "batch.so"
+    cmd = [_CC, *_FLAGS, f"-I{_RUNTIME}", "-o", str(out), str(_HERE / "batch.c"), "-lm"]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    if r.returncode != 0:
+        raise RuntimeError(f"cannot compile the batched kernels: {' '.join(cmd)}\n{r.stderr}")
+    return out
+
+
+def library() -> ctypes.CDLL:
+    """``batch.c`` with the runtime's chain_dynamics.c as a loaded shared library: from the cache if
+    compiled before from the same sources, compiler and flags, else compiled now (about a second) and
+    stored -- by one rename of a complete folder, so processes compiling at once never see half of one.
+    ``FMUGEN_OBJECT_CACHE=0`` compiles into a temporary folder instead."""
+    global _lib
+    with _lock:
+        if _lib is not None:
+            return _lib
+        root = _cache_root()
+        so = None
+        if root is not None:
+            target = root / _key()
+            if not (target / "batch.so").is_file():
+                try:
+                    root.mkdir(parents=True, exist_ok=True)
+                    tmp = Path(tempfile.mkdtemp(prefix=".part-", dir=root))
+                    _compile(tmp)
+                    try:
+                        os.rename(tmp, target)
+                    except OSError:  # another process stored it first
+                        shutil.rmtree(tmp, ignore_errors=True)
+                except OSError:
+                    target = None  # a cache that cannot be written is no error
+            if target is not None and (target / "batch.so").is_file():
+                so = target / "batch.so"
+        if so is None:
+            tmp = Path(tempfile.mkdtemp(prefix="fmugen_batch_"))
+            so = _compile(tmp)
+        lib = ctypes.CDLL(str(so))  # CDLL: the GIL is released during each call
+        vp = ctypes.c_void_p
+        lib.fmugen_batch_work.argtypes = [ctypes.c_int, ctypes.c_int]
+        lib.fmugen_batch_work.restype = ctypes.c_long
+        lib.fmugen_batch.argtypes = [ctypes.c_int, ctypes.c_int, vp, vp, vp, ctypes.c_long, vp, vp, vp,
+                                     vp, vp, vp, vp, vp, vp]
+        lib.fmugen_batch.restype = ctypes.c_int
+        _lib = lib
+        return lib
+
+
+def _method(what: str, method: str):
+    if method not in MASS_MATRIX_METHODS:
+        raise ValueError(f"{what}: method must be one of {', '.join(MASS_MATRIX_METHODS)}, got {method!r}")
+
+
+def _number(expr, env: dict, what: str) -> float:
+    e = sp.sympify(expr).xreplace(env)
+    if e.free_symbols:
+        raise ValueError(f"{what}: no value for parameter(s) {', '.join(sorted(s.name for s in e.free_symbols))}")
+    return float(e)
+
+
+class Kernels:
+    """Forward and inverse dynamics, their derivatives and the mass matrix of one robot, for many states
+    per call.
+
+    Inputs are arrays of shape ``(N, n)`` (N states, n joints in the robot's order), float64; a
+    non-contiguous array is copied, any other shape or dtype is refused (ValueError naming the argument
+    and the shape expected).  Joint angles are angles also for continuous joints.  A state where the
+    dynamics fail -- the mass matrix not positive definite, a NaN or infinite input or result --
+    raises :class:`StateError` with the index of the first such state; nothing is returned then.
+
+    Build one with :meth:`from_urdf` or :meth:`from_robot`; the constructor takes the runtime's numbers
+    directly (``revolute``: n bools, ``parents``: n ints, -1 the base, parents first; ``constants``: n x
+    NC body constants; ``gravity``: 3).
+    """
+
+    def __init__(self, revolute, parents, constants, gravity, threads: int = 1, names=(), name: str = "robot"):
+        n = len(revolute)
+        parents = [int(p) for p in parents]
+        if len(parents) != n or any(not -1 <= p < i for i, p in enumerate(parents)):
+            raise ValueError(f"{name}: parents {parents} must number every body after its parent")
+        lc = np.ascontiguousarray(np.asarray(constants, dtype=float).reshape(n, NC))
+        g = np.asarray(gravity, dtype=float).ravel()
+        if g.size != 3:
+            raise ValueError(f"{name}: gravity must have 3 components, got {g.size}")
+        if not np.all(np.isfinite(lc)) or not np.all(np.isfinite(g)):
+            raise ValueError(f"{name}: the body constants or gravity are not finite")
+        self.name, self.n, self.names = name, n, tuple(names)
+        self.revolute, self.parents = tuple(bool(r) for r in revolute), tuple(parents)
+        self._lc = lc
+        self._g = np.ascontiguousarray(np.r_[g, 0.0, 0.0, 0.0])  # no end effector: p_ee is not computed
+        self._jt = np.array([1 if r else 0 for r in self.revolute] + parents + [-1], dtype=np.intc)
+        self._lib = library()
+        self._works = {}
+        self._busy = threading.Lock()
+        self._pool = None
+        self.threads = threads
+
+    # ------------------------------------------------------------ construction
+    @classmethod
+    def from_robot(cls, robot, values: Optional[Mapping[str, float]] = None, threads: int = 1) -> "Kernels":
+        """The kernels of a :class:`fmugen.robot.description.Robot` (a URDF, a DH file, a scene's robot);
+        ``values`` overrides parameter values by name (defaults: the file's), e.g. ``{"b_joint1": 0}``."""
+        by_name = {p.name: p for p in robot.parameters}
+        unknown = sorted(set(values or {}) - set(by_name))
+        if unknown:
+            raise KeyError(f"{robot.name}: unknown parameter(s) {unknown}")
+        tied = [b.name for b in robot.bodies if getattr(b, "mimic", None) is not None]
+        if tied:
+            raise ValueError(f"{robot.name}: tied mimic joints ({', '.join(tied)}) -- the kernels take every "
+                             f"joint as independent (load_urdf(..., mimic='independent'))")
+        env = {p.symbol: sp.Float(values[p.name]) if values and p.name in values else p.value
+               for p in robot.parameters}
+        env = {s: sp.sympify(v) for s, v in env.items() if v is not None}
+        revolute, parents, _, constants = robot_tree(robot)
+        n = len(revolute)
+        lc = [_number(c, env, f"{robot.name}: body constant {k % NC} of body {k // NC}")
+              for k, c in enumerate(constants[:n * NC])]
+        g = [_number(c, env, f"{robot.name}: gravity") for c in constants[n * NC:n * NC + 3]]
+        return cls(revolute, parents, lc, g, threads=threads, names=[b.joint_name or b.name for b in robot.bodies],
+                   name=robot.name)
+
+    @classmethod
+    def from_urdf(cls, path, values: Optional[Mapping[str, float]] = None, threads: int = 1,
+                  mimic: str = "independent") -> "Kernels":
+        """The kernels of the URDF file at ``path``, read by fmugen's reader (:func:`fmugen.robot.urdf.load_urdf`;
+        mimic joints as independent joints, with its warning)."""
+        from ..robot.urdf import load_urdf
+
+        return cls.from_robot(load_urdf(path, mimic=mimic), values=values, threads=threads)
+
+    # ------------------------------------------------------------ threads
+    @property
+    def threads(self) -> int:
+        return self._threads
+
+    @threads.setter
+    def threads(self, k: int):
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
+            raise ValueError(f"threads: a whole number >= 1, got {k!r}")
+        self._threads = int(k)
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
+
+    def close(self):
+        """Stop the worker threads (started by the first call with threads > 1)."""
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:  # interpreter shutdown
+            pass
+
+    # ------------------------------------------------------------ the calls
+    def _check(self, what: str, arrays: dict) -> tuple:
+        n, out, count = self.n, [], None
+        for name, a in arrays.items():
+            a = np.asarray(a)
+            if a.dtype != np.float64 or a.ndim != 2 or a.shape[1] != n or (count is not None and a.shape[0] != count):
+                want = f"(N, {n})" if count is None else f"({count}, {n})"
+                raise ValueError(f"{what}: {name} must be a float64 array of shape {want}, "
+                                 f"got {a.dtype} {a.shape}")
+            count = a.shape[0]
+            out.append(np.ascontiguousarray(a))
+        return count, out
+
+    def _work(self, kind: int, k: int) -> np.ndarray:
+        key = (kind, k)
+        if key not in self._works:
+            size = self._lib.fmugen_batch_work(kind, self.n)
+            self._works[key] = np.empty(max(size, 1))
+        return self._works[key]
+
+    def _run(self, what: str, kind: int, count: int, ins: list, outs: list):
+        lib, n = self._lib, self.n
+        ins = ins + [None] * (3 - len(ins))
+        outs = outs + [None] * (4 - len(outs))
+        row_in = [0 if a is None else 8 * n for a in ins]
+        row_out = [0 if a is None else 8 * int(np.prod(a.shape[1:])) for a in outs]
+        k = min(self._threads, max(count, 1))
+        bounds = [count * i // k for i in range(k + 1)]
+        works = [self._work(kind, i) for i in range(k)]
+
+        def part(i):
+            lo, hi = bounds[i], bounds[i + 1]
+            bad = ctypes.c_long(-1)
+            a = [None if x is None else x.ctypes.data + lo * r for x, r in zip(ins, row_in)]
+            o = [None if x is None else x.ctypes.data + lo * r for x, r in zip(outs, row_out)]
+            s = lib.fmugen_batch(kind, n, self._jt.ctypes.data, self._lc.ctypes.data, self._g.ctypes.data,
+                                 hi - lo, *a, *o, works[i].ctypes.data, ctypes.byref(bad))
+            return s, lo + bad.value
+
+        with self._busy:  # the work arrays are the object's: calls from several threads take turns
+            if k == 1:
+                results = [part(0)]
+            else:
+                if self._pool is None:
+                    self._pool = ThreadPoolExecutor(max_workers=self._threads - 1,
+                                                    thread_name_prefix="fmugen-batch")
+                futures = [self._pool.submit(part, i) for i in range(1, k)]
+                results = [part(0)] + [f.result() for f in futures]
+        for s, index in results:  # in order of the ranges: the first bad state of the batch
+            if s != 0:
+                raise StateError(f"{self.name}: {what}", index, s)
+
+    def fd(self, q, qd, tau) -> np.ndarray:
+        """qdd = M(q)^-1 (tau - h(q, qd)) per state (N, n): the articulated-body algorithm."""
+        count, (q, qd, tau) = self._check("fd", {"q": q, "qd": qd, "tau": tau})
+        qdd = np.empty((count, self.n))
+        self._run("fd", _FD, count, [q, qd, tau], [qdd])
+        return qdd
+
+    def fd_derivatives(self, q, qd, tau) -> tuple:
+        """``(qdd, dqdd/dq, dqdd/dqd, M^-1)``: (N, n) and three (N, n, n); M^-1 = dqdd/dtau.  Pinocchio's
+        ``computeABADerivatives`` (``ddq_dq``, ``ddq_dv``, ``Minv``)."""
+        count, (q, qd, tau) = self._check("fd_derivatives", {"q": q, "qd": qd, "tau": tau})
+        n = self.n
+        qdd = np.empty((count, n))
+        blocks = [np.empty((count, n, n)) for _ in range(3)]
+        self._run("fd_derivatives", _FD_JAC, count, [q, qd, tau], [qdd, *blocks])
+        return (qdd, *blocks)
+
+    def id(self, q, qd, qdd) -> np.ndarray:
+        """tau = M(q) qdd + h(q, qd) per state (N, n): recursive Newton-Euler."""
+        count, (q, qd, qdd) = self._check("id", {"q": q, "qd": qd, "qdd": qdd})
+        tau = np.empty((count, self.n))
+        self._run("id", _ID, count, [q, qd, qdd], [tau])
+        return tau
+
+    def id_derivatives(self, q, qd, qdd) -> tuple:
+        """``(tau, dtau/dq, dtau/dqd, M)``: (N, n) and three (N, n, n); M = dtau/dqdd.  Pinocchio's
+        ``computeRNEADerivatives`` (``dtau_dq``, ``dtau_dv``, ``M``)."""
+        count, (q, qd, qdd) = self._check("id_derivatives", {"q": q, "qd": qd, "qdd": qdd})
+        n = self.n
+        tau = np.empty((count, n))
+        blocks = [np.empty((count, n, n)) for _ in range(3)]
+        self._run("id_derivatives", _ID_JAC, count, [q, qd, qdd], [tau, *blocks])
+        return (tau, *blocks)
+
+    def mass_matrix(self, q, method: str = "jacobian") -> np.ndarray:
+        """M(q) per state (N, n, n), symmetric, rotor inertias on the diagonal (Pinocchio's ``crba``, which
+        fills the upper triangle).  ``method``: :data:`MASS_MATRIX_METHODS`.  M is not checked for positive
+        definiteness here (nothing is solved)."""
+        _method("mass_matrix", method)
+        count, (q,) = self._check("mass_matrix", {"q": q})
+        M = np.empty((count, self.n, self.n))
+        self._run("mass_matrix", _M_COLUMNS if method == "columns" else _M_JAC, count, [q], [M])
+        return M
+
+    def mass_matrix_inverse(self, q, method: str = "jacobian") -> np.ndarray:
+        """M(q)^-1 per state (N, n, n) (Pinocchio's ``computeMinverse``); ``method``: :data:`MASS_MATRIX_METHODS`.
+        Raises StateError where M is not positive definite."""
+        _method("mass_matrix_inverse", method)
+        count, (q,) = self._check("mass_matrix_inverse", {"q": q})
+        Minv = np.empty((count, self.n, self.n))
+        self._run("mass_matrix_inverse", _MINV_COLUMNS if method == "columns" else _MINV_JAC, count, [q], [Minv])
+        return Minv
+
+    def __repr__(self):
+        return f"Kernels({self.name!r}, n={self.n}, threads={self._threads})"
