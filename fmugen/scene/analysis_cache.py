@@ -15,6 +15,15 @@ scene names (robot files, URDF, parameter sets, component files).  Change any of
 is analysed again.  Scenes with Python factories are never cached this way
 (their code is not part of the key).
 
+:func:A record is trusted only as written: it carries the sha256 of its own content
+and key (:func:`_seal`), its FMU copies their sha256 each, and its structure is
+checked before use (:func:`_check_record`: group names are identifiers -- they
+become file names --, start values finite numbers, every field of the type
+it is read as).  A truncated, damaged, edited or hostile record -- not JSON,
+nested thousands deep, a directory or a device where the file should be,
+larger than :data:`MAX_RECORD_BYTES` -- is ignored: the scene is analysed
+and built again, and the record written anew.
+
 :func:`build_scene_cached` is what the commands call: the cached analysis and
 FMUs when both are there (nothing of sympy, scipy or the scene models is
 imported), else :func:`fmugen.scene.load_scene` and ``Scene.build`` as
@@ -35,7 +44,9 @@ from typing import Optional
 from .build import BuiltScene, FmuReport, Progress, cache_dir, generator_fingerprint
 from .settings import parse_sets
 
-FORMAT = 2  # of the stored record (2: the FMUs copied into the artefact)
+FORMAT = 3  # of the stored record (2: the FMUs copied into the artefact; 3: the record sealed by its digest)
+#: largest record read (the PUMA's is ~100 kB); a larger file in the cache is not a record of ours
+MAX_RECORD_BYTES = 16 * 2**20
 
 
 def _toml_names(data, out: set) -> None:
@@ -86,6 +97,73 @@ def _record_path(key: str) -> Path:
 
 def _digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _seal(key: str, record: dict) -> str:
+    """The digest of ``record`` (without its own "digest") under ``key``: what a served record must match."""
+    body = {k: v for k, v in record.items() if k != "digest"}
+    text = json.dumps(body, sort_keys=True, default=str, allow_nan=False)
+    return hashlib.sha256(f"{key} {text}".encode()).hexdigest()
+
+
+def _is_number(v) -> bool:
+    import math
+
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _check_record(record, key: str) -> None:
+    """Raise ValueError unless ``record`` is a sealed record of :data:`FORMAT` whose fields have the types
+    they are read as (the FMU reports' fields, the system's units, couplings and start values)."""
+    from ..errors import IDENTIFIER_PATTERN
+
+    def need(ok, what):
+        if not ok:
+            raise ValueError(what)
+
+    need(isinstance(record, dict), "not a table")
+    need(record.get("format") == FORMAT, "another format")
+    need(record.get("digest") == _seal(key, record), "digest does not match")
+    need(isinstance(record.get("name"), str) and isinstance(record.get("initial_report"), str), "name/report")
+    x0 = record.get("x0")
+    need(isinstance(x0, dict) and all(isinstance(k, str) and _is_number(v) for k, v in x0.items()), "x0")
+    spec = record.get("spec")
+    need(isinstance(spec, dict) and isinstance(spec.get("name"), str)
+         and all(_is_number(spec.get(k)) for k in ("start", "stop", "step"))
+         and isinstance(spec.get("cosim"), dict) and isinstance(spec.get("bonds"), list), "spec")
+    fields = {f.name for f in dataclasses.fields(FmuReport)} - {"path", "cached", "build_seconds"}
+    fmus = record.get("fmus")
+    need(isinstance(fmus, dict) and fmus, "fmus")
+    for g, entry in fmus.items():
+        need(isinstance(g, str) and IDENTIFIER_PATTERN.match(g) is not None, "a group name is no identifier")
+        need(isinstance(entry, dict) and isinstance(entry.get("sha256"), str) and len(entry["sha256"]) == 64
+             and isinstance(entry.get("report"), dict) and fields <= set(entry["report"])
+             and set(entry["report"]) <= fields | {"cached", "build_seconds"}, f"fmus.{g}")
+        r = entry["report"]
+        need(r.get("group") == g and isinstance(r.get("members"), list)
+             and all(isinstance(r.get(k), int) and not isinstance(r.get(k), bool) and r[k] >= 0
+                     for k in ("states", "inputs", "outputs", "parameters", "total_ops", "library_bytes")),
+             f"fmus.{g}.report")
+    system = record.get("system")
+    need(isinstance(system, dict) and isinstance(system.get("units"), list)
+         and isinstance(system.get("couplings"), list) and isinstance(system.get("recorded"), list)
+         and all(_is_number(system.get(k)) for k in ("start", "stop", "step")), "system")
+    for u in system["units"]:
+        need(isinstance(u, dict) and u.get("name") in fmus and u.get("fmi_type") in ("cs", "me")
+             and isinstance(u.get("start_values"), dict)
+             and all(isinstance(k, str) and (_is_number(v) or isinstance(v, (bool, str)))
+                     for k, v in u["start_values"].items())
+             and isinstance(u.get("directional"), bool) and isinstance(u.get("members"), list), "system.units")
+    for c in system["couplings"]:
+        need(isinstance(c, dict) and all(isinstance(c.get(k), list) and len(c[k]) == 2 and c[k][0] in fmus
+                                         and isinstance(c[k][1], str) for k in ("source", "target"))
+             and _is_number(c.get("factor")), "system.couplings")
+    for r in system["recorded"]:
+        need(isinstance(r, list) and len(r) == 4 and r[1] in fmus and isinstance(r[0], str), "system.recorded")
+    need(isinstance(system.get("settings", {}), dict) and isinstance(system.get("rest_unstable", []), list)
+         and isinstance(record.get("inputs", []), list), "system.settings")
+    lim, step = record.get("jacobi_limit"), record.get("default_step", 0.0)
+    need((lim is None or lim == "nan" or _is_number(lim)) and _is_number(step), "jacobi_limit/default_step")
 
 
 def _system_to_json(system) -> dict:
@@ -206,11 +284,16 @@ def store(key: str, scene, built: BuiltScene) -> None:
                   "spec": {"name": spec.name, "start": spec.start, "stop": spec.stop, "step": spec.step,
                            "cosim": dict(spec.cosim or {}), "bonds": _bonds_to_json(getattr(spec, "bonds", ()))},
                   "fmus": fmus, "system": _system_to_json(built.system), "inputs": list(built.inputs),
-                  "jacobi_limit": built.jacobi_limit if built.jacobi_limit != float("inf") else None,
+                  # inf: no limit (None); NaN: not computed ("nan": JSON has no NaN)
+                  "jacobi_limit": None if built.jacobi_limit == float("inf") else
+                  "nan" if built.jacobi_limit != built.jacobi_limit else built.jacobi_limit,
                   "default_step": built.default_step}
+        record = json.loads(json.dumps(record, default=str, allow_nan=False))  # as it will be read back
+        record["digest"] = _seal(key, record)
+        _check_record(record, key)  # never store what would not be served
         fd, tmp = tempfile.mkstemp(dir=target.parent, suffix=".part")
         with os.fdopen(fd, "w") as f:
-            json.dump(record, f, default=str)
+            json.dump(record, f)
         os.replace(tmp, target)
     except (OSError, TypeError, ValueError):
         pass
@@ -249,8 +332,11 @@ class CachedAnalysis:
             r.members = tuple(r.members)
             reports[g] = r
             progress(r.line())
+        try:  # checked when read (_check_record); a record that still does not fit is not served
+            system = _system_from_json(self.record["system"], {g: out / f"{g}.fmu" for g in reports})
+        except (KeyError, TypeError, ValueError, AttributeError):
+            return None
         stale = _remove_stale(out, [f"{g}.fmu" for g in reports])
-        system = _system_from_json(self.record["system"], {g: out / f"{g}.fmu" for g in reports})
         lim = self.record.get("jacobi_limit")
         return BuiltScene(self.scene, out, reports, system, list(self.record.get("inputs", [])), stale,
                           float("inf") if lim is None else float(lim), float(self.record.get("default_step", 0.0)))
@@ -258,19 +344,26 @@ class CachedAnalysis:
 
 def cached_analysis(path, sets=None, allow_factories: bool = False) -> Optional[CachedAnalysis]:
     """The stored analysis of the scene file ``path`` with ``sets``, when there is one with its FMUs."""
+    from ..errors import FmugenError, read_text_file
+
     key = analysis_key(path, sets)
     if key is None:
         return None
-    try:
-        record = json.loads(_record_path(key).read_text())
-        if record.get("format") != FORMAT:
+    rec = _record_path(key)
+    try:  # bounded, a regular file, UTF-8 (read_text_file); then sealed and well-typed, or not served
+        if rec.is_file() and rec.stat().st_size > MAX_RECORD_BYTES:
             return None
-    except (OSError, ValueError):
+        record = json.loads(read_text_file(rec, "analysis record"))
+        _check_record(record, key)
+    except (OSError, ValueError, FmugenError, RecursionError):  # FmugenError: missing, a device, not UTF-8
         return None
-    folder = _record_path(key).with_suffix("")
-    if not all((folder / f"{g}.fmu").is_file() for g in record.get("fmus", {})):
+    folder = rec.with_suffix("")
+    if not all((folder / f"{g}.fmu").is_file() for g in record["fmus"]):
         return None
-    return CachedAnalysis(key, record, path, sets, allow_factories)
+    try:
+        return CachedAnalysis(key, record, path, sets, allow_factories)
+    except (KeyError, TypeError, ValueError, AttributeError):
+        return None
 
 
 def build_scene_cached(path, out_dir, sets=None, allow_factories: bool = False, progress=None,
