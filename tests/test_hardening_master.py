@@ -14,10 +14,22 @@ held input u = 1 and B by A's output:
   platform, a wrong model identifier, a binary that does not load, a wrong
   GUID, a 300 MB description) each give one CosimError (a FmugenError: the
   command line prints it and exits 2) that names the FMU's file.
+
+Issue 27, every capability a scheme relies on is checked or its fallback stated:
+
+* canGetAndSetFMUstate="false": the run at a fixed step says in its summary that it has no error estimate
+  (the estimate reruns windows from saved states), instead of a silent NaN;
+* canHandleVariableCommunicationStepSize="false" (FMI 2.0's default): adaptive steps are refused, and so is
+  a fixed step that does not divide the run's span (its last step would be shorter); a dividing step runs
+  with constant steps and no estimate (whose windows step H/2), said;
+* a Model-Exchange FMU with providesDirectionalDerivative="false": the ME block never calls
+  fmi2GetDirectionalDerivative (it would fail here), takes Radau's Jacobian by differences, and says so;
+* dense output from an FMU with maxOutputDerivativeOrder = 0 is linear, said.
 """
 import math
 import os
 
+import numpy as np
 import pytest
 
 from fmugen.cosim import run
@@ -25,7 +37,7 @@ from fmugen.cosim.errors import CosimError
 from fmugen.cosim.system import Coupling, CosimSystem, Recorded, Unit
 from fmugen.errors import FmugenError
 
-from third_party_fmu import broken_fmus, build_lag
+from third_party_fmu import broken_fmus, build_gain, build_lag
 
 TA, TB, H, STOP = 0.1, 0.05, 0.01, 0.2
 
@@ -129,3 +141,79 @@ def _copy(src, dst):
 
     shutil.copy(src, dst)
     return dst
+
+
+def test_a_run_without_fmu_states_says_it_has_no_estimate(lag):
+    r = run(chain(lag), scheme="gauss-seidel")
+    assert r.ok and math.isnan(r.summary.error_estimate) and r.summary.estimate_samples == 0
+    (w,) = r.summary.warnings
+    assert w.startswith("no coupling error estimate: FMU 'A' declares canGetAndSetFMUstate=\"false\""), w
+    assert f"warning: {w}" in str(r.summary) and r.summary.as_dict()["warnings"] == [w]
+    assert run(chain(lag), scheme="gauss-seidel", estimate=False).summary.warnings == []
+
+
+@pytest.fixture(scope="module")
+def fixed_step_lag(tmp_path_factory):
+    return build_gain(tmp_path_factory.mktemp("fixed"), "fixed", dependencies="", lag=True,
+                      capabilities={"canHandleVariableCommunicationStepSize": "false"})
+
+
+def test_an_fmu_with_one_step_size_refuses_what_would_change_it(fixed_step_lag, lag):
+    s = chain(fixed_step_lag, lag)
+    for kw, said in (({"scheme": "jacobi", "adaptive": True, "extrapolation": "hold"},
+                      "but adaptive macro steps change the step; run at a fixed step"),
+                     ({"scheme": "gauss-seidel", "step": 0.03},
+                      "but 0.2 s is not a whole number of macro steps of 0.03 s")):
+        with pytest.raises(CosimError) as info:
+            run(s, **kw)
+        msg = str(info.value)
+        assert "\n" not in msg and f"FMU 'A' ({fixed_step_lag})" in msg and said in msg, msg
+        assert 'canHandleVariableCommunicationStepSize="false"' in msg, msg
+    r = run(s, scheme="gauss-seidel", step=0.02)
+    assert r.ok and r.summary.step_min == r.summary.step_max == 0.02 and len(r.time) == 11
+    assert r.summary.warnings[0].startswith("no coupling error estimate: FMU 'A' declares "
+                                            "canHandleVariableCommunicationStepSize")
+    # the lag steps exactly with its input held: A.y = 1 - exp(-t / T) at u = 1 (RK4 at 1e-5 s sub-steps)
+    assert r["A.y"][-1] == pytest.approx(1 - math.exp(-STOP / TA), rel=1e-9)
+
+
+def test_me_fmu_without_directional_derivatives_gets_a_jacobian_by_differences(tmp_path):
+    import shutil
+    import zipfile
+    from dataclasses import replace
+
+    from cosim_rigs import split_system
+    from fmugen.cosim import Master
+
+    s = split_system("stiff", "smooth", stop=0.2)
+    units = []
+    for u in s.units:
+        path = tmp_path / u.path.name
+        with zipfile.ZipFile(u.path) as zin, zipfile.ZipFile(path, "w") as zout:
+            for item in zin.infolist():
+                data = zin.read(item.filename)
+                if item.filename == "modelDescription.xml":
+                    data = data.replace(b'providesDirectionalDerivative="true"', b'providesDirectionalDerivative="false"')
+                zout.writestr(item, data)
+        units.append(replace(u, path=path, fmi_type="me", start_values={
+            k: v for k, v in u.start_values.items() if not k.startswith("solver.")}))
+    exact_units = tuple(replace(u, fmi_type="me", start_values=w.start_values) for u, w in zip(s.units, units))
+    with Master(replace(s, units=tuple(units)), "jacobi", "hold") as m:
+        for u in m.units:
+            u._dirDer = lambda *a: 3  # fmi2Error: a call would fail the run
+        r = m.run(step=0.05)
+    assert r.ok, r.summary
+    assert sum("providesDirectionalDerivative=\"false\": the ME block's Jacobian by finite differences" in w
+               for w in r.summary.warnings) == 2, r.summary.warnings
+    ref = run(replace(s, units=exact_units), "jacobi", "hold", step=0.05)
+    assert ref.ok and ref.summary.warnings == []
+    scale = np.max(np.abs(ref["joint.theta"]))
+    assert np.max(np.abs(r["joint.theta"] - ref["joint.theta"])) < 1e-6 * scale
+    shutil.rmtree(tmp_path, ignore_errors=True)
+
+
+def test_dense_output_from_an_fmu_without_output_derivatives_says_it_is_linear(lag):
+    r = run(chain(lag), scheme="gauss-seidel", dense=True, estimate=False)
+    assert r.ok and np.all(np.isnan(r.slopes))
+    assert r.summary.warnings == ["dense output: FMU 'A', 'B' gives no output derivatives (maxOutputDerivativeOrder "
+                                  "= 0): its columns are linear between communication points"]

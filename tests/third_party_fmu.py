@@ -255,6 +255,9 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet) {
     Comp *s = c;
     if (!(h > 0)) return fmi2Error;
+#ifdef STATUS_AFTER  /* a hostile FMU: refuses every step that ends after STATUS_AFTER with STATUS */
+    if (t + h > STATUS_AFTER) return STATUS;
+#endif
     int n = (int)ceil(h / 1e-5 - 1e-9);
     double dt = h / n, y[NY], k1[NY], k2[NY], k3[NY], k4[NY], tmp[NY];
     memcpy(y, s->y, sizeof y);
@@ -324,7 +327,8 @@ def rk4_source(nr: int, ny: int, model_c: str) -> str:
     * ``outputs(c)``: the outputs computed before a read and when initialization ends (or nothing).
 
     Compiled with ``-DINTERP``, the inputs follow the derivatives fmi2SetRealInputDerivatives sends (else it
-    refuses them)."""
+    refuses them); with ``-DSTATUS_AFTER=t -DSTATUS=fmi2Discard`` (or fmi2Error) fmi2DoStep returns that status
+    for every step that ends after t."""
     return RK4_FMU_HEAD + f"#define NR {nr}\n#define NY {ny}\n" + RK4_FMU_STATE + model_c + RK4_FMU_C
 
 

@@ -15,4 +15,11 @@ except ImportError:  # pragma: no cover - older trees
 
 
 class CosimError(_Base):
-    """A co-simulation set-up or option the master refuses (a ValueError)."""
+    """A co-simulation set-up or option the master refuses (a ValueError), always one line: a name taken
+    from a system or an FMU may hold a newline or another control character, which is shown escaped."""
+
+    def __init__(self, message="", *args):
+        text = str(message)
+        if not text.isprintable():
+            text = "".join(ch if ch.isprintable() else repr(ch)[1:-1] for ch in text)
+        super().__init__(text, *args)

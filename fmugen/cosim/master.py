@@ -32,6 +32,7 @@ import numpy as np
 from .accuracy import ErrorEstimate, coupling_tolerance, internal_rtol
 from .errors import CosimError
 from .executor import SweepExecutor
+from .physical_units import mismatch as unit_mismatch
 from .loops import SingularLoop, algebraic_loops, check_scheme, solve_initial
 from .interpolants import CUBIC_THETA, EXTRAPOLATIONS, ORDER, InputHistory  # noqa: F401 (public names)
 from .monitor import DivergenceMonitor
@@ -169,19 +170,31 @@ class Master:
         ins = [[] for _ in self.units]
         src_of, factor_of, label_of = {}, {}, {}
         for c in sysm.couplings:
-            (su, sv), (tu, tv) = c.source, c.target
+            ends = (getattr(c, "source", None), getattr(c, "target", None))
+            if not all(isinstance(e, (tuple, list)) and len(e) == 2 and all(isinstance(x, str) for x in e)
+                       for e in ends):
+                raise CosimError(f"{sysm.name}: coupling {ends[0]!r} -> {ends[1]!r}: source and target must each be "
+                                 f"(FMU name, variable name)")
+            (su, sv), (tu, tv) = ends
             for un in (su, tu):
                 if un not in index:
                     raise CosimError(f"{sysm.name}: coupling {su}.{sv} -> {tu}.{tv}: no FMU named {un!r}")
             if su == tu:
                 raise CosimError(f"{sysm.name}: coupling {su}.{sv} -> {tu}.{tv} connects an FMU to itself")
-            self.units[index[su]].variable(sv, ("output", "local"))
-            self.units[index[tu]].variable(tv, ("input",))
+            src_var = self.units[index[su]].variable(sv, ("output", "local"))
+            dst_var = self.units[index[tu]].variable(tv, ("input",))
             if (tu, tv) in src_of:
                 raise CosimError(f"{sysm.name}: input {tu}.{tv} is driven twice")
-            f = float(c.factor)
+            try:
+                f = float(c.factor)
+            except (TypeError, ValueError):
+                raise CosimError(f"{sysm.name}: coupling {su}.{sv} -> {tu}.{tv}: factor {c.factor!r} is not a "
+                                 f"number") from None
             if not math.isfinite(f):
                 raise CosimError(f"{sysm.name}: coupling {su}.{sv} -> {tu}.{tv}: factor {c.factor} is not finite")
+            why = unit_mismatch(self.units[index[su]].md, src_var, self.units[index[tu]].md, dst_var, f)
+            if why:
+                raise CosimError(f"{sysm.name}: coupling {su}.{sv} -> {tu}.{tv}: {why}")
             src_of[(tu, tv)] = (su, sv)
             factor_of[(tu, tv)] = f
             label_of[(tu, tv)] = f"{su}.{sv} -> {tu}.{tv}"
@@ -330,6 +343,22 @@ class Master:
                 raise CosimError(f"{what}: FMU {u.name!r} cannot interpolate inputs (canInterpolateInputs = "
                                  f"false); use {self.scheme}/linear")
 
+    def _check_step_sizes(self, t0: float, stop: float, H: float, adaptive: bool) -> None:
+        """An FMU that declares canHandleVariableCommunicationStepSize = false (FMI 2.0's default) takes only
+        one macro step: adaptive steps (and their landing on events) are refused, and so is a fixed step
+        that does not divide the run's span (its last step would be shorter, see _land)."""
+        for u in self.units:
+            if getattr(u, "variable_step", True):
+                continue
+            head = (f"{self.system.name}: FMU {u.name!r} ({u.unit.path}) declares "
+                    f"canHandleVariableCommunicationStepSize=\"false\" (FMI 2.0's default when it is absent)")
+            if adaptive:
+                raise CosimError(f"{head}, but adaptive macro steps change the step; run at a fixed step")
+            n = (stop - t0) / H
+            if round(n) < 1 or abs(n - round(n)) > 1e-6:
+                raise CosimError(f"{head}, but {stop - t0:.9g} s is not a whole number of macro steps of {H:.9g} s "
+                                 f"(the last one would differ); take a step that divides the run's span")
+
     def _check_states(self, adaptive: bool) -> None:
         """Iterated schemes and adaptive steps repeat a macro step from saved FMU states: refuse, before
         anything runs, an FMU that declares it cannot save them (canGetAndSetFMUstate = false)."""
@@ -430,7 +459,9 @@ class Master:
         Hmax = _positive("max_step", max_step) if max_step is not None else (max(H0, (stop - t0) / 10) if adaptive else H0)
         if Hmin > Hmax:
             raise CosimError(f"min_step {Hmin} exceeds max_step {Hmax}")
+        _check_resolution(t0, stop, min(Hmin, H0, Hmax), "min_step" if adaptive and min_step is not None else "step")
         self._check_clocks(t0, H0, adaptive)
+        self._check_step_sizes(t0, stop, min(H0, Hmax), adaptive)
         scheme = self._prepare(adaptive, coupling_tol, int(max_iterations))
         implicit = scheme.implicit
         summ = Summary(sysm.name, self.scheme, self.extrapolation, bool(adaptive))
@@ -452,6 +483,11 @@ class Master:
             from .dense import SlopeRecorder
 
             slopes = SlopeRecorder(self.units, sysm.recorded)
+            linear = sorted({r.unit for r in sysm.recorded} - {p[0].name for p in slopes.parts})
+            if linear:
+                summ.warnings.append(f"dense output: FMU {', '.join(map(repr, linear))} gives no output derivatives "
+                                     f"(maxOutputDerivativeOrder = 0): its columns are linear between "
+                                     f"communication points")
         rec = _Recording(cap, self.Y, self.rec_idx, slopes)
         wall0 = _time.perf_counter()
         if adaptive or implicit:  # both repeat macro steps from saved FMU states
@@ -461,7 +497,17 @@ class Master:
             self.executor = SweepExecutor(self.units, self._do, self.workers)
         states, monitor, failure, calls, scale0 = [], None, None, 0, None
         est = shadow = None  # the a-posteriori error estimate by step doubling on a sample of steps (accuracy.py)
-        if estimate and len(self.rec_idx) and all(getattr(u, "can_save_state", True) for u in self.units):
+        # the estimate reruns windows from saved FMU states with H/2: an FMU that can do neither gets none, said
+        lacking = [u for u in self.units if not (getattr(u, "can_save_state", True) and
+                                                 getattr(u, "variable_step", True))]
+        if estimate and len(self.rec_idx) and lacking:
+            u = lacking[0]
+            flag = ("canGetAndSetFMUstate" if not getattr(u, "can_save_state", True)
+                    else "canHandleVariableCommunicationStepSize")
+            summ.warnings.append(f"no coupling error estimate: FMU {u.name!r} declares {flag}=\"false\", and the "
+                                 f"estimate reruns windows of macro steps from saved FMU states with H/2")
+        summ.warnings.extend(self.me_block.warnings() if self.me_block is not None else ())
+        if estimate and len(self.rec_idx) and not lacking:
             rtols = [r for r in map(internal_rtol, self.units) if r is not None]
             est = ErrorEstimate(self.scheme, self.extrapolation, int((stop - t0) / H0), self.columns,
                                 max(rtols) if rtols else 0.0, self.rec_nominal)
@@ -481,6 +527,9 @@ class Master:
             scale[nu:] = 1.0
             scale0 = scale.copy()
             rec.append(t)
+            if not self._finite():
+                failure = self._non_finite(t)
+                raise _Stop
             if adaptive or implicit:
                 states = [u.new_state() for u in self.units]
                 calls += len(self.units)
@@ -540,6 +589,9 @@ class Master:
                     if est is not None:
                         est.discard()
                     continue
+                if not self._finite():  # an FMU's NaN or infinity: the run stops there, naming it
+                    failure = self._non_finite(t)
+                    break
                 # 4. measure: the interface defect
                 np.subtract(Unew_v, P, out=d_v)
                 if adaptive or implicit:
@@ -608,6 +660,8 @@ class Master:
                 H = control.accept(H, err) if adaptive else min(H0, Hmax)
         except UnitFailure as e:
             failure = self._diagnose(e, t, H, d, scale0, monitor)
+        except _Stop:
+            pass
         finally:
             summ.threads = self.executor.threads if self.executor is not None else 1
             if self.executor is not None:
@@ -771,6 +825,19 @@ class Master:
             est.skipped(summ.macro_steps)
         return calls
 
+    def _finite(self) -> bool:
+        return bool(np.isfinite(self.Y[: self.ny]).all())
+
+    def _non_finite(self, t) -> FailureReport:
+        """The first output an FMU returned as NaN or infinite (read after the step from ``t``)."""
+        i = int(np.argmax(~np.isfinite(self.Y[: self.ny])))
+        k = next(k for k, u in enumerate(self.units) if u.out_sl.start <= i < u.out_sl.stop)
+        u = self.units[k]
+        name = u.out_names[i - u.out_sl.start]
+        return FailureReport(t, "non-finite", f"FMU {u.name!r} returned {self.Y[i]} for output {name!r}",
+                             unit=u.name, coupling=next((self.coupling_labels[j] for j in range(self.nu)
+                                                         if self.S[j] == i), None), fmu_messages=u.messages())
+
     def _save_all(self, states) -> int:
         for k, u in enumerate(self.units):
             st = u.save(states[k])
@@ -833,6 +900,24 @@ class Master:
                 raise UnitFailure(u.name, "fmi2SetFMUstate", st, u.messages())
         return len(self.units)
 
+
+
+class _Stop(Exception):
+    """Ends a run before its first macro step (the failure is already set)."""
+
+
+def _check_resolution(t0: float, stop: float, H: float, what: str) -> None:
+    """A macro step must move the time (t + H > t in floating point over the whole run) and the run must end
+    in at most MAX_STEPS of it: a step of 1e-300 s would loop for ever."""
+    if not (t0 + H > t0 and stop - H < stop and stop + H > stop):
+        raise CosimError(f"{what} {H:g} s is below the time resolution at t = {max(abs(t0), abs(stop)):g} s "
+                         f"(t + {what} == t in floating point)")
+    if (stop - t0) / H > MAX_STEPS:
+        raise CosimError(f"{what} {H:g} s would take {(stop - t0) / H:.3g} macro steps from {t0:g} s to {stop:g} s, "
+                         f"more than the {MAX_STEPS:.0e} this master takes; take a larger step")
+
+
+MAX_STEPS = 1e9
 
 
 def _feedthrough(unit, names) -> bool:

@@ -70,6 +70,18 @@ class MEBlock:
                     self.links.append((u, li, "cs", j))
         self.t_n = 0.0
         self.x = np.zeros(self.nx)
+        # df/dx from fmi2GetDirectionalDerivative needs every unit to provide it; else scipy's differences
+        self.exact_jacobian = all(getattr(u, "directional", True) for u in units)
+
+    def warnings(self) -> list:
+        """What the block does without, for the run's summary."""
+        out = [f"Model-Exchange FMU {u.name!r} declares providesDirectionalDerivative=\"false\": the ME block's "
+               f"Jacobian by finite differences (scipy), not exact" for u in self.units
+               if not getattr(u, "directional", True)]
+        out += [f"Model-Exchange FMU {u.name!r} declares {u.n_indicators} event indicators, which the ME block does "
+                f"not watch: its state events are not located" for u in self.units
+                if getattr(u, "n_indicators", 0) > 0]
+        return out
 
     # -- evaluation -----------------------------------------------------------
     def start(self, t0: float) -> None:
@@ -148,7 +160,7 @@ class MEBlock:
         x0 = self._current_x()
         try:
             sol = solve_ivp(self.rhs, (t, t + H), x0, method="Radau", rtol=self.rtol, atol=self.rtol * self.nominal,
-                            jac=self.jac, first_step=None)
+                            jac=self.jac if self.exact_jacobian else None, first_step=None)
         except UnitFailure:
             raise
         if not sol.success:

@@ -64,6 +64,9 @@ class Summary:
     estimate_samples: int = 0  # shadow steps the estimate rests on
     reliability: str = ""  # why the status is "unreliable"
     physics: str = ""  # the system's state of rest is unstable (its linearisation's growing mode)
+    # what the run did without because an FMU lacks a capability (no error estimate without FMU states, the ME
+    # block's Jacobian by differences, ...): sentences, also in str() and as_dict()
+    warnings: list = field(default_factory=list)
     failure: Optional[FailureReport] = None
 
     @property
@@ -79,7 +82,7 @@ class Summary:
                                            "step_min", "step_max", "threads", "coupling_tol",
                                            "coupling_tol_source", "error_estimate", "error_estimates",
                                            "error_trend", "error_growth", "estimate_samples", "reliability",
-                                           "physics")}
+                                           "physics", "warnings")}
         d["real_time_factor"] = self.real_time_factor
         d["failure"] = str(self.failure) if self.failure else ""
         return d
@@ -97,6 +100,8 @@ class Summary:
                   f"({self.estimate_samples} step-doubling samples), trend {self.error_trend}")
         if self.physics:
             s += f"\nwarning: the system is unstable at rest ({self.physics}); its runaway is physics, not coupling"
+        for w in self.warnings:
+            s += f"\nwarning: {w}"
         if self.reliability:
             s += f"\nunreliable: {self.reliability}"
         if self.coupling_tol:

@@ -281,6 +281,8 @@ class SlaveUnit(_Unit):
             raise CosimError(f"FMU {self.name!r} ({self.unit.path}) has no Co-Simulation interface")
         self.can_interpolate = bool(cs.canInterpolateInputs)
         self.can_save_state = bool(cs.canGetAndSetFMUstate)
+        # FMI 2.0's default is false: every macro step of such an FMU must be the same
+        self.variable_step = bool(cs.canHandleVariableCommunicationStepSize)
         fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self._unzip, modelIdentifier=cs.modelIdentifier,
                         instanceName=self.name)
         f = fmu._functions
@@ -315,6 +317,9 @@ class ModelUnit(_Unit):
         if me is None:
             raise CosimError(f"FMU {self.name!r} ({self.unit.path}) has no Model-Exchange interface")
         self.can_save_state = bool(me.canGetAndSetFMUstate)
+        self.variable_step = True  # the master's ME block takes whatever steps it likes
+        self.directional = bool(me.providesDirectionalDerivative)  # else the ME block's Jacobian by differences
+        self.n_indicators = int(self.md.numberOfEventIndicators or 0)
         fmu = FMU2Model(guid=self.md.guid, unzipDirectory=self._unzip, modelIdentifier=me.modelIdentifier,
                         instanceName=self.name)
         return fmu
