@@ -7,7 +7,8 @@ u1 = (c (b + e t) + d) / (1 - a c)  -- closed form, independent of the master.
 * Newton solves it at t0 and at every communication point (to 1e-12 at coupling_tol 1e-13);
 * Jacobi and Gauss-Seidel, which would run the loop as a delay of one macro step, refuse it in one line that
   names the FMUs, the couplings around the loop and the scheme that solves it (two and three FMUs);
-* a loop of gain 1 (y = u, u = y) is refused as singular, under Newton and fixed-point iteration;
+* a loop of gain 1 (y = u, u = y) is refused as singular, under Newton and fixed-point iteration; a loop
+  whose gain reaches 1 during the run stops there with a ``singular`` failure, not a NaN;
 * a loop broken by an FMU whose output does not depend on its input (``dependencies=""``, a lag) is no
   algebraic loop and runs under every scheme, against the lag's closed form; an output without
   ``dependencies`` depends on every input (FMI 2.0 section 2.2.8), so the same lag declared that way closes
@@ -118,3 +119,17 @@ def test_newton_meets_the_loop_where_the_initial_guess_is_far(fmus):
     assert r.ok, r.summary
     y1, y2 = closed_form(0.0)
     assert math.isclose(r["G1.y"][0], y1, rel_tol=1e-12) and math.isclose(r["G2.y"][0], y2, rel_tol=1e-12)
+
+
+def test_a_loop_whose_gain_reaches_one_stops_singular(tmp_path):
+    """G1's gain a = 0.5 + 5 t meets G2's c = 1 at t = 0.1 (a c = 1 with b != 0: no solution there)."""
+    rising = build_gain(tmp_path, "rising", cflags=["-DGAIN_RATE=5.0"])
+    s = ring([rising, build_gain(tmp_path, "plain")], [{"a": 0.5, "b": 1.0}, {"a": 1.0}])
+    r = run(s, scheme="newton", extrapolation="linear", stop=0.2, estimate=False)
+    f = r.summary.failure
+    assert r.summary.status == "failed" and f is not None and f.cause == "singular", r.summary
+    assert "is singular" in f.message and "a loop gain of 1" in f.message and "G1.y -> G2.u" in f.coupling
+    assert 0.085 <= f.time < 0.1 + 1e-12 and np.all(np.isfinite(r.values)), (f.time, r.values[-1])
+    # up to there the run met the loop: u1 = b / (1 - a(t))
+    t = r.time
+    assert np.max(np.abs(r["G2.y"] - 1.0 / (1 - (0.5 + 5 * t)))) < 1e-6 * np.max(np.abs(r["G2.y"]))

@@ -397,7 +397,11 @@ static void outputs(Comp *c) {
 #ifdef LAG
     c->r[0] = c->y[0];
 #else
-    c->r[0] = c->r[2] * in(c, 1, c->time) + c->r[3] + c->r[4] * c->time;   /* y = a u + b + e t, now */
+    double a = c->r[2];
+#ifdef GAIN_RATE
+    a += GAIN_RATE * c->time;   /* a gain that changes with time: a loop through it may become singular */
+#endif
+    c->r[0] = a * in(c, 1, c->time) + c->r[3] + c->r[4] * c->time;   /* y = a u + b + e t, now */
 #endif
 #ifdef NAN_AFTER
     if (c->time > NAN_AFTER) c->r[0] = NAN;
