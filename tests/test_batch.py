@@ -133,6 +133,10 @@ def test_bad_shapes_and_dtypes_are_refused_naming_the_argument(robot):
     wide = np.zeros((4, 2 * n))
     wide[:, ::2] = q
     assert np.array_equal(kernels.mass_matrix(wide[:, ::2]), kernels.mass_matrix(q))
+    # a read-only array is read (its address taken the slow way)
+    frozen = q.copy()
+    frozen.setflags(write=False)
+    assert np.array_equal(kernels.mass_matrix(frozen), kernels.mass_matrix(q))
     # no states: empty results
     assert kernels.fd(q[:0], qd[:0], x[:0]).shape == (0, n)
 

@@ -142,6 +142,22 @@ def library() -> ctypes.CDLL:
         return lib
 
 
+_F64 = np.dtype(np.float64)
+
+
+def _address(a: np.ndarray) -> int:
+    """The data address of an array.  Through the buffer protocol first: a quarter of the cost of
+    ``a.ctypes.data`` or ``a.__array_interface__``, which build objects per call -- and at N = 1 the
+    Python around the C call is most of its cost.  A read-only or empty array takes the slow way."""
+    try:
+        return _addressof(_char.from_buffer(a))
+    except (TypeError, ValueError):
+        return a.__array_interface__["data"][0]
+
+
+_char, _addressof = ctypes.c_char, ctypes.addressof
+
+
 def _method(what: str, method: str):
     if method not in MASS_MATRIX_METHODS:
         raise ValueError(f"{what}: method must be one of {', '.join(MASS_MATRIX_METHODS)}, got {method!r}")
@@ -186,10 +202,26 @@ class Kernels:
         self._g = np.ascontiguousarray(np.r_[g, 0.0, 0.0, 0.0])  # no end effector: p_ee is not computed
         self._jt = np.array([1 if r else 0 for r in self.revolute] + parents + [-1], dtype=np.intc)
         self._lib = library()
+        self._const = (_address(self._jt), _address(self._lc), _address(self._g))
         self._works = {}
         self._busy = threading.Lock()
         self._pool = None
         self.threads = threads
+
+    @property
+    def joint_array(self) -> np.ndarray:
+        """The runtime's ``joint`` ints (chain_dynamics.h: types, parents, end-effector body -1), a copy."""
+        return self._jt.copy()
+
+    @property
+    def constants(self) -> np.ndarray:
+        """The n x NC body constants of chain_dynamics.h, a copy."""
+        return self._lc.copy()
+
+    @property
+    def globals(self) -> np.ndarray:
+        """The NG global constants of chain_dynamics.h (gravity, then a zero end-effector position), a copy."""
+        return self._g.copy()
 
     # ------------------------------------------------------------ construction
     @classmethod
@@ -233,6 +265,8 @@ class Kernels:
     def threads(self, k: int):
         if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
             raise ValueError(f"threads: a whole number >= 1, got {k!r}")
+        if int(k) == getattr(self, "_threads", None):
+            return
         self._threads = int(k)
         if self._pool is not None:
             self._pool.shutdown()
@@ -254,39 +288,55 @@ class Kernels:
     def _check(self, what: str, arrays: dict) -> tuple:
         n, out, count = self.n, [], None
         for name, a in arrays.items():
-            a = np.asarray(a)
-            if a.dtype != np.float64 or a.ndim != 2 or a.shape[1] != n or (count is not None and a.shape[0] != count):
+            if type(a) is not np.ndarray:
+                a = np.asarray(a)
+            if a.dtype != _F64 or a.ndim != 2 or a.shape[1] != n or (count is not None and a.shape[0] != count):
                 want = f"(N, {n})" if count is None else f"({count}, {n})"
                 raise ValueError(f"{what}: {name} must be a float64 array of shape {want}, "
                                  f"got {a.dtype} {a.shape}")
             count = a.shape[0]
-            out.append(np.ascontiguousarray(a))
+            out.append(a if a.flags.c_contiguous else np.ascontiguousarray(a))
         return count, out
 
-    def _work(self, kind: int, k: int) -> np.ndarray:
-        key = (kind, k)
-        if key not in self._works:
-            size = self._lib.fmugen_batch_work(kind, self.n)
-            self._works[key] = np.empty(max(size, 1))
-        return self._works[key]
+    def _work(self, kind: int, i: int) -> int:
+        """Address of the work array of thread i for ``kind`` (allocated once per object and kept)."""
+        key = (kind, i)
+        w = self._works.get(key)
+        if w is None:
+            a = np.empty(max(self._lib.fmugen_batch_work(kind, self.n), 1))
+            w = self._works[key] = (a, _address(a))
+        return w[1]
 
-    def _run(self, what: str, kind: int, count: int, ins: list, outs: list):
-        lib, n = self._lib, self.n
-        ins = ins + [None] * (3 - len(ins))
-        outs = outs + [None] * (4 - len(outs))
-        row_in = [0 if a is None else 8 * n for a in ins]
-        row_out = [0 if a is None else 8 * int(np.prod(a.shape[1:])) for a in outs]
+    def _outputs(self, count: int, blocks: int) -> tuple:
+        """One buffer for the results of a call -- an (count, n) array, then ``blocks`` (count, n, n) arrays,
+        each contiguous -- and its address (one address to take instead of four)."""
+        n = self.n
+        buf = np.empty(count * n * (1 + blocks * n))
+        out = [buf[:count * n].reshape(count, n)]
+        out += [buf[count * n * (1 + b * n):count * n * (1 + (b + 1) * n)].reshape(count, n, n) for b in range(blocks)]
+        return out, _address(buf)
+
+    def _run(self, what: str, kind: int, count: int, ins: list, base: int, blocks: int):
+        """Kernel ``kind`` on the inputs ``ins``; the results into the buffer at ``base`` (:meth:`_outputs`:
+        a (count, n) array then ``blocks`` (count, n, n) arrays; the mass matrices: one (count, n, n))."""
+        # per-call Python work is kept small: at N = 1 it is most of the cost of a call
+        fn, n, const = self._lib.fmugen_batch, self.n, self._const
+        ins = [_address(a) for a in ins] + [None] * (3 - len(ins))
+        row_in = 8 * n
+        if blocks < 0:  # the mass matrices: one (count, n, n) result
+            outs, rows = [base, None, None, None], [8 * n * n, 0, 0, 0]
+        else:
+            outs = [base] + [base + 8 * count * n * (1 + b * n) for b in range(blocks)] + [None] * (3 - blocks)
+            rows = [row_in] + [8 * n * n] * 3
         k = min(self._threads, max(count, 1))
         bounds = [count * i // k for i in range(k + 1)]
-        works = [self._work(kind, i) for i in range(k)]
 
         def part(i):
             lo, hi = bounds[i], bounds[i + 1]
             bad = ctypes.c_long(-1)
-            a = [None if x is None else x.ctypes.data + lo * r for x, r in zip(ins, row_in)]
-            o = [None if x is None else x.ctypes.data + lo * r for x, r in zip(outs, row_out)]
-            s = lib.fmugen_batch(kind, n, self._jt.ctypes.data, self._lc.ctypes.data, self._g.ctypes.data,
-                                 hi - lo, *a, *o, works[i].ctypes.data, ctypes.byref(bad))
+            a = [x and x + lo * row_in for x in ins]
+            o = [x and x + lo * r for x, r in zip(outs, rows)]
+            s = fn(kind, n, *const, hi - lo, *a, *o, self._work(kind, i), ctypes.byref(bad))
             return s, lo + bad.value
 
         with self._busy:  # the work arrays are the object's: calls from several threads take turns
@@ -304,55 +354,52 @@ class Kernels:
 
     def fd(self, q, qd, tau) -> np.ndarray:
         """qdd = M(q)^-1 (tau - h(q, qd)) per state (N, n): the articulated-body algorithm."""
-        count, (q, qd, tau) = self._check("fd", {"q": q, "qd": qd, "tau": tau})
-        qdd = np.empty((count, self.n))
-        self._run("fd", _FD, count, [q, qd, tau], [qdd])
+        count, ins = self._check("fd", {"q": q, "qd": qd, "tau": tau})
+        (qdd,), base = self._outputs(count, 0)
+        self._run("fd", _FD, count, ins, base, 0)
         return qdd
 
     def fd_derivatives(self, q, qd, tau) -> tuple:
         """``(qdd, dqdd/dq, dqdd/dqd, M^-1)``: (N, n) and three (N, n, n); M^-1 = dqdd/dtau.  Pinocchio's
         ``computeABADerivatives`` (``ddq_dq``, ``ddq_dv``, ``Minv``)."""
-        count, (q, qd, tau) = self._check("fd_derivatives", {"q": q, "qd": qd, "tau": tau})
-        n = self.n
-        qdd = np.empty((count, n))
-        blocks = [np.empty((count, n, n)) for _ in range(3)]
-        self._run("fd_derivatives", _FD_JAC, count, [q, qd, tau], [qdd, *blocks])
-        return (qdd, *blocks)
+        count, ins = self._check("fd_derivatives", {"q": q, "qd": qd, "tau": tau})
+        out, base = self._outputs(count, 3)
+        self._run("fd_derivatives", _FD_JAC, count, ins, base, 3)
+        return tuple(out)
 
     def id(self, q, qd, qdd) -> np.ndarray:
         """tau = M(q) qdd + h(q, qd) per state (N, n): recursive Newton-Euler."""
-        count, (q, qd, qdd) = self._check("id", {"q": q, "qd": qd, "qdd": qdd})
-        tau = np.empty((count, self.n))
-        self._run("id", _ID, count, [q, qd, qdd], [tau])
+        count, ins = self._check("id", {"q": q, "qd": qd, "qdd": qdd})
+        (tau,), base = self._outputs(count, 0)
+        self._run("id", _ID, count, ins, base, 0)
         return tau
 
     def id_derivatives(self, q, qd, qdd) -> tuple:
         """``(tau, dtau/dq, dtau/dqd, M)``: (N, n) and three (N, n, n); M = dtau/dqdd.  Pinocchio's
         ``computeRNEADerivatives`` (``dtau_dq``, ``dtau_dv``, ``M``)."""
-        count, (q, qd, qdd) = self._check("id_derivatives", {"q": q, "qd": qd, "qdd": qdd})
-        n = self.n
-        tau = np.empty((count, n))
-        blocks = [np.empty((count, n, n)) for _ in range(3)]
-        self._run("id_derivatives", _ID_JAC, count, [q, qd, qdd], [tau, *blocks])
-        return (tau, *blocks)
+        count, ins = self._check("id_derivatives", {"q": q, "qd": qd, "qdd": qdd})
+        out, base = self._outputs(count, 3)
+        self._run("id_derivatives", _ID_JAC, count, ins, base, 3)
+        return tuple(out)
 
     def mass_matrix(self, q, method: str = "jacobian") -> np.ndarray:
         """M(q) per state (N, n, n), symmetric, rotor inertias on the diagonal (Pinocchio's ``crba``, which
         fills the upper triangle).  ``method``: :data:`MASS_MATRIX_METHODS`.  M is not checked for positive
         definiteness here (nothing is solved)."""
         _method("mass_matrix", method)
-        count, (q,) = self._check("mass_matrix", {"q": q})
+        count, ins = self._check("mass_matrix", {"q": q})
         M = np.empty((count, self.n, self.n))
-        self._run("mass_matrix", _M_COLUMNS if method == "columns" else _M_JAC, count, [q], [M])
+        self._run("mass_matrix", _M_COLUMNS if method == "columns" else _M_JAC, count, ins, _address(M), -1)
         return M
 
     def mass_matrix_inverse(self, q, method: str = "jacobian") -> np.ndarray:
         """M(q)^-1 per state (N, n, n) (Pinocchio's ``computeMinverse``); ``method``: :data:`MASS_MATRIX_METHODS`.
         Raises StateError where M is not positive definite."""
         _method("mass_matrix_inverse", method)
-        count, (q,) = self._check("mass_matrix_inverse", {"q": q})
+        count, ins = self._check("mass_matrix_inverse", {"q": q})
         Minv = np.empty((count, self.n, self.n))
-        self._run("mass_matrix_inverse", _MINV_COLUMNS if method == "columns" else _MINV_JAC, count, [q], [Minv])
+        self._run("mass_matrix_inverse", _MINV_COLUMNS if method == "columns" else _MINV_JAC, count, ins,
+                  _address(Minv), -1)
         return Minv
 
     def __repr__(self):

@@ -1,0 +1,271 @@
+"""Benchmark: ID, M, M^-1, FD, ∇ID and ∇FD of the runtime's looped tree dynamics against Pinocchio, per robot,
+beside the CPU and GPU figures GRiD published.
+
+The robots are those of GRiDBenchmarks (iiwa, HyQ, Atlas: their URDFs, fixed base; the files are not part
+of fmugen -- get them from https://github.com/robot-acceleration/GRiDBenchmarks, folder urdfs/, and pass
+the folder with ``--grid``) and of example-robot-data (UR5, Panda, Talos full v2, Tiago, Tiago dual).
+Each file is read twice: by fmugen's URDF reader (:func:`fmugen.robot.urdf.load_urdf`) into the body
+constants of ``c_runtime/chain_dynamics.c`` (:class:`fmugen.batch.Kernels`; the files' joint damping and
+friction set to 0, which Pinocchio does not model) and by Pinocchio (``buildModelFromUrdf``, fixed base).
+
+1. every algorithm's result, through the batched entry point (fmugen.batch), is checked against
+   Pinocchio's at ``--states`` random states (relative error, goal 1e-9): ``rnea``, ``crba``,
+   ``computeMinverse``, ``aba``, ``computeRNEADerivatives`` (dtau_dq, dtau_dv) and
+   ``computeABADerivatives`` (ddq_dq, ddq_dv, Minv);
+2. each algorithm is timed in alternation with Pinocchio's (``--repeat`` rounds, CPU time): the runtime's
+   C functions called in a compiled C loop -- ``fmugen_chain_id``, ``fmugen_chain_fd``,
+   ``fmugen_chain_id_jacobian``, ``fmugen_chain_fd_jacobian``; M and M^-1 are the third blocks of the
+   two Jacobians at qd = 0, as ``fmugen.batch`` computes them by default -- and Pinocchio from Python with
+   the call overhead of a 0-DoF model subtracted (examples/bench_timing.py).  Printed: medians of the
+   rounds, and the median of the per-round ratios fmugen / Pinocchio (below 1: fmugen faster).
+
+Every robot runs on the looped runtime, also the UR5 (6 DoF), whose FMU has straight-line code by
+default: the straight-line FD and ID of the arms are timed by examples/bench_tree_dynamics.py.
+
+GRiD's figures (Plancher et al., "GRiD: GPU-Accelerated Rigid Body Dynamics with Analytical Gradients",
+ICRA 2022; the GRiDBenchmarks README) are µs per call on another machine -- an i7-10700K at 3.8 GHz
+(CPU: Pinocchio) and an RTX 3080 (GPU: GRiD) -- printed as context, not as a comparison of this run.
+
+Run (needs ``pip install pin example-robot-data``):
+
+    python examples/bench_derivatives.py --grid path/to/GRiDBenchmarks/urdfs --repeat 5
+"""
+from __future__ import annotations
+
+import argparse
+import ctypes
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # examples/: the benchmarks' shared timing helper
+from bench_timing import per_call  # noqa: E402
+
+GRID_ROBOTS = {"iiwa": "iiwa.urdf", "hyq": "hyq.urdf", "atlas": "atlas.urdf"}
+ERD_ROBOTS = {"ur5": "ur_description/urdf/ur5_robot.urdf", "panda": "panda_description/urdf/panda.urdf",
+              "talos": "talos_data/robots/talos_full_v2.urdf", "tiago": "tiago_description/robots/tiago.urdf",
+              "tiago_dual": "tiago_description/robots/tiago_dual.urdf"}
+ALGORITHMS = ("ID", "M", "Minv", "FD", "∇ID", "∇FD")
+PINOCCHIO = {"ID": "rnea", "M": "crba", "Minv": "computeMinverse", "FD": "aba", "∇ID": "computeRNEADerivatives",
+             "∇FD": "computeABADerivatives"}
+# GRiDBenchmarks README: µs per call, i7-10700K 3.8 GHz (Pinocchio) and RTX 3080 (GRiD); no row for M
+GRID_CPU = {"ID": (0.3, 0.3, 1.1), "Minv": (0.5, 0.8, 3.4), "FD": (0.9, 1.2, 5.3), "∇ID": (1.4, 2.1, 9.8),
+            "∇FD": (2.9, 4.3, 20.9)}
+GRID_GPU = {"ID": (3.0, 3.2, 8.0), "Minv": (5.2, 5.6, 17.4), "FD": (7.7, 6.9, 22.4), "∇ID": (6.3, 5.8, 19.5),
+            "∇FD": (12.9, 11.0, 42.1)}
+
+TIMER = r"""
+#define _POSIX_C_SOURCE 199309L
+#include <time.h>
+#include <string.h>
+#include "chain_dynamics.c"
+static double now(void) { struct timespec t; clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t); return t.tv_sec + 1e-9 * t.tv_nsec; }
+/* CPU seconds per call of algorithm `kind` (0 ID, 1 M, 2 Minv, 3 FD, 4 dID, 5 dFD) over k calls;
+ * z: n zeros (qd = qdd = tau = 0 for M and M^-1); out: n + 3 n^2 doubles */
+double time_calls(int kind, int k, int n, const int *jt, const double *lc, const double *g, const double *q,
+                  const double *qd, const double *x, const double *z, double *out, double *work)
+{
+    double t = now();
+    for (int i = 0; i < k; i++) {
+        switch (kind) {
+        case 0: fmugen_chain_id(n, jt, lc, g, q, qd, x, 0, NULL, NULL, out, work); break;
+        case 1: fmugen_chain_id_jacobian(n, jt, lc, g, q, z, z, 0, NULL, NULL, out, out + n, work); break;
+        case 2: fmugen_chain_fd_jacobian(n, jt, lc, g, q, z, z, 0, NULL, NULL, out, out + n, NULL, work); break;
+        case 3: fmugen_chain_fd(n, jt, lc, g, q, qd, x, 0, NULL, NULL, out, NULL, work); break;
+        case 4: fmugen_chain_id_jacobian(n, jt, lc, g, q, qd, x, 0, NULL, NULL, out, out + n, work); break;
+        default: fmugen_chain_fd_jacobian(n, jt, lc, g, q, qd, x, 0, NULL, NULL, out, out + n, NULL, work);
+        }
+    }
+    return (now() - t) / k;
+}
+"""
+
+
+def robots_dir() -> Path:
+    """example-robot-data's robots/ folder (the package installs files, no Python module)."""
+    from importlib.metadata import PackageNotFoundError, distribution
+
+    try:
+        d = Path(distribution("example-robot-data").locate_file("cmeel.prefix/share/example-robot-data/robots"))
+    except PackageNotFoundError as e:
+        raise ImportError("example-robot-data is not installed") from e
+    if not d.is_dir():
+        raise ImportError(f"example-robot-data's robots folder not found at {d}")
+    return d
+
+
+def runtime_version() -> str:
+    """The git blob hash of the runtime file measured (the runtime changes faster than the benchmarks are run)."""
+    import hashlib
+
+    data = (ROOT / "c_runtime" / "chain_dynamics.c").read_bytes()
+    blob = hashlib.sha1(b"blob %d\0" % len(data) + data).hexdigest()
+    return f"chain_dynamics.c blob {blob[:10]}"
+
+
+def timer(tmp: Path):
+    (tmp / "timer.c").write_text(TIMER)
+    lib = tmp / "timer.so"
+    subprocess.run(["cc", "-std=c99", "-O2", "-fPIC", "-shared", f"-I{ROOT / 'c_runtime'}", "-o", str(lib),
+                    str(tmp / "timer.c"), "-lm"], check=True)
+    so = ctypes.CDLL(str(lib))
+    vp = ctypes.c_void_p
+    so.time_calls.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int] + [vp] * 9
+    so.time_calls.restype = ctypes.c_double
+    return so
+
+
+def rel(a, b) -> float:
+    return float(np.max(np.abs(np.asarray(a) - np.asarray(b))) / max(np.max(np.abs(b)), 1e-300))
+
+
+def sym(upper):
+    return np.triu(upper) + np.triu(upper, 1).T
+
+
+def pinocchio_time(fn, args, k: int) -> float:
+    """CPU seconds per call less the same call on a 0-DoF model (Python's call overhead), same arity."""
+    from bench_timing import _empty_pinocchio
+
+    empty, ed, z = _empty_pinocchio()
+    return per_call(fn, args, k) - per_call(fn, (empty, ed) + (z,) * (len(args) - 2), k)
+
+
+def measure(name: str, path: Path, states: int, repeat: int, so) -> dict:
+    import pinocchio as pin
+    from fmugen.batch import Kernels
+    from fmugen.codegen.benchmarks import pinocchio_urdf_map, to_pinocchio
+    from fmugen.codegen.chain import chain_work_doubles
+    from fmugen.robot.urdf import load_urdf
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # mimic joints read as independent joints, as Pinocchio does
+        robot = load_urdf(path)
+    zero = {p.name: 0.0 for p in robot.parameters if p.name.startswith(("b_", "fc_"))}
+    kernels = Kernels.from_robot(robot, values=zero)
+    model = pin.buildModelFromUrdf(str(path))
+    data = model.createData()
+    mp = pinocchio_urdf_map(model, robot)
+    iv = [m[1] for m in mp]
+    ix = np.ix_(iv, iv)
+    n = kernels.n
+    if model.nv != n:
+        raise ValueError(f"{name}: fmugen reads {n} joints, Pinocchio {model.nv}")
+
+    # 1. the results, through the batched entry point, against Pinocchio's
+    rng = np.random.default_rng(0)
+    q, qd, x = rng.uniform(-1, 1, (states, n)), rng.uniform(-1, 1, (states, n)), rng.uniform(-3, 3, (states, n))
+    got = {"ID": kernels.id(q, qd, x), "M": kernels.mass_matrix(q), "Minv": kernels.mass_matrix_inverse(q),
+           "FD": kernels.fd(q, qd, x), "∇ID": kernels.id_derivatives(q, qd, x),
+           "∇FD": kernels.fd_derivatives(q, qd, x)}
+    err = dict.fromkeys(ALGORITHMS, 0.0)
+    for k in range(states):
+        qp, vp = to_pinocchio(model, mp, q[k], qd[k])
+        xp = to_pinocchio(model, mp, None, x[k])
+        e = {"ID": rel(got["ID"][k], pin.rnea(model, data, qp, vp, xp)[iv]),
+             "M": rel(got["M"][k], sym(pin.crba(model, data, qp))[ix]),
+             "Minv": rel(got["Minv"][k], sym(pin.computeMinverse(model, data, qp))[ix]),
+             "FD": rel(got["FD"][k], pin.aba(model, data, qp, vp, xp)[iv])}
+        pin.computeRNEADerivatives(model, data, qp, vp, xp)
+        e["∇ID"] = max(rel(got["∇ID"][1][k], data.dtau_dq[ix]), rel(got["∇ID"][2][k], data.dtau_dv[ix]),
+                       rel(got["∇ID"][3][k], sym(data.M)[ix]))
+        pin.computeABADerivatives(model, data, qp, vp, xp)
+        e["∇FD"] = max(rel(got["∇FD"][1][k], data.ddq_dq[ix]), rel(got["∇FD"][2][k], data.ddq_dv[ix]),
+                       rel(got["∇FD"][3][k], sym(data.Minv)[ix]))
+        err = {a: max(err[a], e[a]) for a in ALGORITHMS}
+    kernels.close()
+
+    # 2. timing at the last state, in alternation
+    keep = [kernels.joint_array, kernels.constants, kernels.globals] + \
+        [np.ascontiguousarray(a, float) for a in (q[-1], qd[-1], x[-1], np.zeros(n), np.zeros(n + 3 * n * n),
+                                                  np.zeros(chain_work_doubles(n, "jacobian")))]
+    ptrs = [a.ctypes.data for a in keep]
+    qp, vp = to_pinocchio(model, mp, q[-1], qd[-1])
+    xp = to_pinocchio(model, mp, None, x[-1])
+    pargs = {"ID": (model, data, qp, vp, xp), "M": (model, data, qp), "Minv": (model, data, qp),
+             "FD": (model, data, qp, vp, xp), "∇ID": (model, data, qp, vp, xp), "∇FD": (model, data, qp, vp, xp)}
+    budget = 0.02  # CPU seconds per timing: long against the clock's resolution, short against the load's drift
+    kc, kp = {}, {}
+    for i, a in enumerate(ALGORITHMS):
+        kc[a] = max(20, int(budget / max(so.time_calls(i, 20, n, *ptrs), 1e-9)))
+        fn = getattr(pin, PINOCCHIO[a])
+        kp[a] = max(20, int(budget / max(per_call(fn, pargs[a], 20), 1e-9)))
+    t = {a: {"fmugen": [], "pinocchio": []} for a in ALGORITHMS}
+    for _ in range(repeat):
+        for i, a in enumerate(ALGORITHMS):
+            t[a]["fmugen"].append(so.time_calls(i, kc[a], n, *ptrs))
+            t[a]["pinocchio"].append(pinocchio_time(getattr(pin, PINOCCHIO[a]), pargs[a], kp[a]))
+    out = {"n": n, "err": err, "fmugen": {}, "pinocchio": {}, "ratio": {}}
+    for a in ALGORITHMS:
+        f, p = np.array(t[a]["fmugen"]), np.array(t[a]["pinocchio"])
+        out["fmugen"][a], out["pinocchio"][a] = statistics.median(f), statistics.median(p)
+        out["ratio"][a] = statistics.median(f / p)
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--grid", type=Path, help="folder with GRiDBenchmarks' iiwa.urdf, hyq.urdf, atlas.urdf "
+                                              "(https://github.com/robot-acceleration/GRiDBenchmarks, urdfs/)")
+    ap.add_argument("--robot", action="append", choices=[*GRID_ROBOTS, *ERD_ROBOTS],
+                    help="robots to run (default: all that are found)")
+    ap.add_argument("--states", type=int, default=3, help="random states checked against Pinocchio")
+    ap.add_argument("--repeat", type=int, default=5, help="timing rounds (medians)")
+    args = ap.parse_args(argv)
+    try:
+        import pinocchio as pin
+        erd = robots_dir()
+    except ImportError as e:
+        print(f"this benchmark needs Pinocchio and example-robot-data ({e}): pip install pin example-robot-data",
+              file=sys.stderr)
+        return 2
+    load = os.getloadavg()
+    print(f"{os.cpu_count()} CPUs, load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}; {runtime_version()}; Pinocchio "
+          f"{pin.__version__}; {args.repeat} rounds, medians; CPU µs per call\n")
+    paths = {}
+    for name, f in GRID_ROBOTS.items():
+        if args.grid is not None and (args.grid / f).is_file():
+            paths[name] = args.grid / f
+        elif args.robot is None or name in args.robot:
+            print(f"({name}: no {f} -- pass --grid with GRiDBenchmarks' urdfs/ folder)", file=sys.stderr)
+    for name, rel_path in ERD_ROBOTS.items():
+        paths[name] = erd / rel_path
+    names = [r for r in paths if args.robot is None or r in args.robot]
+    results, ok = {}, True
+    with tempfile.TemporaryDirectory(prefix="fmugen_bench_derivatives_") as tmp:
+        so = timer(Path(tmp))
+        for name in names:
+            t0 = time.perf_counter()
+            results[name] = r = measure(name, paths[name], args.states, args.repeat, so)
+            ok = ok and all(e < 1e-9 for e in r["err"].values())
+            print(f"({name}: {r['n']} DoF, {time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
+    print("| Robot | DoF | Algorithm | fmugen µs | Pinocchio µs | ratio | max rel. error | GRiD CPU µs | "
+          "GRiD GPU µs |")
+    print("|---|---:|---|---:|---:|---:|---:|---:|---:|")
+    for name in names:
+        r = results[name]
+        for a in ALGORITHMS:
+            g = list(GRID_ROBOTS).index(name) if name in GRID_ROBOTS and a in GRID_CPU else None
+            cpu = f"{GRID_CPU[a][g]:.1f}" if g is not None else ""
+            gpu = f"{GRID_GPU[a][g]:.1f}" if g is not None else ""
+            print(f"| {name} | {r['n']} | {a} ({PINOCCHIO[a]}) | {r['fmugen'][a] * 1e6:.2f} | "
+                  f"{r['pinocchio'][a] * 1e6:.2f} | {r['ratio'][a]:.2f} | {r['err'][a]:.1e} | {cpu} | {gpu} |")
+    print("\nfmugen: the looped runtime (c_runtime/chain_dynamics.c) in a compiled C loop, M and M^-1 the "
+          "third blocks of the ID and FD Jacobians; Pinocchio: the call in parentheses, Python's call overhead "
+          "subtracted; ratio: median of the per-round ratios fmugen / Pinocchio.  GRiD columns: published "
+          "figures, another machine (i7-10700K 3.8 GHz with Pinocchio; RTX 3080 with GRiD), for context.")
+    print(f"check against Pinocchio (relative, 1e-9): {'ok' if ok else 'FAILED'}")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
