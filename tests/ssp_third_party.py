@@ -81,7 +81,9 @@ def build_fmus(folder: Path, fmi_version: str = "2.0") -> dict:
     out = {}
     for ident, flags in defs.items():
         variables, outputs, iu = mv[ident]
-        xml = model_description(ident, f"{{third-party-{ident}}}", variables, [(i, None) for i in outputs], iu,
+        # the outputs are states: no direct feedthrough (FMI 2.0: dependencies="" depends on no input;
+        # no attribute at all would mean "on every input", an algebraic loop through both FMUs)
+        xml = model_description(ident, f"{{third-party-{ident}}}", variables, [(i, "") for i in outputs], iu,
                                 fmi_version)
         out[ident] = compile_fmu(folder, ident, source, xml, ["-O2", "-std=c99", *flags],
                                  source_name="third_party.c")

@@ -275,7 +275,7 @@ def test_a_third_party_fmu_whose_description_guid_is_not_its_binarys(fmus, tmp_p
     checking = dict(fmus)
     checking["mass"] = compile_fmu(tmp_path / "own", "mass", "#include <string.h>\n" + source,
                                    model_description("mass", "{third-party-mass}", variables,
-                                                     [(1, None), (2, None)], []), flags)
+                                                     [(1, ""), (2, "")], []), flags)
     good = write_ssp(tmp_path / "good.ssp", checking, stop=0.05)
     assert run(load_system(good), "newton", "linear", step=1e-3).ok
     bad = write_ssp(tmp_path / "bad.ssp", checking, stop=0.05)

@@ -56,7 +56,11 @@ def _setting(text, where: str):
         return parse_xs_int(t, where, "long")
     if re.fullmatch(r"[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?|-?INF|NaN", t):
         return parse_xs_double(t, where)  # refuses INF, NaN and 1e999: no setting takes them
-    return text
+    try:  # text Python reads as a number ("1_5", Arabic-Indic digits, "infinity") would reach float() later
+        float(t)
+    except ValueError:
+        return text
+    return parse_xs_double(t, where)  # refused by the grammar
 
 
 def _names(text, where: str) -> tuple:

@@ -21,6 +21,13 @@ An ``.ssp`` is a zip archive from anyone, so:
   standard library's ElementTree, because lxml also validates against XML
   Schema, which the standard library cannot do; the SSP schemas are the
   ones FMPy ships (``fmpy/ssp/schema``);
+* **values**: every numeric attribute is read by its XML Schema grammar
+  (:func:`fmugen.values.parse_xs_double`, ``parse_xs_int``, ``parse_xs_boolean``:
+  ``1_5``, Arabic-Indic digits, ``infinity`` are not numbers there, as they are
+  to Python's ``float()``), every name is checked for control characters,
+  every reference (a connection's component and connector, a binding's file)
+  must exist, and nothing may be given twice; a refusal is one line naming the
+  archive, the file inside it, the element and the attribute;
 * every SSD and SSV is validated against those schemas before it is read,
   and what fmugen does not support is refused with one line each: signal
   dictionaries, parameter mappings (.ssm), nested systems, connections to
@@ -139,8 +146,8 @@ def parse_xml(data: bytes, where: str):
                              remove_comments=True)
     try:
         return etree.fromstring(data, parser)
-    except etree.XMLSyntaxError as exc:
-        raise InputFileError(f"{where}: not well-formed XML: {exc}") from None
+    except etree.XMLSyntaxError as exc:  # libxml2's message may hold a newline ("out of allowed range\n, line")
+        raise InputFileError(f"{where}: not well-formed XML: {' '.join(str(exc).split())[:400]}") from None
 
 
 def validate(root, schema_name: str, where: str) -> None:
@@ -170,7 +177,7 @@ def extract(ssp: Path, dest: Path) -> None:
     try:
         zf = zipfile.ZipFile(ssp)
     except (zipfile.BadZipFile, OSError, EOFError, ValueError, NotImplementedError) as exc:
-        raise InputFileError(f"{where}: not an SSP archive (zip): {exc}") from None
+        raise InputFileError(f"{where}: not an SSP archive (zip): {' '.join(str(exc).split())[:300]}") from None
     with zf:
         infos = zf.infolist()
         if len(infos) > MAX_MEMBERS:
