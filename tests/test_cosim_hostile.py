@@ -191,6 +191,26 @@ def test_hostile_systems_are_refused_in_one_line_or_run_with_a_clear_status(tmp_
     assert all("FMU 'L2' returned nan for output 'y'" in d for d in nan), nan
 
 
+def test_two_names_of_one_unit_are_one_unit():
+    """physical_units.mismatch against the FMUs' <UnitDefinitions> (FMI 2.0 section 2.2.2)."""
+    from types import SimpleNamespace as NS
+
+    from fmugen.cosim.physical_units import mismatch
+
+    def md(*defs):
+        return NS(unitDefinitions=[NS(name=n, baseUnit=NS(kg=kg, m=m, s=-2, A=0, K=0, mol=0, cd=0, rad=0,
+                                                         factor=f, offset=0.0)) for n, kg, m, f in defs])
+
+    torque = md(("N.m", 1, 2, 1.0), ("J", 1, 2, 1.0), ("kN.m", 1, 2, 1e3))
+    var = lambda u: NS(unit=u, declaredType=None)  # noqa: E731
+    assert mismatch(torque, var("N.m"), torque, var("J"), 1.0) is None
+    assert mismatch(torque, var("N.m"), torque, var("kN.m"), 1.0) == ("units differ (N.m -> kN.m) and the coupling "
+                                                                     "states no conversion factor")
+    assert mismatch(torque, var("N.m"), torque, var("kN.m"), 1e-3) is None  # a stated conversion
+    assert mismatch(md(), var("m"), md(), var(""), 1.0) is None  # one side without a unit
+    assert mismatch(md(), var("m"), md(), NS(unit=None, declaredType=NS(unit="rad")), 1.0) is not None
+
+
 if __name__ == "__main__":  # python tests/test_cosim_hostile.py: the counts per class and per kind
     import sys
     import tempfile
