@@ -19,8 +19,13 @@ friction set to 0, which Pinocchio does not model) and by Pinocchio (``buildMode
    the call overhead of a 0-DoF model subtracted (examples/bench_timing.py).  Printed: medians of the
    rounds, and the median of the per-round ratios fmugen / Pinocchio (below 1: fmugen faster).
 
-Every robot runs on the looped runtime, also the UR5 (6 DoF), whose FMU has straight-line code by
-default: the straight-line FD and ID of the arms are timed by examples/bench_tree_dynamics.py.
+Every robot runs on the looped runtime.  A robot of 6 DoF or fewer (the UR5) gets straight-line code in
+its FMU by default, so for those a second table times the generated straight-line code too (the URDF's
+numbers folded into constants, as Pinocchio has them; compiled with -O2 and called in a C loop): FD and
+∇FD are the FMU's ``evaluate`` and ``jacobian`` (dfdx, dfdu hold ∂qdd/∂q, ∂qdd/∂qd and M^-1), ID and ∇ID
+those of the inverse-dynamics model (dtau/du = [∂tau/∂q, ∂tau/∂qd, M]), M the lower triangle of the mass
+matrix model (fmugen.codegen.benchmarks); there is no straight-line M^-1.  ``--no-straight`` skips it
+(deriving and compiling the straight-line Jacobians takes a minute).
 
 GRiD's figures (Plancher et al., "GRiD: GPU-Accelerated Rigid Body Dynamics with Analytical Gradients",
 ICRA 2022; the GRiDBenchmarks README) are µs per call on another machine -- an i7-10700K at 3.8 GHz
@@ -212,6 +217,91 @@ def measure(name: str, path: Path, states: int, repeat: int, so) -> dict:
     return out
 
 
+def straight_line(name: str, path: Path, states: int, repeat: int) -> dict:
+    """The generated straight-line code of a small robot (module docstring), checked and timed like measure()."""
+    from dataclasses import replace
+
+    import pinocchio as pin
+    from bench_timing import c_loop
+    from fmugen.codegen.benchmarks import mass_matrix_model, pinocchio_urdf_map, to_pinocchio
+    from fmugen.codegen.c_code import generate_c
+    from fmugen.codegen.c_harness import CompiledModel
+    from fmugen.dynamics.manipulator import Manipulator
+    from fmugen.robot.urdf import load_urdf
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        robot = load_urdf(path)
+    zero = {p.name: 0.0 for p in robot.parameters if p.name.startswith(("b_", "fc_"))}
+    arm = Manipulator(robot)
+    n = robot.n
+
+    def folded(m):
+        return m.with_starts({k: x for k, x in zero.items() if k in {v.name for v in m.parameters}}) \
+            .with_parameters_folded()
+
+    t0 = time.process_time()
+    fd = folded(arm.state_space_model(outputs=(), strategy="straight"))
+    idm = folded(arm.inverse_dynamics_model(strategy="straight"))
+    mm = folded(mass_matrix_model(arm))
+    no_jac = dict(jacobian=None, dfdx=None, dfdu=None, dgdx=None, dgdu=None)
+    models = {"FD": fd.without_jacobian(), "∇FD": fd, "ID": replace(idm, **no_jac), "∇ID": idm, "M": mm}
+    sources = {a: generate_c(m).source for a, m in models.items()}
+    derive = time.process_time() - t0
+    model = pin.buildModelFromUrdf(str(path))
+    data = model.createData()
+    mp = pinocchio_urdf_map(model, robot)
+    iv = [m[1] for m in mp]
+    ix = np.ix_(iv, iv)
+    rng = np.random.default_rng(0)
+    q, qd, x = rng.uniform(-1, 1, (states, n)), rng.uniform(-1, 1, (states, n)), rng.uniform(-3, 3, (states, n))
+    tri = [(i, j) for i in range(n) for j in range(i + 1)]
+    err = dict.fromkeys(("ID", "M", "FD", "∇ID", "∇FD"), 0.0)
+    compiled = {a: CompiledModel.build(src) for a, src in sources.items()}
+    try:
+        for k in range(states):
+            qp, vp = to_pinocchio(model, mp, q[k], qd[k])
+            xp = to_pinocchio(model, mp, None, x[k])
+            u = np.r_[q[k], qd[k], x[k]]
+            _, tau = compiled["ID"].evaluate([], 0.0, [], u)
+            e = {"ID": rel(tau, pin.rnea(model, data, qp, vp, xp)[iv])}
+            _, _, _, dgdu = compiled["∇ID"].jacobian([], 0.0, [], u)
+            pin.computeRNEADerivatives(model, data, qp, vp, xp)
+            e["∇ID"] = rel(dgdu[:, :3 * n], np.c_[data.dtau_dq[ix], data.dtau_dv[ix], sym(data.M)[ix]])
+            _, m_low = compiled["M"].evaluate([], 0.0, [], q[k])
+            Mref = sym(pin.crba(model, data, qp))[ix]
+            e["M"] = rel(m_low, [Mref[i, j] for i, j in tri])
+            dx, _ = compiled["FD"].evaluate([], 0.0, np.r_[q[k], qd[k]], x[k], want_y=False)
+            e["FD"] = rel(dx[n:], pin.aba(model, data, qp, vp, xp)[iv])
+            dfdx, dfdu, _, _ = compiled["∇FD"].jacobian([], 0.0, np.r_[q[k], qd[k]], x[k])
+            pin.computeABADerivatives(model, data, qp, vp, xp)
+            e["∇FD"] = rel(np.c_[dfdx[n:], dfdu[n:, :n]],
+                           np.c_[data.ddq_dq[ix], data.ddq_dv[ix], sym(data.Minv)[ix]])
+            err = {a: max(err[a], e[a]) for a in err}
+        qp, vp = to_pinocchio(model, mp, q[-1], qd[-1])
+        xp = to_pinocchio(model, mp, None, x[-1])
+        calls = {"ID": ("ID", [], np.r_[q[-1], qd[-1], x[-1]], "evaluate"),
+                 "M": ("M", [], q[-1], "evaluate"),
+                 "FD": ("FD", np.r_[q[-1], qd[-1]], x[-1], "evaluate"),
+                 "∇ID": ("∇ID", [], np.r_[q[-1], qd[-1], x[-1]], "jacobian"),
+                 "∇FD": ("∇FD", np.r_[q[-1], qd[-1]], x[-1], "jacobian")}
+        pargs = {"ID": (model, data, qp, vp, xp), "M": (model, data, qp), "FD": (model, data, qp, vp, xp),
+                 "∇ID": (model, data, qp, vp, xp), "∇FD": (model, data, qp, vp, xp)}
+        t = {a: ([], []) for a in calls}
+        for _ in range(repeat):
+            for a, (m, xs, us, which) in calls.items():
+                t[a][0].append(c_loop(compiled[m], [], xs, us, which, 20000 if which == "evaluate" else 5000))
+                t[a][1].append(pinocchio_time(getattr(pin, PINOCCHIO[a]), pargs[a], 5000))
+    finally:
+        for cm in compiled.values():
+            cm.close()
+    out = {"n": n, "derive": derive, "err": err, "fmugen": {}, "pinocchio": {}, "ratio": {}}
+    for a, (f, p) in t.items():
+        out["fmugen"][a], out["pinocchio"][a] = statistics.median(f), statistics.median(p)
+        out["ratio"][a] = statistics.median(np.array(f) / np.array(p))
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--grid", type=Path, help="folder with GRiDBenchmarks' iiwa.urdf, hyq.urdf, atlas.urdf "
@@ -220,6 +310,8 @@ def main(argv=None) -> int:
                     help="robots to run (default: all that are found)")
     ap.add_argument("--states", type=int, default=3, help="random states checked against Pinocchio")
     ap.add_argument("--repeat", type=int, default=5, help="timing rounds (medians)")
+    ap.add_argument("--no-straight", action="store_true",
+                    help="skip the straight-line code of the robots of 6 DoF and fewer")
     args = ap.parse_args(argv)
     try:
         import pinocchio as pin
@@ -263,6 +355,20 @@ def main(argv=None) -> int:
           "third blocks of the ID and FD Jacobians; Pinocchio: the call in parentheses, Python's call overhead "
           "subtracted; ratio: median of the per-round ratios fmugen / Pinocchio.  GRiD columns: published "
           "figures, another machine (i7-10700K 3.8 GHz with Pinocchio; RTX 3080 with GRiD), for context.")
+    small = [r for r in names if results[r]["n"] <= 6] if not args.no_straight else []
+    if small:
+        print("\n| Robot | DoF | Algorithm | straight-line µs | looped µs | Pinocchio µs | straight-line ratio | "
+              "max rel. error |")
+        print("|---|---:|---|---:|---:|---:|---:|---:|")
+        for name in small:
+            s = straight_line(name, paths[name], args.states, args.repeat)
+            ok = ok and all(e < 1e-9 for e in s["err"].values())
+            for a in ("ID", "M", "FD", "∇ID", "∇FD"):
+                print(f"| {name} | {s['n']} | {a} ({PINOCCHIO[a]}) | {s['fmugen'][a] * 1e6:.2f} | "
+                      f"{results[name]['fmugen'][a] * 1e6:.2f} | {s['pinocchio'][a] * 1e6:.2f} | {s['ratio'][a]:.2f} | "
+                      f"{s['err'][a]:.1e} |", flush=True)
+        print("\nstraight-line: the code generated for the FMU (parameters folded), in a C loop; looped: the "
+              "first table's figure; M: the lower triangle only.")
     print(f"check against Pinocchio (relative, 1e-9): {'ok' if ok else 'FAILED'}")
     return 0 if ok else 1
 
