@@ -392,3 +392,23 @@ def test_no_import_circle_between_cosim_commands_and_ssp_report():
     assert not reaches("fmugen.ssp.report", "fmugen.cosim.commands")
     for m in ("fmugen.ssp.report", "fmugen.cosim.commands"):  # each imports on its own in a fresh interpreter
         subprocess.run([sys.executable, "-c", f"import {m}"], check=True, cwd=ROOT, timeout=120)
+
+
+def test_the_report_and_export_apis_refuse_bad_arguments(fmus, tmp_path):
+    from fmugen.ssp import export_ssp
+    from fmugen.ssp.report import report_ssp
+
+    system = load_system(write_ssp(tmp_path / "two.ssp", fmus, stop=0.05))
+    for kwargs, why in ((dict(steps="0.01"), "steps must be a list"), (dict(steps=["x"]), "a step must be a finite"),
+                        (dict(steps=[float("nan")]), "finite number"), (dict(steps=[-1.0]), "steps must be positive"),
+                        (dict(schemes="newton"), r"\(scheme, extrapolation\) pairs"),
+                        (dict(schemes=[("warp", "hold")]), "unknown scheme 'warp'"),
+                        (dict(repeats=0), "repeats must be a whole number"),
+                        (dict(stop=float("inf")), "stop must be a finite number"),
+                        (dict(stop=-1.0), "must be after the system's start time")):
+        args = {"steps": [0.01], "schemes": [("newton", "linear")], **kwargs}
+        with pytest.raises(FmugenError, match=why):
+            report_ssp(system, **args)
+    for args, why in (((None, tmp_path / "x.ssp"), "scene must be a loaded scene"),):
+        with pytest.raises(FmugenError, match=why):
+            export_ssp(*args)

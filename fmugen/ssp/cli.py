@@ -66,6 +66,8 @@ def settable(system, name: str, where: str, error=None, hint: str = "") -> tuple
 
     error = error or InputFileError
     units = {u.name: u for u in system.units}
+    if not isinstance(name, str):
+        raise error(f"{where}: {name!r:.60}: name a component's variable, 'component.variable'{hint}")
     comp, _, var = name.partition(".")
     if comp not in units or not var:
         raise error(f"{where}: {name}: name a component's variable, 'component.variable' (components: "
@@ -84,6 +86,8 @@ def with_sets(system, sets: dict, where: str, error=None):
     from ..errors import InputFileError
 
     error = error or InputFileError
+    if not hasattr(sets, "items") or not all(isinstance(k, str) for k in sets):
+        raise error(f"{where}: --set: NAME=VALUE pairs (a mapping of names to values) are needed, got {sets!r:.60}")
     cosim = {k[len("cosim."):]: v for k, v in sets.items() if k.startswith("cosim.")}
     if cosim:
         from ..cosim.settings import check_table

@@ -210,9 +210,20 @@ def export_ssp(scene, output, fmus_dir=None, scheme: Optional[str] = None,
     """
     from ..cosim.master import check_choices
 
+    if not (hasattr(scene, "spec") and hasattr(scene, "build")):
+        raise FmugenError(f"export_ssp: scene must be a loaded scene (fmugen.load_scene), got "
+                          f"{type(scene).__name__}")
+    for arg, value in (("output", output), ("fmus_dir", fmus_dir)):
+        if (value is not None or arg == "output") and not isinstance(value, (str, os.PathLike)):
+            raise FmugenError(f"export_ssp: {arg} must be a file path, got {type(value).__name__} {value!r:.60}")
+    for arg, value in (("scheme", scheme), ("extrapolation", extrapolation)):
+        if value is not None and not isinstance(value, str):
+            raise FmugenError(f"export_ssp: {arg} must be a name, got {value!r:.60}")
     out = Path(output)
     if out.suffix.lower() != ".ssp":
         raise FmugenError(f"{out}: an SSP archive is named *.ssp")
+    if out.is_dir():
+        raise FmugenError(f"{out}: is a folder; the archive to write is a file")
     st = dict(scene.spec.cosim or {})
     scheme, extrapolation = check_choices(scheme or st.get("scheme", "gauss-seidel"),
                                           extrapolation or st.get("extrapolation", "linear"))
@@ -221,15 +232,17 @@ def export_ssp(scene, output, fmus_dir=None, scheme: Optional[str] = None,
         step = built.default_step or built.system.step
         ssd, ssvs = ssd_xml(built, {"scheme": scheme, "extrapolation": extrapolation}, step)
         stems = resource_stems([u.name for u in built.system.units])
-        out.parent.mkdir(parents=True, exist_ok=True)
         part = out.with_name(f".{out.name}.{os.getpid()}.part")
         try:
+            out.parent.mkdir(parents=True, exist_ok=True)
             with zipfile.ZipFile(part, "w", zipfile.ZIP_DEFLATED) as zf:
                 zf.writestr(_info(SSD_NAME), ssd)
                 for u in built.system.units:
                     zf.writestr(_info(f"resources/{stems[u.name]}.ssv"), ssvs[u.name])
                     zf.writestr(_info(f"resources/{stems[u.name]}.fmu"), Path(u.path).read_bytes())
             os.replace(part, out)
+        except OSError as exc:  # a read-only folder, a full disk: one line naming the archive
+            raise FmugenError(f"{out}: cannot write the archive: {exc.strerror or exc}") from None
         finally:
             if part.exists():
                 part.unlink()

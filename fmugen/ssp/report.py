@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import csv
 import math
+import numbers
 import statistics
 from pathlib import Path
 
@@ -63,11 +64,24 @@ def self_convergence_reference(system, h_ref: float, stop: float, workers: int =
 
 def report_ssp(system, steps, schemes, repeats: int = 1, stop=None, workers: int = 1, progress=None):
     """Rows (scheme, extrapolation, H, error or None, status, median wall s) and the reference's data."""
-    steps = sorted({float(h) for h in steps}, reverse=True)
+    def number(v, what):
+        if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v):
+            raise CosimError(f"report_ssp: {what} must be a finite number, got {v!r:.60}")
+        return float(v)
+
+    if isinstance(steps, (str, bytes)) or not hasattr(steps, "__iter__"):
+        raise CosimError(f"report_ssp: steps must be a list of macro steps [s], got {steps!r:.60}")
+    steps = sorted({number(h, "a step") for h in steps}, reverse=True)
     if not steps or min(steps) <= 0:
         raise CosimError("steps must be positive")
+    if isinstance(schemes, (str, bytes)) or not all(isinstance(p, (tuple, list)) and len(p) == 2 for p in schemes):
+        raise CosimError(f"report_ssp: schemes must be (scheme, extrapolation) pairs, got {schemes!r:.80}")
     schemes = [check_choices(s, e) for s, e in schemes]
-    stop = float(stop) if stop is not None else system.stop_time
+    if isinstance(repeats, bool) or not isinstance(repeats, numbers.Integral) or not 1 <= repeats <= 1000:
+        raise CosimError(f"report_ssp: repeats must be a whole number from 1 to 1000, got {repeats!r:.60}")
+    stop = number(stop, "stop") if stop is not None else system.stop_time
+    if not stop > system.start_time:
+        raise CosimError(f"report_ssp: stop {stop!r} must be after the system's start time {system.start_time!r}")
     h_ref = min(steps) / REFINE
     if progress:
         progress(f"reference: the master at {h_ref:g} s and {h_ref / 2:g} s")
