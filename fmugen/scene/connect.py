@@ -96,6 +96,11 @@ def expand_connect(scene, pairs) -> tuple:
 
     for k, pair in enumerate(pairs):
         a, b = pair
+        for end in (a, b):  # names only: printable ASCII, so that every message naming it stays one line
+            if not (isinstance(end, str) and end.isascii() and end.isprintable() and 0 < len(end) <= 200):
+                shown = repr(end) if len(repr(end)) <= 60 else repr(end)[:40] + "..."
+                raise SceneError(f"{src}: [scene] connect[{k}]: {shown} is not a name 'instance.connector' or "
+                                 f"'instance.variable' (printable ASCII, at most 200 characters)")
         where = f"{src}: [scene] connect[{k}] ({a} <-> {b})"
         (ia, na), (ib, nb) = split(a, where), split(b, where)
         pa, pb = ports(scene, ia).get(na), ports(scene, ib).get(nb)

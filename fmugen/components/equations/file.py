@@ -284,6 +284,9 @@ def _equations(raw, declared, src) -> dict:
     out = {}
     for k, text in enumerate(raw):
         where = f"equation {k + 1} {language._short(text)}"
+        if not text.isascii():  # the left side too: str.strip() would drop a no-break space around der(x)
+            bad = next(c for c in text if not c.isascii())
+            raise _err(src, f"{where}: non-ASCII character {bad!r} (U+{ord(bad):04X}); equations are ASCII")
         try:
             lhs, rhs = split_equation(text)
         except ValueError as exc:
