@@ -81,6 +81,37 @@ static void mv6(const double *A, const double *x, double *o)
 
 static const double ZERO6[6] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
 
+/* A rigid body's spatial inertia at the base origin in its ten numbers (sums of them -- the
+ * composite inertias -- stay of that form): m, h = m c (3), J = I_c + m (c.c 1 - c c^T) about
+ * the origin (xx yy zz xy xz yz).  Applied as [J w + h x v_O ; m v_O - h x w]: 24 products
+ * where the 6x6 matrix takes 36, and a sum takes 10 additions, not 36. */
+#define SI_N 10
+static void si_apply(const double *I, const double *x, double *o)
+{
+    const double m = I[0], *h = I + 1, *J = I + 4, *w = x, *vo = x + 3;
+    o[0] = J[0] * w[0] + J[3] * w[1] + J[4] * w[2] + (h[1] * vo[2] - h[2] * vo[1]);
+    o[1] = J[3] * w[0] + J[1] * w[1] + J[5] * w[2] + (h[2] * vo[0] - h[0] * vo[2]);
+    o[2] = J[4] * w[0] + J[5] * w[1] + J[2] * w[2] + (h[0] * vo[1] - h[1] * vo[0]);
+    o[3] = m * vo[0] - (h[1] * w[2] - h[2] * w[1]);
+    o[4] = m * vo[1] - (h[2] * w[0] - h[0] * w[2]);
+    o[5] = m * vo[2] - (h[0] * w[1] - h[1] * w[0]);
+}
+
+/* the 6x6 matrix (row-major) of a ten-number spatial inertia: [[J, [h]x], [[h]x^T, m 1]] */
+static void si_expand(const double *I, double *A)
+{
+    const double m = I[0], *h = I + 1, *J = I + 4;
+    const double Jm[9] = {J[0], J[3], J[4], J[3], J[1], J[5], J[4], J[5], J[2]};
+    const double hx[9] = {0.0, -h[2], h[1], h[2], 0.0, -h[0], -h[1], h[0], 0.0};
+    for (int r = 0; r < 3; r++)
+        for (int k = 0; k < 3; k++) {
+            A[6 * r + k] = Jm[3 * r + k];
+            A[6 * r + k + 3] = hx[3 * r + k];
+            A[6 * (k + 3) + r] = hx[3 * r + k];
+            A[6 * (r + 3) + k + 3] = r == k ? m : 0.0;
+        }
+}
+
 /* the joint's passive force b qd + F_c tanh(qd / v_c) (damping, smooth Coulomb friction); *slope
  * receives its derivative by qd */
 static double joint_friction(const double *L, double qd, double *slope)
@@ -105,7 +136,7 @@ static void mul33(const double *A, const double *B, double *o)
 }
 
 /* World pose of every body frame, motion subspaces S_i, body inertias at the
- * base origin (6x6, row-major; when I is not NULL) and the end-effector position. */
+ * base origin (SI_N numbers each, see si_apply; when I is not NULL) and the end-effector position. */
 static void kinematics(int n, const int *jt, const double *lc, const double *g, const double *q,
                        double *R, double *p, double *S, double *I, double *p_ee)
 {
@@ -162,20 +193,15 @@ static void kinematics(int n, const int *jt, const double *lc, const double *g, 
                     Jw[3 * r + kk] = Jw[3 * kk + r] =
                         RJ[3 * r] * Ri[3 * kk] + RJ[3 * r + 1] * Ri[3 * kk + 1] + RJ[3 * r + 2] * Ri[3 * kk + 2];
             double cc = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
-            double h[3] = {m * c[0], m * c[1], m * c[2]};
-            double *Ii = I + 36 * i;
-            for (int r = 0; r < 3; r++)
-                for (int kk = 0; kk < 3; kk++) {
-                    Ii[6 * r + kk] = Jw[3 * r + kk] + m * ((r == kk ? cc : 0.0) - c[r] * c[kk]);
-                    Ii[6 * (r + 3) + kk + 3] = r == kk ? m : 0.0;
-                }
-            /* [h]x top right, its transpose bottom left */
-            double hx[9] = {0.0, -h[2], h[1], h[2], 0.0, -h[0], -h[1], h[0], 0.0};
-            for (int r = 0; r < 3; r++)
-                for (int kk = 0; kk < 3; kk++) {
-                    Ii[6 * r + kk + 3] = hx[3 * r + kk];
-                    Ii[6 * (kk + 3) + r] = hx[3 * r + kk];
-                }
+            double *Ii = I + SI_N * i;
+            Ii[0] = m;
+            Ii[1] = m * c[0]; Ii[2] = m * c[1]; Ii[3] = m * c[2];
+            Ii[4] = Jw[0] + m * (cc - c[0] * c[0]);
+            Ii[5] = Jw[4] + m * (cc - c[1] * c[1]);
+            Ii[6] = Jw[8] + m * (cc - c[2] * c[2]);
+            Ii[7] = Jw[1] - m * c[0] * c[1];
+            Ii[8] = Jw[2] - m * c[0] * c[2];
+            Ii[9] = Jw[5] - m * c[1] * c[2];
         }
     }
     if (p_ee) {
@@ -188,12 +214,12 @@ static void kinematics(int n, const int *jt, const double *lc, const double *g, 
 }
 
 /* The articulated-body algorithm on world quantities already computed:
- * S (6n), IA (36n: the body inertias on entry, articulated inertias on
- * exit); scratch v, c, pA, U, acc (6n each), D, u (n each).  Bodies are
- * numbered parents first, so one sweep up and one down visit a tree. */
+ * S (6n), I (SI_N n: the body inertias); IA (36n) receives the articulated
+ * inertias (6x6); scratch v, c, pA, U, acc (6n each), D, u (n each).  Bodies
+ * are numbered parents first, so one sweep up and one down visit a tree. */
 static int aba(int n, const int *jt, const double *lc, const double *g, const double *qd, const double *tau,
-               const double *fx, const double *S, double *IA, double *v, double *c, double *pA, double *U,
-               double *D, double *u, double *acc, double *qdd)
+               const double *fx, const double *S, const double *I, double *IA, double *v, double *c, double *pA,
+               double *U, double *D, double *u, double *acc, double *qdd)
 {
     /* pass 1: velocities, velocity-product accelerations c_i = v_i x S_i qd_i, bias forces */
     for (int i = 0; i < n; i++) {
@@ -203,7 +229,8 @@ static int aba(int n, const int *jt, const double *lc, const double *g, const do
         for (int k = 0; k < 6; k++) vi[k] = vp[k] + Si[k] * qd[i];
         crm(vi, Si, c + 6 * i);
         for (int k = 0; k < 6; k++) c[6 * i + k] *= qd[i];
-        mv6(IA + 36 * i, vi, h);
+        si_apply(I + SI_N * i, vi, h);
+        si_expand(I + SI_N * i, IA + 36 * i);
         crf(vi, h, pA + 6 * i);
         if (fx)
             for (int k = 0; k < 6; k++) pA[6 * i + k] -= fx[6 * i + k];
@@ -278,10 +305,10 @@ int fmugen_chain_fd(int n, const int *jt, const double *lc, const double *g, con
 {
     double *R = work, *p = R + 9 * n, *S = p + 3 * n, *IA = S + 6 * n, *v = IA + 36 * n;
     double *c = v + 6 * n, *pA = c + 6 * n, *U = pA + 6 * n, *D = U + 6 * n, *u = D + n;
-    double *fx = u + n, *cft = fx + 6 * n, *acc = cft + 9 * n;
-    kinematics(n, jt, lc, g, q, R, p, S, IA, p_ee);
+    double *fx = u + n, *cft = fx + 6 * n, *acc = cft + 9 * n, *I = acc + 6 * n;
+    kinematics(n, jt, lc, g, q, R, p, S, I, p_ee);
     const double *f = external_forces(n, ne, ext_link, ext, lc, R, p, fx, cft);
-    return aba(n, jt, lc, g, qd, tau, f, S, IA, v, c, pA, U, D, u, acc, qdd);
+    return aba(n, jt, lc, g, qd, tau, f, S, I, IA, v, c, pA, U, D, u, acc, qdd);
 }
 
 /* K -= A + A^T with A = I crm(v): the velocity term of d(I a + v x* I v),
@@ -291,12 +318,13 @@ int fmugen_chain_fd(int n, const int *jt, const double *lc, const double *g, con
  * and each product X W (X 3x3) is one cross product per row: row_r(X W) = x_r x w. */
 static void add_K(double *K, const double *I, const double *vel)
 {
-    const double *w = vel, *vo = vel + 3;
+    const double *w = vel, *vo = vel + 3, *hv = I + 1, *Jv = I + 4;
+    const double Jm[9] = {Jv[0], Jv[3], Jv[4], Jv[3], Jv[1], Jv[5], Jv[4], Jv[5], Jv[2]};
+    const double Hm[9] = {0.0, -hv[2], hv[1], hv[2], 0.0, -hv[0], -hv[1], hv[0], 0.0};
     double A[36];
     for (int r = 0; r < 3; r++) {
-        double J[3] = {I[6 * r], I[6 * r + 1], I[6 * r + 2]};
-        double H[3] = {I[6 * r + 3], I[6 * r + 4], I[6 * r + 5]};
-        double Ht[3] = {I[6 * (r + 3)], I[6 * (r + 3) + 1], I[6 * (r + 3) + 2]};
+        const double *J = Jm + 3 * r, *H = Hm + 3 * r;
+        double Ht[3] = {-H[0], -H[1], -H[2]}; /* rows of [h]x^T = -[h]x */
         double a[3], b[3];
         cross3(J, w, a);
         cross3(H, vo, b);
@@ -306,7 +334,7 @@ static void add_K(double *K, const double *I, const double *vel)
         cross3(Ht, w, a);
         A[6 * (r + 3)] = a[0]; A[6 * (r + 3) + 1] = a[1]; A[6 * (r + 3) + 2] = a[2];
     }
-    double m = I[21];
+    double m = I[0];
     /* m V and m W: rows of m [x]x */
     double mV[9] = {0.0, -vo[2], vo[1], vo[2], 0.0, -vo[0], -vo[1], vo[0], 0.0};
     double mW[9] = {0.0, -w[2], w[1], w[2], 0.0, -w[0], -w[1], w[0], 0.0};
@@ -386,8 +414,8 @@ static void rnea_passes(int n, const int *jt, const double *lc, const double *g,
         for (int k = 0; k < 6; k++) vi[k] = vp[k] + Si[k] * qd[i];
         crm(vi, Si, t);
         for (int k = 0; k < 6; k++) ai[k] = ap[k] + Si[k] * qdd[i] + t[k] * qd[i];
-        mv6(I + 36 * i, vi, h + 6 * i);
-        mv6(I + 36 * i, ai, t);
+        si_apply(I + SI_N * i, vi, h + 6 * i);
+        si_apply(I + SI_N * i, ai, t);
         crf(vi, h + 6 * i, f + 6 * i);
         for (int k = 0; k < 6; k++) f[6 * i + k] += t[k] - (fxp ? fxp[6 * i + k] : 0.0);
     }
@@ -396,15 +424,16 @@ static void rnea_passes(int n, const int *jt, const double *lc, const double *g,
      * gamma_i] (S_i . (x x* HC_i) = gamma_i . x) gives the entries of row i of dID
      * for the joints j on the path from i to the base, the vectors P_i, Q_i those
      * of column i for the joints before i; and M (lower) */
-    memset(ICn, 0, (size_t)100 * n * sizeof(double)); /* ICn, Kn, HCn, Fn, XS */
+    memset(ICn, 0, (size_t)(SI_N + 48) * n * sizeof(double)); /* ICn, Kn, HCn, Fn */
+    if (fxp) memset(XS, 0, (size_t)16 * n * sizeof(double));
     memset(M, 0, (size_t)n * n * sizeof(double));
     for (int i = n - 1; i >= 0; i--) {
         const double *L = lc + FMUGEN_CHAIN_NC * i;
         double *Si = S + 6 * i, t[6], t2[6], t3[6];
-        const double *Ii = I + 36 * i;
-        double *IC = ICn + 36 * i, *K = Kn + 36 * i, *HC = HCn + 6 * i, *F = Fn + 6 * i;
+        const double *Ii = I + SI_N * i;
+        double *IC = ICn + SI_N * i, *K = Kn + 36 * i, *HC = HCn + 6 * i, *F = Fn + 6 * i;
         int par = jt[n + i];
-        for (int k = 0; k < 36; k++) IC[k] += Ii[k];
+        for (int k = 0; k < SI_N; k++) IC[k] += Ii[k];
         add_K(K, Ii, v + 6 * i);
         for (int k = 0; k < 6; k++) {
             HC[k] += h[6 * i + k];
@@ -412,7 +441,7 @@ static void rnea_passes(int n, const int *jt, const double *lc, const double *g,
         }
         if (tauF) tauF[i] = dot6(Si, F); /* tau_i of recursive Newton-Euler, but rotor and friction */
         double *ali = al + 12 * i, *bgi = ali + 6, KS[6];
-        mv6(IC, Si, ali);
+        si_apply(IC, Si, ali);
         mv6(K, Si, KS);
         /* gamma = [hn x s_w + hf x s_v ; hf x s_w] */
         cross3(HC, Si, t);
@@ -424,11 +453,11 @@ static void rnea_passes(int n, const int *jt, const double *lc, const double *g,
         }
         /* P_i = IC u_i + K S_i + S_i x* HC ; Q_i = S_i x* F - (IC w_i + K dv_i + dv_i x* HC) */
         double *Pi = P + 6 * i, *Qi = Q + 6 * i;
-        mv6(IC, uu + 6 * i, Pi);
+        si_apply(IC, uu + 6 * i, Pi);
         crf(Si, HC, t2);
         for (int k = 0; k < 6; k++) Pi[k] += KS[k] + t2[k];
         crf(Si, F, Qi);
-        mv6(IC, w + 6 * i, t);
+        si_apply(IC, w + 6 * i, t);
         mv6(K, dv + 6 * i, t2);
         crf(dv + 6 * i, HC, t3);
         for (int k = 0; k < 6; k++) Qi[k] -= t[k] + t2[k] + t3[k];
@@ -462,17 +491,39 @@ static void rnea_passes(int n, const int *jt, const double *lc, const double *g,
         for (int j = i; j >= 0; j = jt[n + j]) M[(size_t)i * n + j] = dot6(ali, S + 6 * j);
         M[(size_t)i * n + i] += L[FMUGEN_CHAIN_ROTOR];
         if (par >= 0) {
-            double *ICp = ICn + 36 * par, *Kp = Kn + 36 * par, *xp = XS + 16 * par;
-            for (int k = 0; k < 36; k++) {
-                ICp[k] += IC[k];
-                Kp[k] += K[k];
-            }
+            double *ICp = ICn + SI_N * par, *Kp = Kn + 36 * par, *xp = XS + 16 * par;
+            for (int k = 0; k < SI_N; k++) ICp[k] += IC[k];
+            for (int k = 0; k < 36; k++) Kp[k] += K[k];
             for (int k = 0; k < 6; k++) {
                 HCn[6 * par + k] += HC[k];
                 Fn[6 * par + k] += F[k];
             }
             if (fxp)
                 for (int k = 0; k < 16; k++) xp[k] += xs[k];
+        }
+    }
+}
+
+/* The root branches: the subtree of each body whose parent is the base.  Joints on two of them
+ * share no path, so M, M^-1 and the columns of M^-1 dID are block diagonal over them (Atlas:
+ * 18 + 6 + 6 of 30 joints, Talos full 32 + 6 + 6 of 44): the dense work is done per block,
+ * on the rows [lo_i, hi_i) of i's branch.  Bodies are numbered parents first, which need not
+ * keep a branch contiguous: then one block of all n rows (the zeros are computed). */
+static void root_blocks(int n, const int *jt, int *lo, int *hi)
+{
+    int contiguous = 1;
+    for (int i = 0; i < n; i++) { /* lo: the root of i's branch; a branch broken by another is not contiguous */
+        int par = jt[n + i];
+        lo[i] = par >= 0 ? lo[par] : i;
+        if (i > 0 && lo[i] != i && lo[i] != lo[i - 1]) contiguous = 0;
+    }
+    for (int i = 0; i < n; i++) hi[lo[i]] = i + 1; /* at the root: one past the branch's last body */
+    for (int i = 0; i < n; i++) {
+        if (contiguous) {
+            hi[i] = hi[lo[i]];
+        } else {
+            lo[i] = 0;
+            hi[i] = n;
         }
     }
 }
@@ -487,59 +538,138 @@ int fmugen_chain_fd_jacobian(int n, const int *jt, const double *lc, const doubl
     double *uu = w + 6 * n, *al = uu + 6 * n, *P = al + 12 * n, *Q = P + 6 * n;
     double *c = Q + 6 * n, *pA = c + 6 * n, *U = pA + 6 * n, *D = U + 6 * n, *u = D + n, *acc = u + n;
     double *fx = acc + 6 * n, *cft = fx + 6 * n, *ev = cft + 9 * n, *d = ev + 3 * n;
-    double *ICn = d + n, *Kn = ICn + 36 * n, *HCn = Kn + 36 * n, *Fn = HCn + 6 * n, *XS = Fn + 6 * n;
-    double *M = XS + 16 * n, *T = M + nn, *Mi = T + nn, *Hn = Mi + nn, *Gb = Hn + 6 * nn;
-    int *gb = (int *)(Gb + 15 * nn), *freeb = gb + n, *path = freeb + n;
+    double *ICn = d + n, *Kn = ICn + SI_N * n, *HCn = Kn + 36 * n, *Fn = HCn + 6 * n, *XS = Fn + 6 * n;
+    double *M = XS + 16 * n, *A = M + nn, *T = A + nn, *Mb = T + nn, *Xq = Mb + nn, *Xd = Xq + nn;
+    double *Hn = Xd + nn, *Gb = Hn + 6 * nn;
+    int *gb = (int *)(Gb + 15 * nn), *freeb = gb + n, *path = freeb + n, *lo = path + n, *hi = lo + n;
+    int *off = hi + n;
     double p_ee[3];
     kinematics(n, jt, lc, g, q, R, p, S, I, p_ee);
     const double *fxp = external_forces(n, ne, ext_link, ext, lc, R, p, fx, cft);
     /* forward dynamics first: the derivatives are those of ID at qdd = FD */
-    memcpy(IA, I, (size_t)36 * n * sizeof(double));
-    int st = aba(n, jt, lc, g, qd, tau, fxp, S, IA, v, c, pA, U, D, u, acc, qdd);
+    int st = aba(n, jt, lc, g, qd, tau, fxp, S, I, IA, v, c, pA, U, D, u, acc, qdd);
     if (st != FMUGEN_OK) return st;
     rnea_passes(n, jt, lc, g, qd, qdd, fxp, cft, S, I, v, a, h, f, dv, w, uu, al, P, Q, ev, ICn, Kn, HCn, Fn, XS,
                 M, NULL);
-    st = spd_inverse(n, M, T, Mi);
-    if (st != FMUGEN_OK) return st;
+    /* M^-1 block by block: row j of block [lo, hi) at Mb + off[j], its nb entries contiguous */
+    root_blocks(n, jt, lo, hi);
+    for (int i = 0, o = 0; i < n; i++) {
+        int l = lo[i], nb = hi[i] - l;
+        if (i != l) {
+            off[i] = off[l] + (i - l) * nb;
+            continue;
+        }
+        for (int r = 0; r < nb; r++)
+            for (int k = 0; k <= r; k++) A[(size_t)r * nb + k] = M[(size_t)(l + r) * n + l + k];
+        st = spd_inverse(nb, A, T, Mb + o);
+        if (st != FMUGEN_OK) return st;
+        off[i] = o;
+        o += nb * nb;
+    }
     /* dqdd/dq = -Minv dID/dq, dqdd/dqd = -Minv dID/dqd, column by column, without forming dID:
      *   dID[i][j] (j on the path from i to the base) = -al_i . [w_j; dv_j]  (q),
      *                                                  al_i . [u_j; S_j] + b_j delta_ij  (qd)
      *   dID[i][j] (i before j, on its path)           =  S_i . Q_j  (q),   S_i . P_j  (qd)
      *   dID[i][j] = 0 for joints on different branches,
      * so column j of Minv dID is G_j W_j + H_pj Q_j with the sums over the subtree of j
-     * G_j = sum_i Minv[:, i] al_i^T (n x 12) and over the path from j to the base
-     * H_j = sum_i Minv[:, i] S_i^T (n x 6). */
-    size_t k3 = 3 * (size_t)n + 6 * (size_t)(ne > 0 ? ne : 0);
-    for (int j = 0; j < n; j++) { /* upper parts, j ascending (parents first) */
-        const double *Qj = Q + 6 * j, *Pj = P + 6 * j, *Mj = Mi + (size_t)j * n, *Sj = S + 6 * j;
-        int par = jt[n + j];
-        const double *Hp = par >= 0 ? Hn + 6 * (size_t)n * par : NULL;
-        double *Hj = Hn + 6 * (size_t)n * j;
-        for (int r = 0; r < n; r++) {
-            double m = Mj[r], sq = 0.0, sd = 0.0;
-            for (int k = 0; k < 6; k++) {
-                double hk = Hp ? Hp[(size_t)k * n + r] : 0.0;
-                sq -= Qj[k] * hk;
-                sd -= Pj[k] * hk;
-                Hj[(size_t)k * n + r] = hk + Sj[k] * m;
+     * G_j = sum_i Minv[:, i] al_i^T (nb x 12) and over the path from j to the base
+     * H_j = sum_i Minv[:, i] S_i^T (nb x 6).  G and H are stored component-major (12 or 6 rows
+     * of nb), so every update is an axpy over contiguous rows: the loops vectorise.  Column j
+     * of the q and qd parts collects in Xq, Xd (nb entries each, stride n). */
+    /* Two ways to the same columns, chosen per block by their cost in multiply-adds: the subtree
+     * sums G, H above (54 per pair of rows of a block: long chains) or dID itself, whose entries
+     * are nonzero only for a joint and the joints on its path to the base (d_i of them, d_i the
+     * depth of i), each scattered as an axpy of a row of M^-1 (36 + 4 nb per pair on a path: the
+     * branched trees and short chains).  usesG[j] marks the bodies of blocks taking the first. */
+    int *usesG = off + n;
+    for (int i = 0; i < n; i++) usesG[i] = -1;
+    for (int i = 0; i < n; i++) {
+        int l = lo[i];
+        if (usesG[l] < 0) {
+            long nb = hi[i] - l, pairs = 0;
+            for (int k = l; k < hi[i]; k++)
+                for (int j = k; j >= 0; j = jt[n + j]) pairs++;
+            usesG[l] = pairs * (36 + 4 * nb) > 54 * nb * nb;
+        }
+        usesG[i] = usesG[l];
+    }
+    for (int j = 0; j < n; j++) {
+        if (usesG[j]) continue;
+        int nb = hi[j] - lo[j];
+        double *xq = Xq + (size_t)n * j, *xd = Xd + (size_t)n * j;
+        for (int r = 0; r < nb; r++) xq[r] = xd[r] = 0.0;
+    }
+    for (int i = 0; i < n; i++) {
+        if (usesG[i]) continue;
+        int nb = hi[i] - lo[i];
+        const double *restrict Mi = Mb + off[i], *ali = al + 12 * i;
+        double *restrict xqi = Xq + (size_t)n * i, *restrict xdi = Xd + (size_t)n * i;
+        for (int j = i; j >= 0; j = jt[n + j]) {
+            const double *Sj = S + 6 * j;
+            double *restrict xqj = Xq + (size_t)n * j, *restrict xdj = Xd + (size_t)n * j;
+            /* i in the subtree of j: -dID[i][j] = al_i . [w_j; dv_j] (- e_i . s_w,j), and for qd
+             * -(al_i . [u_j; S_j] + b_j delta_ij) */
+            double cq = dot6(ali, w + 6 * j) + dot6(ali + 6, dv + 6 * j);
+            double cd = -dot6(ali, uu + 6 * j) - dot6(ali + 6, Sj);
+            if (fxp) cq -= ev[3 * i] * Sj[0] + ev[3 * i + 1] * Sj[1] + ev[3 * i + 2] * Sj[2];
+            if (j == i) {
+                double b;
+                joint_friction(lc + FMUGEN_CHAIN_NC * i, qd[i], &b);
+                cd -= b;
             }
-            double *row = dqdd + r * k3;
-            row[j] = sq;
-            row[n + j] = sd;
-            row[2 * n + j] = m;
+            for (int r = 0; r < nb; r++) {
+                xqj[r] += cq * Mi[r];
+                xdj[r] += cd * Mi[r];
+            }
+            if (j != i) { /* j before i on its path: dID[j][i] = S_j . Q_i (q), S_j . P_i (qd) */
+                const double *restrict Mj = Mb + off[j];
+                double sq = -dot6(Sj, Q + 6 * i), sd = -dot6(Sj, P + 6 * i);
+                for (int r = 0; r < nb; r++) {
+                    xqi[r] += sq * Mj[r];
+                    xdi[r] += sd * Mj[r];
+                }
+            }
         }
     }
-    /* lower parts, j descending (children first): the subtree sum G of j lives in a
-     * buffer that j's first finished child hands over (a chain: one buffer throughout) */
-    int nfree = 0, nnew = 0;
+    for (int j = 0; j < n; j++) { /* upper parts, j ascending (parents first) */
+        if (!usesG[j]) continue;
+        int par = jt[n + j], nb = hi[j] - lo[j];
+        const double *Qj = Q + 6 * j, *Pj = P + 6 * j, *Sj = S + 6 * j;
+        const double *restrict Mj = Mb + off[j];
+        double *restrict Hj = Hn + 6 * (size_t)n * j, *restrict xq = Xq + (size_t)n * j;
+        double *restrict xd = Xd + (size_t)n * j;
+        if (par < 0) {
+            for (int k = 0; k < 6; k++)
+                for (int r = 0; r < nb; r++) Hj[k * nb + r] = Sj[k] * Mj[r];
+            for (int r = 0; r < nb; r++) xq[r] = xd[r] = 0.0;
+            continue;
+        }
+        const double *restrict Hp = Hn + 6 * (size_t)n * par;
+        for (int r = 0; r < nb; r++) xq[r] = xd[r] = 0.0;
+        for (int k = 0; k < 6; k++) {
+            const double *restrict hp = Hp + k * nb;
+            double *restrict hj = Hj + k * nb;
+            double qk = -Qj[k], pk = -Pj[k], sk = Sj[k];
+            for (int r = 0; r < nb; r++) {
+                double t = hp[r];
+                xq[r] += qk * t;
+                xd[r] += pk * t;
+                hj[r] = t + sk * Mj[r];
+            }
+        }
+    }
+    /* lower parts, j descending (children first): the subtree sum G of j lives in a buffer that
+     * j's first finished child hands over (a chain: one buffer throughout); a leaf starts its own */
+    int nfree = 0, nnew = 0, ng = fxp ? 15 : 12;
     for (int j = 0; j < n; j++) gb[j] = -1;
     for (int j = n - 1; j >= 0; j--) {
-        if (gb[j] < 0) {
-            gb[j] = nfree ? freeb[--nfree] : nnew++;
-            memset(Gb + n15 * gb[j], 0, n15 * sizeof(double));
-        }
-        double *G = Gb + n15 * gb[j], *Ge = G + 12 * (size_t)n;
-        const double *Mj = Mi + (size_t)j * n, *alj = al + 12 * j;
+        if (!usesG[j]) continue;
+        int nb = hi[j] - lo[j], fresh = gb[j] < 0;
+        if (fresh) gb[j] = nfree ? freeb[--nfree] : nnew++;
+        double *restrict G = Gb + n15 * gb[j];
+        const double *restrict Mj = Mb + off[j];
+        const double *alj = al + 12 * j;
+        double *restrict xq = Xq + (size_t)n * j, *restrict xd = Xd + (size_t)n * j;
         double Wq[12], Wd[12], b;
         joint_friction(lc + FMUGEN_CHAIN_NC * j, qd[j], &b);
         b = -b; /* d(passive force)/dqd_j enters dID_j/dqd_j */
@@ -549,28 +679,36 @@ int fmugen_chain_fd_jacobian(int n, const int *jt, const double *lc, const doubl
             Wd[k] = -uu[6 * j + k];
             Wd[6 + k] = -S[6 * j + k];
         }
-        for (int r = 0; r < n; r++) {
-            double m = Mj[r], sq = 0.0, sd = b * m;
-            for (int k = 0; k < 12; k++) {
-                double gk = G[(size_t)k * n + r] + alj[k] * m;
-                G[(size_t)k * n + r] = gk;
-                sq += Wq[k] * gk;
-                sd += Wd[k] * gk;
+        for (int r = 0; r < nb; r++) xd[r] += b * Mj[r];
+        for (int k = 0; k < 12; k++) {
+            double *restrict gk = G + k * nb;
+            double ak = alj[k], wq = Wq[k], wd = Wd[k];
+            if (fresh) {
+                for (int r = 0; r < nb; r++) {
+                    double t = ak * Mj[r];
+                    gk[r] = t;
+                    xq[r] += wq * t;
+                    xd[r] += wd * t;
+                }
+            } else {
+                for (int r = 0; r < nb; r++) {
+                    double t = gk[r] + ak * Mj[r];
+                    gk[r] = t;
+                    xq[r] += wq * t;
+                    xd[r] += wd * t;
+                }
             }
-            double *row = dqdd + r * k3;
-            row[j] += sq;
-            row[n + j] += sd;
         }
         if (fxp) { /* dID[i][j] += e_i . w_j (i in the subtree of j): -M^-1 of it, by the sum Ge */
             const double *ej = ev + 3 * j, *wj = S + 6 * j;
-            for (int r = 0; r < n; r++) {
-                double m = Mj[r], s = 0.0;
-                for (int k = 0; k < 3; k++) {
-                    double gk = Ge[(size_t)k * n + r] + ej[k] * m;
-                    Ge[(size_t)k * n + r] = gk;
-                    s += wj[k] * gk;
+            for (int k = 0; k < 3; k++) {
+                double *restrict gk = G + (12 + k) * nb;
+                double ek = ej[k], wk = wj[k];
+                for (int r = 0; r < nb; r++) {
+                    double t = (fresh ? 0.0 : gk[r]) + ek * Mj[r];
+                    gk[r] = t;
+                    xq[r] -= wk * t;
                 }
-                dqdd[r * k3 + j] -= s;
             }
         }
         int par = jt[n + j];
@@ -578,17 +716,32 @@ int fmugen_chain_fd_jacobian(int n, const int *jt, const double *lc, const doubl
             if (gb[par] < 0) {
                 gb[par] = gb[j];
             } else {
-                double *Gp = Gb + n15 * gb[par];
-                size_t len = (fxp ? 15 : 12) * (size_t)n;
+                double *restrict Gp = Gb + n15 * gb[par];
+                size_t len = (size_t)ng * nb;
                 for (size_t k = 0; k < len; k++) Gp[k] += G[k];
                 freeb[nfree++] = gb[j];
             }
+        } else {
+            freeb[nfree++] = gb[j];
+        }
+    }
+    /* the columns into the rows of dqdd; rows of other branches stay zero */
+    size_t k3 = 3 * (size_t)n + 6 * (size_t)(ne > 0 ? ne : 0);
+    memset(dqdd, 0, (size_t)n * k3 * sizeof(double));
+    for (int j = 0; j < n; j++) {
+        int l = lo[j], nb = hi[j] - l;
+        const double *Mj = Mb + off[j], *xq = Xq + (size_t)n * j, *xd = Xd + (size_t)n * j;
+        for (int r = 0; r < nb; r++) {
+            double *row = dqdd + (size_t)(l + r) * k3;
+            row[j] = xq[r];
+            row[n + j] = xd[r];
+            row[2 * n + j] = Mj[r];
         }
     }
     /* dqdd/dext = -M^-1 dID/dext: tau_i = ... - S_i . [t + c x f; f] for the joints i on the path
      * from body k to the base, so dID_i/df = -(s_w x c + s_v), dID_i/dt = -s_w */
     for (int e = 0; e < ne; e++) {
-        int k = ext_link[e], np = 0;
+        int k = ext_link[e], np = 0, l = lo[k], nb = hi[k] - l;
         const double *ck = cft + 9 * k;
         for (int i = k; i >= 0; i = jt[n + i]) path[np++] = i;
         for (int comp = 0; comp < 6; comp++) {
@@ -604,11 +757,10 @@ int fmugen_chain_fd_jacobian(int n, const int *jt, const double *lc, const doubl
                 }
             }
             size_t col = 3 * (size_t)n + 6 * (size_t)e + comp;
-            for (int r = 0; r < n; r++) {
-                const double *Mr = Mi + (size_t)r * n;
+            for (int r = 0; r < nb; r++) { /* Minv[l + r][i] = row i of its block, entry r */
                 double s = 0.0;
-                for (int t = 0; t < np; t++) s += Mr[path[t]] * d[t];
-                dqdd[r * k3 + col] = s;
+                for (int t = 0; t < np; t++) s += Mb[off[path[t]] + r] * d[t];
+                dqdd[(size_t)(l + r) * k3 + col] = s;
             }
         }
     }
@@ -639,9 +791,9 @@ int fmugen_chain_id(int n, const int *jt, const double *lc, const double *g, con
         for (int k = 0; k < 6; k++) vi[k] = vp[k] + Si[k] * qd[i];
         crm(vi, Si, t);
         for (int k = 0; k < 6; k++) ai[k] = ap[k] + Si[k] * qdd[i] + t[k] * qd[i];
-        mv6(I + 36 * i, vi, hh);
+        si_apply(I + SI_N * i, vi, hh);
         crf(vi, hh, f + 6 * i);
-        mv6(I + 36 * i, ai, t);
+        si_apply(I + SI_N * i, ai, t);
         for (int k = 0; k < 6; k++) f[6 * i + k] += t[k] - (fxp ? fxp[6 * i + k] : 0.0);
     }
     for (int i = n - 1; i >= 0; i--) { /* leaves to base: tau_i = S_i . (subtree force) + Ia qdd + friction */
@@ -664,7 +816,7 @@ int fmugen_chain_id_jacobian(int n, const int *jt, const double *lc, const doubl
     double *a = v + 6 * n, *h = a + 6 * n, *f = h + 6 * n, *dv = f + 6 * n, *w = dv + 6 * n;
     double *uu = w + 6 * n, *al = uu + 6 * n, *P = al + 12 * n, *Q = P + 6 * n;
     double *fx = Q + 6 * n, *cft = fx + 6 * n, *ev = cft + 9 * n;
-    double *ICn = ev + 3 * n, *Kn = ICn + 36 * n, *HCn = Kn + 36 * n, *Fn = HCn + 6 * n, *XS = Fn + 6 * n;
+    double *ICn = ev + 3 * n, *Kn = ICn + SI_N * n, *HCn = Kn + 36 * n, *Fn = HCn + 6 * n, *XS = Fn + 6 * n;
     double *M = XS + 16 * n;
     kinematics(n, jt, lc, g, q, R, p, S, I, NULL);
     const double *fxp = external_forces(n, ne, ext_link, ext, lc, R, p, fx, cft);

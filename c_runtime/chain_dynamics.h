@@ -49,8 +49,8 @@
 #define FMUGEN_CHAIN_NG 6
 
 /* doubles of work space for n bodies: forward dynamics, and its Jacobian */
-#define FMUGEN_CHAIN_FD_WORK(n) (104 * (n) + 16)
-#define FMUGEN_CHAIN_WORK(n) ((n) * (312 + 24 * (n)) + 64)
+#define FMUGEN_CHAIN_FD_WORK(n) (114 * (n) + 16)
+#define FMUGEN_CHAIN_WORK(n) ((n) * (312 + 28 * (n)) + 64)
 
 /* qdd = M(q)^{-1} (tau - h(q, qd)) by the articulated-body algorithm (O(n));
  * p_ee (3, may be NULL): end-effector position.  joint: see above; lc is
@@ -67,8 +67,8 @@ FMUGEN_MODEL_HIDDEN int fmugen_chain_fd(int n, const int *joint, const double *l
  *   dqdd (n x (3n + 6 ne), row-major) = [dqdd/dq, dqdd/dqd, dqdd/dtau, dqdd/dext]
  *        = M^{-1} [-dID/dq, -dID/dqd, I, -dID/dext]  at qdd = FD(q, qd, tau, ext),
  * with dID from the analytical derivatives of recursive Newton-Euler in world
- * coordinates (O(n d), d the depth of the tree) and one Cholesky factorisation
- * of M (composite rigid bodies).  qdd (n) receives the forward dynamics, dp_ee
+ * coordinates (O(n d), d the depth of the tree) and a Cholesky factorisation
+ * of M (composite rigid bodies) per root branch (M is block diagonal over them).  qdd (n) receives the forward dynamics, dp_ee
  * (3 x n, may be NULL) the derivative of the end-effector position by q. */
 FMUGEN_MODEL_HIDDEN int fmugen_chain_fd_jacobian(int n, const int *joint, const double *lc, const double *g,
                                                  const double *q, const double *qd, const double *tau,

@@ -69,7 +69,7 @@ NG = 6
 
 def chain_work_doubles(n: int, kind: str) -> int:
     """Work space of the runtime call, in doubles (``FMUGEN_CHAIN_FD_WORK``, ``FMUGEN_CHAIN_WORK`` of chain_dynamics.h)."""
-    return n * (312 + 24 * n) + 64 if kind in ("jacobian", "id_jacobian") else 104 * n + 16
+    return n * (312 + 28 * n) + 64 if kind in ("jacobian", "id_jacobian") else 114 * n + 16
 
 
 @dataclass(frozen=True)
@@ -274,7 +274,8 @@ def chain_ops(n: int, kind: str, ne: int = 0):
     229 mul / 241 add / 2 div.  The Jacobian adds, per body, the forward (180 /
     144) and backward (348 / 483, composite sums handed to the parent included)
     derivative passes; per pair of joints on one path the mass matrix (6 / 5,
-    lower triangle) and, for every pair, the columns of M^-1 dID (55 / 56); and
+    lower triangle) and, for every pair, the columns of M^-1 dID (55 / 56: the
+    subtree-sum way of a chain; branched trees take fewer, per root branch); and
     the Cholesky factorisation, L^-1 and M^-1 = L^-T L^-1 (each ~n^3/6); with
     ``ne`` external wrenches about 40 mul per body and 9 per pair more, and n^2
     per wrench component.  For a tree the pairs on one path are fewer than the
