@@ -145,6 +145,8 @@ def tick_symbol(clock: str) -> str:
 
 
 def _err(src, msg):
+    # one line whatever the file holds: a key "a\nb" or a value with a line separator is shown escaped
+    msg = "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(msg))
     return InputFileError(f"{src}: {msg}")
 
 
