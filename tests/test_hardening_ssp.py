@@ -279,7 +279,7 @@ def test_a_third_party_fmu_whose_description_guid_is_not_its_binarys(fmus, tmp_p
     good = write_ssp(tmp_path / "good.ssp", checking, stop=0.05)
     assert run(load_system(good), "newton", "linear", step=1e-3).ok
     bad = write_ssp(tmp_path / "bad.ssp", checking, stop=0.05)
-    _swap_guid(bad, "resources/mass.fmu", "{third-party-mass}", "{third-party-mass-2}")
+    _edit_description(bad, "resources/mass.fmu", "{third-party-mass}", "{third-party-mass-2}")
     system = load_system(bad)
     with pytest.raises(FmugenError) as info:
         run(system, "newton", "linear", step=1e-3)
@@ -289,8 +289,9 @@ def test_a_third_party_fmu_whose_description_guid_is_not_its_binarys(fmus, tmp_p
     assert "mass.fmu" in msg, msg
 
 
-def _swap_guid(ssp, member, old, new):
-    """The archive with the FMU ``member``'s modelDescription.xml GUID replaced (the binary unchanged)."""
+def _edit_description(ssp, member, old, new):
+    """The archive with ``old`` replaced by ``new`` in the FMU ``member``'s modelDescription.xml (the binary
+    unchanged)."""
     import io
 
     with zipfile.ZipFile(ssp) as zf:
@@ -342,7 +343,7 @@ def test_fmugens_runtime_refuses_a_foreign_guid_with_a_logged_message(tmp_path):
         zf.write(fmu, "resources/lag1.fmu")
     r = run(load_system(p), "jacobi", "hold", step=0.01)
     assert r.ok and r["lag.x"][-1] == pytest.approx(1 - 2.718281828459045 ** -1, rel=1e-6)  # u = 1, T = 0.1
-    _swap_guid(p, "resources/lag1.fmu", guid, "{00000000-0000-0000-0000-000000000000}")
+    _edit_description(p, "resources/lag1.fmu", guid, "{00000000-0000-0000-0000-000000000000}")
     with pytest.raises(FmugenError) as info:
         run(load_system(p), "jacobi", "hold", step=0.01)
     msg = str(info.value)
@@ -412,3 +413,15 @@ def test_the_report_and_export_apis_refuse_bad_arguments(fmus, tmp_path):
     for args, why in (((None, tmp_path / "x.ssp"), "scene must be a loaded scene"),):
         with pytest.raises(FmugenError, match=why):
             export_ssp(*args)
+
+
+@pytest.mark.parametrize("old, new, why", [
+    ('unit="m"', 'unit="a&#10;b"', r"the FMU's variable is in \[a\\nb\]"),
+    ('causality="output"', 'causality="out&#10;put"', r"the FMU's variable is out\\nput"),
+])
+def test_an_fmus_own_strings_with_newlines_stay_on_one_line(fmus, tmp_path, old, new, why):
+    """A message quotes the FMU's unit or causality, which nobody checked: a newline in it is written as
+    an escape (found probing the fuzz battery's fmu class)."""
+    p = write_ssp(tmp_path / "nl.ssp", fmus)
+    _edit_description(p, "resources/mass.fmu", old, new)
+    _refusal(p, why)

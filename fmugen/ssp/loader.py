@@ -72,6 +72,19 @@ def _names(text, where: str) -> tuple:
     return tuple(text.split())
 
 
+def _controls(text: str) -> bool:
+    return any(unicodedata.category(ch) in ("Cc", "Cf", "Zl", "Zp") for ch in text)
+
+
+def _one_line(message: str) -> str:
+    """``message`` with every control or line-separator character written as its escape: a message
+    quotes the FMU's own strings (units, causalities, names), which nobody checked for newlines."""
+    if not _controls(message):
+        return message
+    return "".join(ch.encode("unicode_escape").decode("ascii") if unicodedata.category(ch) in
+                   ("Cc", "Cf", "Zl", "Zp") else ch for ch in message)
+
+
 def fmugen_run(ssd: Ssd) -> Optional[dict]:
     """fmugen's run annotation of ``ssd`` as plain data, or None when there is none.
 
@@ -341,6 +354,9 @@ def to_system(ssd: Ssd, record: Optional[list] = None):
         for name, md in mds.items():
             for v in without_aliases(md):
                 if v.causality == "output" and v.type == "Real":
+                    if _controls(v.name) or _controls(v.unit or ""):  # they become CSV header cells
+                        raise InputFileError(f"{where}: component {name} ({ssd.components[name].fmu_path.name}): "
+                                             f"output {v.name!r} [{v.unit!r}] contains control characters")
                     recorded.append(Recorded(f"{name}.{v.name}", name, v.name, v.unit or ""))
         if record is not None:
             by = {r.column: r for r in recorded}
@@ -445,4 +461,10 @@ def load_system(path, record: Optional[list] = None, workdir=None):
         tmp = Path(tempfile.mkdtemp(prefix="fmugen_ssp_"))
         atexit.register(shutil.rmtree, str(tmp), True)
         workdir = tmp
-    return to_system(open_ssp(path, Path(workdir)), record)
+    try:
+        return to_system(open_ssp(path, Path(workdir)), record)
+    except InputFileError as exc:
+        msg = _one_line(str(exc))
+        if msg == str(exc):
+            raise
+        raise InputFileError(msg) from None

@@ -17,7 +17,8 @@ the outcome must be:
 * **zip** -- the archive itself: members missing, zip slip, symbolic links, duplicate members,
   corrupt or encrypted data, an FMU that is no FMU: must be *refused*;
 * **random** -- any element deleted or doubled, an attribute set to hostile text, the SSD cut short
-  or with bytes inserted: refused or accepted, never a crash.
+  or with bytes inserted, a bit of the archive flipped: refused or accepted, never a crash;
+* **fmu** -- an FMU's modelDescription.xml damaged the same way: refused or accepted, never a crash.
 
 Findings, per class: **crash** (an exception other than :class:`fmugen.errors.FmugenError`),
 **silent-wrong** (a value that must be refused accepted, or an honoured value read differently),
@@ -357,6 +358,14 @@ def _fmu_edit(data: bytes, old: bytes, new: bytes) -> bytes:
     return buf.getvalue()
 
 
+def _fmu_replace(data: bytes, member: str, new: bytes) -> bytes:
+    buf = io.BytesIO()
+    with zipfile.ZipFile(io.BytesIO(data)) as zi, zipfile.ZipFile(buf, "w") as zo:
+        for i in zi.infolist():
+            zo.writestr(i, new if i.filename == member else zi.read(i))
+    return buf.getvalue()
+
+
 def _fmu_without(data: bytes, member: str) -> bytes:
     buf = io.BytesIO()
     with zipfile.ZipFile(io.BytesIO(data)) as zi, zipfile.ZipFile(buf, "w") as zo:
@@ -369,7 +378,7 @@ def _fmu_without(data: bytes, member: str) -> bytes:
 HOSTILE_TEXT = ["", " ", "\u202e", "A", "B", "x" * 3000, "é", "..", "../x", "A.v", "<", "&amp;", "0", "-1", "NaN",
                 "\t", "名前", "resources/mass.fmu", "true", "1e999"]
 
-CLASSES = ("number", "structure", "zip", "random")
+CLASSES = ("number", "structure", "zip", "random", "fmu")
 OUTCOMES = ("cases", "accepted", "refused", "crash", "silent-wrong", "false refusal", "bad message")
 
 
@@ -572,6 +581,36 @@ class Runner:
             return self.check("random", n, f"bit flipped at byte {pos}", path, "any")
         path = self.write(n, self.members(self.text(ssd), self.text(ssv)))
         self.check("random", n, what, path, "any")
+
+    def fmu(self, n: int) -> None:
+        """One FMU's modelDescription.xml damaged (an attribute hostile, an element gone or doubled): the
+        FMU is someone else's file too; refused naming the component and the FMU, or accepted."""
+        from lxml import etree
+
+        rng = self.rng
+        with zipfile.ZipFile(io.BytesIO(self.fmu_bytes["mass"])) as zf:
+            md = etree.fromstring(zf.read("modelDescription.xml"))
+        elements = [e for e in md.iter() if isinstance(e.tag, str)]
+        el = rng.choice(elements)
+        kind = rng.randrange(3)
+        if kind == 0 and el.attrib:
+            attr = rng.choice(sorted(el.attrib))
+            value = rng.choice(HOSTILE_TEXT + NOT_XS_DOUBLE[:8] + ["a\nb", "x\u2028y"])
+            el.set(attr, value)
+            what = f"modelDescription {el.tag} {attr} = {value[:30]!r}"
+        elif kind == 1 and el is not md:
+            el.getparent().remove(el)
+            what = f"modelDescription {el.tag} removed"
+        elif el is not md:
+            el.addnext(copy.deepcopy(el))
+            what = f"modelDescription {el.tag} doubled"
+        else:
+            what = "modelDescription unchanged"
+        data = _fmu_replace(self.fmu_bytes["mass"], "modelDescription.xml", etree.tostring(md))
+        ssd, ssv = self.roots()
+        members = [(m, data if m == "resources/mass.fmu" else d, a) for m, d, a in
+                   self.members(self.text(ssd), self.text(ssv))]
+        self.check("fmu", n, what, self.write(n, members), "any")
 
     def run(self, cases: int) -> None:
         for n in range(cases):

@@ -8,7 +8,7 @@ import pytest
 
 from fuzz_ssp import CLASSES, Runner
 
-CASES = int(os.environ.get("FUZZ_SSP_CASES", "160"))
+CASES = int(os.environ.get("FUZZ_SSP_CASES", "150"))
 SEED = int(os.environ.get("FUZZ_SEED", "20261203"))
 
 
