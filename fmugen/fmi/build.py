@@ -195,25 +195,112 @@ class _Progress:
         self.t = None
 
 
+class _Signals:
+    """SIGTERM and SIGINT of one build in the main thread.
+
+    Outside a shielded block a signal raises at once (SIGTERM as
+    :class:`BuildInterrupted`, SIGINT as KeyboardInterrupt), so a long code
+    generation stops on the spot.  Inside :func:`_shielded` -- starting a
+    compiler and recording it, reaping one, making or removing a temporary
+    file -- it is kept and raised when the block ends: an exception raised
+    between ``fork`` and the return of ``subprocess.Popen`` left a compiler
+    nobody knew of running for its whole run time (tests/test_large_models.py
+    saw that 4 times in 30 under load), and one raised inside ``Popen.poll``
+    between taking and releasing its wait lock would leave the lock taken, so
+    that the ``wait`` after killing the compiler never returned."""
+
+    def __init__(self):
+        self.depth = 0
+        self.pending = None
+
+    def handler(self, signum, frame):
+        if self.depth:
+            self.pending = self.pending or signum
+            return
+        raise _interruption(signum)
+
+    def raise_pending(self) -> None:
+        if self.pending is not None:
+            signum, self.pending = self.pending, None
+            raise _interruption(signum)
+
+
+_ACTIVE: Optional[_Signals] = None  # the main thread's build, while one runs
+
+
+def _interruption(signum: int) -> BaseException:
+    if signum == signal.SIGINT:
+        return KeyboardInterrupt()
+    return BuildInterrupted(f"build interrupted by signal {signum}; temporary files removed")
+
+
+def _in_main_thread() -> bool:
+    return threading.current_thread() is threading.main_thread()
+
+
 @contextmanager
 def _terminate_as_exception():
     """SIGTERM raises :class:`BuildInterrupted` while the build runs, so every
     ``with``/``finally`` on the way out removes its files and stops its
-    compilers (a SIGTERM would otherwise end the process on the spot).
-    SIGINT already raises KeyboardInterrupt.  Only in the main thread, where
-    Python can install handlers."""
-    if threading.current_thread() is not threading.main_thread():
+    compilers (a SIGTERM would otherwise end the process on the spot); SIGINT
+    raises KeyboardInterrupt as always, but never inside a shielded block (see
+    :class:`_Signals`).  A SIGINT the process ignores stays ignored, one with
+    a handler of the caller's stays the caller's.  Only in the main thread,
+    where Python can install handlers (and where signals arrive)."""
+    global _ACTIVE
+    if not _in_main_thread() or _ACTIVE is not None:
         yield
         return
+    state, previous = _Signals(), {}
+    try:
+        # installed inside the try: a signal between the two calls still puts the first back
+        previous[signal.SIGTERM] = signal.signal(signal.SIGTERM, state.handler)
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            previous[signal.SIGINT] = signal.signal(signal.SIGINT, state.handler)
+        _ACTIVE = state
+        yield
+    finally:
+        state.depth += 1  # a signal while the handlers are put back waits for the end
+        _ACTIVE = None
+        for signum, h in previous.items():
+            signal.signal(signum, h)
+        state.raise_pending()
 
-    def handler(signum, frame):
-        raise BuildInterrupted(f"build interrupted by signal {signum}; temporary files removed")
 
-    previous = signal.signal(signal.SIGTERM, handler)
+@contextmanager
+def _shielded():
+    """A signal arriving in the block is raised when the block ends (see :class:`_Signals`)."""
+    state = _ACTIVE if _in_main_thread() else None
+    if state is None:
+        yield
+        return
+    state.depth += 1
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        state.depth -= 1
+        if state.depth == 0:
+            state.raise_pending()
+
+
+def _checkpoint() -> None:
+    """Raise a signal kept by a shielded block now (a place inside one where stopping is safe)."""
+    if _ACTIVE is not None and _in_main_thread():
+        _ACTIVE.raise_pending()
+
+
+@contextmanager
+def _temporary_folder(prefix: str):
+    """A temporary folder that is made and removed whole whatever signal arrives meanwhile."""
+    path = None
+    try:
+        with _shielded():
+            path = Path(tempfile.mkdtemp(prefix=prefix))
+        yield path
+    finally:
+        if path is not None:
+            with _shielded():
+                shutil.rmtree(path, ignore_errors=True)
 
 
 def _run_jobs(jobs: list, cwd: Path, what: str, budget: _Budget, stage: str) -> None:
@@ -221,6 +308,12 @@ def _run_jobs(jobs: list, cwd: Path, what: str, budget: _Budget, stage: str) -> 
     (or an exceeded budget, or an exception such as a SIGTERM) kills the rest."""
     pending, running = list(jobs), []
     width = max(1, os.cpu_count() or 1)
+    with _shielded():  # a signal waits for the next _checkpoint(), a few ms away
+        _supervise(pending, running, width, cwd, what, budget, stage)
+
+
+def _supervise(pending: list, running: list, width: int, cwd: Path, what: str, budget: _Budget,
+               stage: str) -> None:
     try:
         while pending or running:
             while pending and len(running) < width:
@@ -236,6 +329,7 @@ def _run_jobs(jobs: list, cwd: Path, what: str, budget: _Budget, stage: str) -> 
                 proc.log = log
                 running.append((cmd, proc))
             time.sleep(0.02)
+            _checkpoint()
             budget.check(stage, [p.pid for _, p in running])
             for cmd, proc in list(running):
                 if proc.poll() is None:
@@ -323,7 +417,12 @@ def _compile(cc: Union[str, Slice], extra: list, sources: list, src: Path, lib: 
 def _store_objects(target: Path, objs: list) -> None:
     """Put freshly compiled runtime objects into the cache: a complete folder appears by one
     rename (builds running in parallel never see half of it); a cache that cannot be
-    written is no error."""
+    written is no error.  Shielded: a signal meanwhile leaves no half folder behind."""
+    with _shielded():
+        _store(target, objs)
+
+
+def _store(target: Path, objs: list) -> None:
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(prefix=".part-", dir=target.parent))
@@ -434,8 +533,7 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
     if out.is_dir():
         out = out / f"{ident}.fmu"
 
-    with tempfile.TemporaryDirectory(prefix=f"fmugen_{ident}_") as tmp:
-        root = Path(tmp)
+    with _temporary_folder(f"fmugen_{ident}_") as root:
         src = root / "sources"
         src.mkdir()
         for name in runtime_c + runtime_h:
@@ -470,10 +568,12 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
         if keep_sources:
             files += sorted(src.iterdir())
         # a name of its own: never a user's file (an existing "x.fmu.part" stays as it was)
-        fd, tmp_name = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent)
-        os.close(fd)
-        tmp_zip = Path(tmp_name)
+        tmp_zip = None
         try:
+            with _shielded():  # made and named as one step: a signal in between left it behind
+                fd, tmp_name = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent)
+                os.close(fd)
+                tmp_zip = Path(tmp_name)
             with zipfile.ZipFile(tmp_zip, "w", zipfile.ZIP_DEFLATED) as zf:
                 for f in files:
                     info = zipfile.ZipInfo(f.relative_to(root).as_posix(), date_time=_ZIP_DATE)
@@ -483,7 +583,9 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
             budget.check("zip")
             os.replace(tmp_zip, out)
         finally:
-            tmp_zip.unlink(missing_ok=True)
+            if tmp_zip is not None:
+                with _shielded():
+                    tmp_zip.unlink(missing_ok=True)
         t_zip = time.perf_counter() - t2
 
     return BuildResult(path=out, model_identifier=ident, guid=guid, op_counts=gen.op_counts,
