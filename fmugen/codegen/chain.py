@@ -43,6 +43,7 @@ from typing import Optional, Sequence
 import numpy as np
 import sympy as sp
 
+from .op_count import OpCount
 from .program import SolveSPD
 
 __all__ = ["ChainDynamics", "LOOP_MIN_LINKS", "NC", "NG", "link_constants", "tree_constants", "robot_tree",
@@ -282,8 +283,6 @@ def chain_ops(n: int, kind: str, ne: int = 0):
     chain's n(n+1)/2 counted here; the subtree sums of the branches add 12 n
     additions per branch point.
     """
-    from .c_code import OpCount
-
     tri = n * (n + 1) // 2
     if kind in ("id", "id_jacobian"):
         # kinematics, then per body the forward (126 mul / 110 add) and backward (6 / 11) passes
