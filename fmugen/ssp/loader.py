@@ -244,8 +244,8 @@ def _bound(v, value, where: str):
         except InputFileError:
             continue  # the FMU's own attribute is not a number: the FMU would not enforce it either
         if not ok(b):
-            raise InputFileError(f"{where}: {v.name} = {value!r} is {'below its minimum' if bound == 'min' else 'above its maximum'} "
-                                 f"{b!r} (the FMU's modelDescription.xml)")
+            side = "below its minimum" if bound == "min" else "above its maximum"
+            raise InputFileError(f"{where}: {v.name} = {value!r} is {side} {b!r} (the FMU's modelDescription.xml)")
     return value
 
 

@@ -323,7 +323,8 @@ ZIP = [
     ("zip slip", lambda m: m + [("../evil.txt", b"x", {})], r"unsafe path"),
     ("absolute member", lambda m: m + [("/tmp/evil.txt", b"x", {})], r"unsafe path"),
     ("backslash member", lambda m: m + [("resources\\evil.txt", b"x", {})], r"unsafe path"),
-    ("symbolic link", lambda m: m + [("resources/link", b"/etc/passwd", {"external_attr": (stat.S_IFLNK | 0o777) << 16})],
+    ("symbolic link", lambda m: m + [("resources/link", b"/etc/passwd",
+                                      {"external_attr": (stat.S_IFLNK | 0o777) << 16})],
      r"symbolic link"),
     ("member twice", lambda m: m + [m[0]], r"appears twice"),
     ("file where a folder is", lambda m: [("resources", b"x", {})] + m, r"cannot be extracted|appears twice"),
@@ -332,7 +333,8 @@ ZIP = [
     ("FMU without description", lambda m: [(n, _fmu_without(d, "modelDescription.xml") if n == "resources/mass.fmu"
                                             else d, a) for n, d, a in m], r"not an FMU"),
     ("FMU of FMI 3.0", lambda m: [(n, _fmu_edit(d, b'fmiVersion="2.0"', b'fmiVersion="3.0"')
-                                   if n == "resources/mass.fmu" else d, a) for n, d, a in m], r"FMI 3\.0 is not supported"),
+                                   if n == "resources/mass.fmu" else d, a) for n, d, a in m],
+     r"FMI 3\.0 is not supported"),
     ("FMU description broken", lambda m: [(n, _fmu_edit(d, b"<ModelVariables>", b"<ModelVariables")
                                            if n == "resources/mass.fmu" else d, a) for n, d, a in m],
      r"modelDescription\.xml: not well-formed"),
@@ -413,7 +415,8 @@ class Runner:
     # -- the archive -------------------------------------------------------------------------
     def members(self, ssd: bytes, ssv: bytes) -> list:
         return [("SystemStructure.ssd", ssd, {}), ("resources/B.ssv", ssv, {}),
-                ("resources/mass.fmu", self.fmu_bytes["mass"], {}), ("resources/spring.fmu", self.fmu_bytes["spring"], {})]
+                ("resources/mass.fmu", self.fmu_bytes["mass"], {}),
+                ("resources/spring.fmu", self.fmu_bytes["spring"], {})]
 
     def write(self, n: int, members: list) -> Path:
         path = self.dir / f"case_{n}.ssp"
@@ -493,8 +496,6 @@ class Runner:
 
     # -- the four classes --------------------------------------------------------------------
     def number(self, n: int) -> None:
-        from lxml import etree  # noqa: F401
-
         rng = self.rng
         label, file, where, attr, kind, rule, read, expected, field = rng.choice(SLOTS)
         ssd, ssv = self.roots()
