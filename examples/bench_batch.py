@@ -139,7 +139,8 @@ def main(argv=None) -> int:
               file=sys.stderr)
         return 2
     load = os.getloadavg()
-    print(f"{os.cpu_count()} CPUs, load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}; {runtime_version()}; Pinocchio "
+    print(f"{os.cpu_count()} CPUs, load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}; {runtime_version()}; "
+          f"Pinocchio "
           f"{pin.__version__}; batched call in Pinocchio's Python interface: "
           f"{'abaInParallel (no derivatives)' if hasattr(pin, 'abaInParallel') else 'none'}; "
           f"{args.repeat} rounds, medians\n")

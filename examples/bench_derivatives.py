@@ -321,7 +321,8 @@ def main(argv=None) -> int:
               file=sys.stderr)
         return 2
     load = os.getloadavg()
-    print(f"{os.cpu_count()} CPUs, load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}; {runtime_version()}; Pinocchio "
+    print(f"{os.cpu_count()} CPUs, load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}; {runtime_version()}; "
+          f"Pinocchio "
           f"{pin.__version__}; {args.repeat} rounds, medians; CPU µs per call\n")
     paths = {}
     for name, f in GRID_ROBOTS.items():

@@ -29,7 +29,7 @@ from typing import Mapping, Optional
 import numpy as np
 import sympy as sp
 
-from ..codegen.chain import NC, NG, robot_tree
+from ..codegen.chain import NC, robot_tree
 
 __all__ = ["Kernels", "StateError", "library", "MASS_MATRIX_METHODS"]
 
