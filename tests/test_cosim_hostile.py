@@ -11,7 +11,8 @@ the closed form of the system, or ``failed`` with a FailureReport naming the FMU
 The base system is a chain of third-party FMUs (``tests/third_party_fmu.py``): lag L1 (u = 1) -> gain G
 (y = a u + b) -> lag L2, with time constant T, whose L2.y is (a + b)(1 - e^{-t/T}) - a (t/T) e^{-t/T}.
 The cases are deterministic (a seeded generator picks hostile names, numbers and mutations);
-``python tests/test_cosim_hostile.py`` prints the counts per class and per kind of case.
+``python tests/test_cosim_hostile.py`` prints the counts per class and per kind of case (a case still running
+after 30 s counts as ``hang`` there).
 """
 from __future__ import annotations
 
@@ -137,10 +138,25 @@ def cases(f, seed: int = 27) -> list:
     return out
 
 
-def classify(expected, system, kw):
-    """(class, detail) of one case."""
+class _Hang(Exception):
+    pass
+
+
+def classify(expected, system, kw, seconds=None):
+    """(class, detail) of one case (``seconds``: a case still running after that long is a ``hang``; the
+    command line's guard, for masters that loop for ever on a step below the time resolution)."""
+    import signal
+
+    if seconds:
+        def alarm(*_):
+            raise _Hang
+
+        signal.signal(signal.SIGALRM, alarm)
+        signal.alarm(seconds)
     try:
         r = run(system, estimate=False, **kw)
+    except _Hang:
+        return "hang", f"still running after {seconds} s"
     except CosimError as e:
         msg = str(e)
         if "\n" in msg:
@@ -148,6 +164,9 @@ def classify(expected, system, kw):
         return ("refused" if expected == "refuse" else "refused-unexpectedly"), msg
     except Exception as e:  # noqa: BLE001 - the battery counts what escapes
         return "crash", f"{type(e).__name__}: {e}"
+    finally:
+        if seconds:
+            signal.alarm(0)
     if r.summary.status == "failed":
         want = expected.split(":", 1)[1] if expected.startswith("fail:") else None
         if want is not None and r.summary.failure.cause != want:
@@ -168,10 +187,10 @@ def classify(expected, system, kw):
     return "ok", ""
 
 
-def battery(folder: Path, seed: int = 27):
+def battery(folder: Path, seed: int = 27, seconds=None):
     """(Counter of classes, [(kind, class, detail)])."""
     f = build(folder)
-    rows = [(kind, *classify(expected, system, kw)) for kind, expected, system, kw in cases(f, seed)]
+    rows = [(kind, *classify(expected, system, kw, seconds)) for kind, expected, system, kw in cases(f, seed)]
     return Counter(cls for _, cls, _ in rows), rows
 
 
@@ -216,7 +235,7 @@ if __name__ == "__main__":  # python tests/test_cosim_hostile.py: the counts per
     import tempfile
 
     with tempfile.TemporaryDirectory() as tmp:
-        counts, rows = battery(Path(tmp), int(sys.argv[1]) if len(sys.argv) > 1 else 27)
+        counts, rows = battery(Path(tmp), int(sys.argv[1]) if len(sys.argv) > 1 else 27, seconds=30)
     print(f"{len(rows)} cases: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
     per = Counter((kind, cls) for kind, cls, _ in rows)
     for (kind, cls), n in sorted(per.items()):

@@ -459,7 +459,8 @@ class Master:
         Hmax = _positive("max_step", max_step) if max_step is not None else (max(H0, (stop - t0) / 10) if adaptive else H0)
         if Hmin > Hmax:
             raise CosimError(f"min_step {Hmin} exceeds max_step {Hmax}")
-        _check_resolution(t0, stop, min(Hmin, H0, Hmax), "min_step" if adaptive and min_step is not None else "step")
+        _check_resolution(t0, stop, min(Hmin, H0, Hmax), "min_step" if adaptive and min_step is not None else "step",
+                          count=not adaptive)  # an adaptive run's step count is its controller's
         self._check_clocks(t0, H0, adaptive)
         self._check_step_sizes(t0, stop, min(H0, Hmax), adaptive)
         scheme = self._prepare(adaptive, coupling_tol, int(max_iterations))
@@ -906,13 +907,13 @@ class _Stop(Exception):
     """Ends a run before its first macro step (the failure is already set)."""
 
 
-def _check_resolution(t0: float, stop: float, H: float, what: str) -> None:
-    """A macro step must move the time (t + H > t in floating point over the whole run) and the run must end
-    in at most MAX_STEPS of it: a step of 1e-300 s would loop for ever."""
+def _check_resolution(t0: float, stop: float, H: float, what: str, count: bool = True) -> None:
+    """A macro step must move the time (t + H > t in floating point over the whole run) and a fixed-step run
+    must end in at most MAX_STEPS of it: a step of 1e-300 s looped for ever."""
     if not (t0 + H > t0 and stop - H < stop and stop + H > stop):
         raise CosimError(f"{what} {H:g} s is below the time resolution at t = {max(abs(t0), abs(stop)):g} s "
                          f"(t + {what} == t in floating point)")
-    if (stop - t0) / H > MAX_STEPS:
+    if count and (stop - t0) / H > MAX_STEPS:
         raise CosimError(f"{what} {H:g} s would take {(stop - t0) / H:.3g} macro steps from {t0:g} s to {stop:g} s, "
                          f"more than the {MAX_STEPS:.0e} this master takes; take a larger step")
 
