@@ -350,6 +350,13 @@ def test_fmugens_runtime_refuses_a_foreign_guid_with_a_logged_message(tmp_path):
     msg = str(info.value)
     assert "\n" not in msg and "lag" in msg and "lag1.fmu" in msg and "fmi2Instantiate failed" in msg, msg
     assert f"does not match this FMU's \"{guid}\"" in msg, msg
+    # the command line: that line, exit 2, no traceback (and no results written as if the run were ok)
+    r = subprocess.run([sys.executable, "-m", "fmugen.cli", "cosim", str(p), "--out", str(tmp_path / "out")],
+                       capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "fmi2Instantiate failed" in r.stderr
+    assert "fmugen_ssp_one_" in r.stderr  # the extraction folder is named after the archive
+    assert not (tmp_path / "out" / "results.csv").exists()
 
 
 # ------------------------------------------------------------------------------------------ imports

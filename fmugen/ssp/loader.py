@@ -458,7 +458,9 @@ def load_system(path, record: Optional[list] = None, workdir=None):
     if isinstance(path, str) and not path.strip():
         raise FmugenError("load_system: path is empty")
     if workdir is None:
-        tmp = Path(tempfile.mkdtemp(prefix="fmugen_ssp_"))
+        # named after the archive: the master's messages name an FMU by its extracted path
+        stem = re.sub(r"[^A-Za-z0-9_-]", "_", Path(path).stem)[:40]
+        tmp = Path(tempfile.mkdtemp(prefix=f"fmugen_ssp_{stem}_"))
         atexit.register(shutil.rmtree, str(tmp), True)
         workdir = tmp
     try:
