@@ -245,6 +245,7 @@ class Master:
                                      for r in sysm.recorded], dtype=float)
         # buffers (ctypes pointers into them are taken once)
         self.Y = np.zeros(max(ny, 1))  # outputs at t_{n+1} (being computed)
+        self._Yv, self._Yzero = self.Y[:ny], np.zeros(ny)  # the outputs read, for the finiteness check
         self.Uset = np.zeros(max(nu, 1))  # input values passed at t_n
         self.DUset = np.zeros(max(nu, 1))  # input slopes passed at t_n
         self.DDUset = np.zeros(max(nu, 1))  # input second derivatives passed at t_n (quadratic inputs)
@@ -827,7 +828,9 @@ class Master:
         return calls
 
     def _finite(self) -> bool:
-        return bool(np.isfinite(self.Y[: self.ny]).all())
+        """Every output read is finite: NaN and infinity times 0 are NaN, any finite value times 0 is 0 (a dot
+        product with zeros costs a third of np.isfinite(...).all())."""
+        return math.isfinite(self._Yv.dot(self._Yzero))
 
     def _non_finite(self, t) -> FailureReport:
         """The first output an FMU returned as NaN or infinite (read after the step from ``t``)."""
