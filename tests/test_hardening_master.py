@@ -24,7 +24,9 @@ Issue 27, every capability a scheme relies on is checked or its fallback stated:
   with constant steps and no estimate (whose windows step H/2), said;
 * a Model-Exchange FMU with providesDirectionalDerivative="false": the ME block never calls
   fmi2GetDirectionalDerivative (it would fail here), takes Radau's Jacobian by differences, and says so;
-* dense output from an FMU with maxOutputDerivativeOrder = 0 is linear, said.
+* dense output from an FMU with maxOutputDerivativeOrder = 0 is linear, said;
+* Hermite inputs (newton/quadratic) name the FMU without output derivatives or without
+  canInterpolateInputs, and newton/linear runs it.
 """
 import math
 import os
@@ -217,3 +219,20 @@ def test_dense_output_from_an_fmu_without_output_derivatives_says_it_is_linear(l
     assert r.ok and np.all(np.isnan(r.slopes))
     assert r.summary.warnings == ["dense output: FMU 'A', 'B' gives no output derivatives (maxOutputDerivativeOrder "
                                   "= 0): its columns are linear between communication points"]
+
+
+@pytest.mark.parametrize("caps, said", [
+    ({"maxOutputDerivativeOrder": "0"}, "declares maxOutputDerivativeOrder = 0"),
+    ({"maxOutputDerivativeOrder": "1", "canInterpolateInputs": "false"}, "cannot interpolate inputs"),
+])
+def test_hermite_inputs_name_the_capability_a_third_party_fmu_lacks(tmp_path, lag, caps, said):
+    """Newton/quadratic sends parabolas (input derivatives of order 1-2) built from the sources' slopes."""
+    gain = build_gain(tmp_path, "hermite", dependencies="", lag=True, capabilities=caps)
+    s = CosimSystem("lags", (Unit("A", gain, "cs", {"u": 1.0}), Unit("B", gain, "cs")),
+                    (Coupling(("A", "y"), ("B", "u")), Coupling(("B", "y"), ("A", "u"))),
+                    (Recorded("A.y", "A", "y"),), 0.0, STOP, H)
+    with pytest.raises(CosimError) as info:
+        run(s, scheme="newton", extrapolation="quadratic")
+    msg = str(info.value)
+    assert "\n" not in msg and said in msg and "FMU 'A'" in msg and "use newton/linear" in msg, msg
+    assert run(s, scheme="newton", extrapolation="linear", estimate=False).ok
