@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import fmugen
-from fmugen.codegen.evaluate import linearize
+from fmugen.control.linearize import linearize
 from fmugen.components.assembly import load_assembly
 
 # actuator-chain.md, "default, P": eigenvalues of the linearised one-joint rig at rest

@@ -63,6 +63,7 @@ from .chain import ChainDynamics, chain_call_lines, chain_ops
 from .cse import common_subexpressions
 from .op_count import OpCount
 from .program import Assign, Program, SolveSPD
+from .runtime_parameters import runtime_starts
 
 __all__ = [
     "OpCount",
@@ -1023,7 +1024,7 @@ def generate_c(
     with the modelDescription.xml, then substitute (what the FMU builder does).
     ``runtime_start``: start values of the runtime's own parameters
     (``solver.method``, ``solver.rtol``, ...) that differ from its defaults
-    (:func:`fmugen.fmi.model_description.runtime_starts` checks and completes them).
+    (:func:`fmugen.codegen.runtime_parameters.runtime_starts` checks and completes them).
     """
     _check_model(model)
     ident = model_identifier or c_identifier(model.name)
@@ -1122,8 +1123,6 @@ def generate_c(
         return _array("char *const", name, [_c_string(v.name) for v in vars_])
 
     if runtime_start:
-        from ..fmi.model_description import runtime_starts
-
         runtime_start = runtime_starts(runtime_start)
     decls = [
         # sized by the runtime's count: a runtime with more parameters zero-fills, never over-reads

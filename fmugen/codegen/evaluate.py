@@ -197,13 +197,3 @@ class ModelEvaluator:
         # empty blocks were compiled as a 1x1 placeholder
         return tuple(M[: r, : c] if r and c else np.zeros((r, c))
                      for M, (r, c) in zip(self._jac(*self._args(t, x, u)), shapes))
-
-
-def __getattr__(name):
-    # linearize moved to fmugen.control.linearize (one linearisation function
-    # for arms, components and scenes); imported lazily, since it imports this module
-    if name == "linearize":
-        from ..control.linearize import linearize
-
-        return linearize
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
