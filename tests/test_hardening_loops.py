@@ -133,3 +133,19 @@ def test_a_loop_whose_gain_reaches_one_stops_singular(tmp_path):
     # up to there the run met the loop: u1 = b / (1 - a(t))
     t = r.time
     assert np.max(np.abs(r["G2.y"] - 1.0 / (1 - (0.5 + 5 * t)))) < 1e-6 * np.max(np.abs(r["G2.y"]))
+
+
+def test_a_loop_through_a_model_exchange_fmu_is_refused_under_every_scheme():
+    """The ME block evaluates ME couplings once per right-hand side: a loop through it is not solved
+    (loops.check_scheme on the master's interface tables)."""
+    from types import SimpleNamespace as NS
+
+    from fmugen.cosim.loops import check_scheme
+
+    for scheme in ("newton", "iterative", "jacobi"):
+        m = NS(system=NS(name="mixed"), scheme=scheme, loops=[[0, 1]], u_owner=np.array([0, 1]),
+               u_src_unit=np.array([1, 0]), units=[NS(name="cs", kind="cs"), NS(name="me", kind="me")],
+               coupling_labels=("me.y -> cs.u", "cs.y -> me.u"))
+        with pytest.raises(CosimError, match=r"^mixed: algebraic loop through FMUs 'me', 'cs' \(me.y -> cs.u, "
+                                             r"cs.y -> me.u\): Model-Exchange FMU 'me' is in it"):
+            check_scheme(m)
