@@ -189,6 +189,7 @@ def test_win64_dll_imports_system_dlls_and_exports_fmi2_only(puma):
 # -- darwin64 ------------------------------------------------------------------------------------
 
 LC_ID_DYLIB, LC_LOAD_DYLIB, LC_SYMTAB = 0xD, 0xC, 0x2
+LC_BUILD_VERSION, LC_VERSION_MIN_MACOSX, LC_CODE_SIGNATURE = 0x32, 0x24, 0x1D
 LINKS = {LC_LOAD_DYLIB, 0x80000018, 0x8000001F, 0x20, 0x80000023}  # load, weak, reexport, lazy, upward
 CPU = {0x01000007: "x86_64", 0x0100000C: "arm64"}
 
@@ -197,11 +198,18 @@ def _macho(data: bytes) -> dict:
     """A thin 64-bit Mach-O: cpu, file type, ids and linked libraries, externally visible symbols."""
     magic, cpu, _, filetype, ncmds, _, _, _ = struct.unpack_from("<IiiIIIII", data, 0)
     assert magic == 0xFEEDFACF
-    out = {"cpu": CPU.get(cpu, hex(cpu)), "filetype": filetype, "id": [], "links": [], "exports": set()}
+    out = {"cpu": CPU.get(cpu, hex(cpu)), "filetype": filetype, "id": [], "links": [], "exports": set(),
+           "minos": None, "signed": False}
     off = 32
     for _ in range(ncmds):
         cmd, size = struct.unpack_from("<II", data, off)
-        if cmd == LC_ID_DYLIB or cmd in LINKS:
+        if cmd == LC_BUILD_VERSION:  # platform, minos (X.Y.Z as 16.8.8 bits), sdk
+            out["minos"] = struct.unpack_from("<I", data, off + 12)[0] >> 16
+        elif cmd == LC_VERSION_MIN_MACOSX:
+            out["minos"] = struct.unpack_from("<I", data, off + 8)[0] >> 16
+        elif cmd == LC_CODE_SIGNATURE:
+            out["signed"] = True
+        elif cmd == LC_ID_DYLIB or cmd in LINKS:
             name_off = struct.unpack_from("<I", data, off + 8)[0]
             name = data[off + name_off:off + size].split(b"\0", 1)[0].decode()
             out["id" if cmd == LC_ID_DYLIB else "links"].append(name)
@@ -240,6 +248,9 @@ def test_darwin64_is_a_universal_dylib_exporting_fmi2_only(puma):
         assert m["links"] == ["/usr/lib/libSystem.B.dylib"]
         # zig's linker also exports the Mach-O header's two linker-made symbols (no code)
         assert m["exports"] - {"__mh_dylib_header", "___dso_handle"} == fmi2, arch
+        # loads on macOS 10.13 (Intel) and 11 (Apple silicon, the first), not only on the newest
+        assert m["minos"] == {"x86_64": 10, "arm64": 11}[arch], (arch, m["minos"])
+    assert slices["arm64"]["signed"]  # Apple silicon runs no unsigned code: the linker's ad-hoc signature
     lipo = shutil.which("llvm-lipo") or shutil.which("llvm-lipo-14")
     if lipo:  # an independent reader of the fat header fmugen wrote
         info = subprocess.run([lipo, "-info", str(lib)], capture_output=True, text=True, check=True).stdout

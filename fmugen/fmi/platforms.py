@@ -156,8 +156,10 @@ def resolve(platforms: Optional[Sequence[str]], cc: str = "cc", where: str = "pl
             argv, exe = zig
             link = ("-Wl,-exported_symbols_list,{exports}",
                     f"-Wl,-install_name,@rpath/{model_identifier}.dylib")
-            slices = tuple(Slice(arch, argv, exe, ("-target", f"{triple}-macos", "-fvisibility=hidden"), link)
-                           for arch, triple in (("x86_64", "x86_64"), ("arm64", "aarch64")))
+            # the oldest macOS each slice runs on (zig's default: its newest SDK, macOS 15, which older
+            # dyld versions refuse): 10.13 as the Reference FMUs, 11.0 the first on arm64
+            slices = tuple(Slice(arch, argv, exe, ("-target", triple, "-fvisibility=hidden"), link)
+                           for arch, triple in (("x86_64", "x86_64-macos.10.13"), ("arm64", "aarch64-macos.11.0")))
         else:  # linux64 from another host: not offered (a Linux machine builds it)
             raise PlatformError(f"{where}: {name} binaries are built on {name} itself (this machine is {host})")
         targets.append(Target(name, SUFFIX[name], slices))
