@@ -12,7 +12,9 @@ u1 = (c (b + e t) + d) / (1 - a c)  -- closed form, independent of the master.
 * a loop broken by an FMU whose output does not depend on its input (``dependencies=""``, a lag) is no
   algebraic loop and runs under every scheme, against the lag's closed form; an output without
   ``dependencies`` depends on every input (FMI 2.0 section 2.2.8), so the same lag declared that way closes
-  the loop.
+  the loop;
+* a feedthrough chain of four gains without a loop is consistent at t0 (the old two passes left the last
+  gain's output at 7 where the composition is 63).
 """
 import math
 
@@ -149,3 +151,20 @@ def test_a_loop_through_a_model_exchange_fmu_is_refused_under_every_scheme():
         with pytest.raises(CosimError, match=r"^mixed: algebraic loop through FMUs 'me', 'cs' \(me.y -> cs.u, "
                                              r"cs.y -> me.u\): Model-Exchange FMU 'me' is in it"):
             check_scheme(m)
+
+
+def test_a_long_feedthrough_chain_is_consistent_at_t0(fmus):
+    """G1 -> G2 -> G3 -> G4, gains without a loop: the values at t0 are the composition (two passes of
+    set/get carried a value over one coupling only: G4 read its input before G2's output had reached G3)."""
+    names = ["G1", "G2", "G3", "G4"]
+    units = (Unit("G1", fmus["gain"], "cs", {"a": 2.0, "b": 1.0, "u": 3.0}),) + tuple(
+        Unit(n, fmus["gain"], "cs", {"a": 2.0, "b": 1.0}) for n in names[1:])
+    s = CosimSystem("chain", units, tuple(Coupling((a, "y"), (b, "u")) for a, b in zip(names, names[1:])),
+                    tuple(Recorded(f"{n}.y", n, "y") for n in names), 0.0, STOP, H)
+    with Master(s, "jacobi", "hold") as m:
+        assert m.loops == [] and m.init_passes == 3  # three coupled inputs in a row
+    r = run(s, scheme="jacobi", extrapolation="hold", estimate=False)
+    y = 3.0
+    for n in names:
+        y = 2 * y + 1
+        assert r[n + ".y"][0] == y, (n, r[n + ".y"][0], y)

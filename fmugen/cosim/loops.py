@@ -129,6 +129,30 @@ def algebraic_loops(m) -> list:
     return [c for c in strongly_connected(succ) if len(c) > 1 or c[0] in succ[c[0]]]
 
 
+def chain_length(succ) -> int:
+    """The longest path (in edges) of a feedthrough graph without loops: fmi2SetReal/fmi2GetReal passes at
+    t0 beyond the first that carry a value from its start to its end."""
+    n = len(succ)
+    depth, order, seen = [0] * n, [], [False] * n
+    for root in range(n):  # a topological order (iterative depth-first search)
+        if seen[root]:
+            continue
+        seen[root] = True
+        work = [(root, iter(succ[root]))]
+        while work:
+            v, it = work[-1]
+            w = next(it, None)
+            if w is None:
+                order.append(v)
+                work.pop()
+            elif not seen[w]:
+                seen[w] = True
+                work.append((w, iter(succ[w])))
+    for v in order:  # successors first
+        depth[v] = max((depth[w] + 1 for w in succ[v]), default=0)
+    return max(depth, default=0)
+
+
 def describe(m, loop) -> str:
     """``FMUs 'A', 'B' (A.y -> B.u, B.y -> A.u)``: the FMUs around a loop and its couplings."""
     names = []

@@ -33,7 +33,7 @@ from .accuracy import ErrorEstimate, coupling_tolerance, internal_rtol
 from .errors import CosimError
 from .executor import SweepExecutor
 from .physical_units import mismatch as unit_mismatch
-from .loops import SingularLoop, algebraic_loops, check_scheme, solve_initial
+from .loops import SingularLoop, algebraic_loops, chain_length, check_scheme, feedthrough_graph, solve_initial
 from .interpolants import CUBIC_THETA, EXTRAPOLATIONS, ORDER, InputHistory  # noqa: F401 (public names)
 from .monitor import DivergenceMonitor
 from .results import CosimResult, FailureReport, Summary
@@ -306,6 +306,9 @@ class Master:
         self.u_nominal = np.array(nominal, dtype=float)
         # couplings around which every output depends on the input before it (loops.py): solved, or refused
         self.loops = algebraic_loops(self)
+        # t0: fmi2SetReal/fmi2GetReal passes enough for the longest feedthrough chain (two as before for
+        # chains of one; with loops, Newton at t0 meets every chain as well)
+        self.init_passes = 2 if self.loops else max(2, chain_length(feedthrough_graph(self)) + 1)
 
     def close(self) -> None:
         for u in getattr(self, "units", []):
@@ -725,11 +728,11 @@ class Master:
         return (Newton if self.scheme == "newton" else FixedPoint)(self, coupling_tol, max_iterations)
 
     def _initialize(self, U0, coupling_tol) -> int:
-        """Consistent coupled values at t0 into U0: two passes (enough for chains of feedthrough no longer
-        than one), then, when the system has algebraic loops, Newton on U = G(U) at t0 (loops.py; a singular
-        loop is refused there).  Returns the FMU calls."""
+        """Consistent coupled values at t0 into U0: passes of fmi2SetReal/fmi2GetReal, one more than the
+        longest feedthrough chain has couplings (at least two), then, when the system has algebraic loops,
+        Newton on U = G(U) at t0 (loops.py; a singular loop is refused there).  Returns the FMU calls."""
         calls = 0
-        for _ in range(2):
+        for _ in range(self.init_passes):
             calls += self._read_all()
             self._coupled(self.Uset)
             for u in self.units:
