@@ -1,35 +1,55 @@
-"""Runs that compare the restructured master with the single-module master it replaced.
+"""The cases that compare the restructured master with the single-module master it replaced.
 
-``tests/legacy/master_59795fa.py`` is ``fmugen/cosim/master.py`` as it was at commit 59795fa, before it was
-split into modules, unchanged; :func:`legacy_master` loads it inside ``fmugen.cosim`` (so it uses today's
-FMU wrappers and ME block) and :func:`run_case` runs a case with either master on the same FMUs.
-``fingerprint(result)`` hashes what must agree bit for bit: the recorded arrays (their bytes), every summary
-counter, and where a run failed, the failure's time, cause, FMU and coupling.  ``CASES`` cover each scheme x
-extrapolation, adaptive runs with rollbacks, divergence reports, an FMU failure, a non-converged iteration,
-Model-Exchange units, an algebraic FMU (exact Newton columns), FMUs without input interpolation and threads.
+The old master (``fmugen/cosim/master.py`` of commit 59795fa, before it was split into modules) ran each of
+``CASES`` once on today's FMU wrappers and ME block and on the rigs' FMUs; what it gave is stored in
+``tests/data/master_59795fa.npz`` (how: tests/data/README.md): the recorded arrays, the summary counters of
+:func:`counters` and, where a run failed, the failure's time, cause, FMU and coupling.  ``CASES`` cover each
+scheme x extrapolation, adaptive runs with rollbacks, divergence reports, an FMU failure, a non-converged
+iteration, Model-Exchange units, an algebraic FMU (exact Newton columns), FMUs without input interpolation and
+threads.  :func:`fmu_sources_key` names the FMUs' code the results belong to (C sources and XML of each FMU).
 """
 from __future__ import annotations
 
 import hashlib
 import json
+import zipfile
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
 from cosim_rigs import amp_split_system, split_system
 
 
-def fingerprint(r) -> str:
-    s = r.summary
+STORED = Path(__file__).parent / "data" / "master_59795fa.npz"
+
+
+def counters(r) -> dict:
+    """Every summary counter that must agree exactly, and where a run failed, the failure's time, cause, FMU
+    and coupling (floats as they are: JSON writes and reads them back bit for bit)."""
+    s, f = r.summary, r.summary.failure
+    return {"failed": s.status == "failed", "macro_steps": s.macro_steps, "rollbacks": s.rollbacks,
+            "iterations": s.iterations, "jacobians": s.jacobians, "do_steps": s.do_steps, "fmu_calls": s.fmu_calls,
+            "step_min": s.step_min, "step_max": s.step_max, "threads": s.threads,
+            "failure": [f.time, f.cause, f.unit, f.coupling] if f else None}
+
+
+def fmu_sources_key(system) -> str:
+    """Hash of every FMU's sources/ and modelDescription.xml: the code the results depend on besides the
+    master's (the compiler aside)."""
     h = hashlib.sha256()
-    h.update(np.ascontiguousarray(r.time, dtype=float).tobytes())
-    h.update(np.ascontiguousarray(r.values, dtype=float).tobytes())
-    f = s.failure
-    counters = [s.status == "failed", s.macro_steps, s.rollbacks, s.iterations, s.jacobians, s.do_steps,
-                s.fmu_calls, repr(s.step_min), repr(s.step_max), s.threads,
-                [repr(f.time), f.cause, f.unit, f.coupling] if f else None]
-    h.update(json.dumps(counters).encode())
-    return h.hexdigest()[:24]
+    for u in sorted(system.units, key=lambda u: u.name):
+        with zipfile.ZipFile(u.path) as z:
+            for n in sorted(n for n in z.namelist() if n.startswith("sources/") or n == "modelDescription.xml"):
+                h.update(f"{u.name}/{n}\0".encode() + z.read(n) + b"\1")
+    return h.hexdigest()[:16]
+
+
+def stored_results() -> dict:
+    """case -> {"time", "values", "columns", "counters", "fmu_sources"} of the old master."""
+    with np.load(STORED) as z:
+        meta = json.loads(str(z["meta"]))
+        return {m["case"]: dict(m, time=z[f"time_{i}"], values=z[f"values_{i}"]) for i, m in enumerate(meta)}
 
 
 def _me(unit):
@@ -83,36 +103,18 @@ for _s, _e in [("jacobi", "linear"), ("newton", "linear"), ("iterative", "linear
                                                           dict(step=2e-3)))
 
 
-def legacy_master():
-    """The master of commit 59795fa as module ``fmugen.cosim._master_59795fa``."""
-    import importlib.util
-    import sys
-    from pathlib import Path
-
-    name = "fmugen.cosim._master_59795fa"
-    if name not in sys.modules:
-        path = Path(__file__).parent / "legacy" / "master_59795fa.py"
-        spec = importlib.util.spec_from_file_location(name, path)
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules[name] = mod
-        spec.loader.exec_module(mod)
-    return sys.modules[name]
-
-
-def run_case(name, legacy=False):
+def run_case(name):
+    """The case run by today's master, with the old master's defaults; returns (result, its system)."""
     from fmugen.cosim import Master
 
     system, scheme, ext, opts = CASES[name]()
-    if legacy:
-        Master = legacy_master().Master
-    else:
-        opts.setdefault("estimate", False)  # its shadow steps add FMU calls (the trajectory: test_cosim_estimate)
-        if scheme in ("iterative", "newton"):
-            opts.setdefault("coupling_tol", 1e-8)  # the old master's default (now derived from the FMUs' rtol)
+    opts.setdefault("estimate", False)  # its shadow steps add FMU calls (the trajectory: test_cosim_estimate)
+    if scheme in ("iterative", "newton"):
+        opts.setdefault("coupling_tol", 1e-8)  # the old master's default (now derived from the FMUs' rtol)
     workers = opts.pop("workers", 1)
     with Master(system, scheme, ext, workers=workers) as m:
         if name.startswith("no-interp"):
             chain = next(u for u in m.units if u.name == "chain")
             chain.can_interpolate = False
             m.no_interp[chain.in_sl] = True
-        return m.run(**opts)
+        return m.run(**opts), system
