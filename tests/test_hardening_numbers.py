@@ -248,3 +248,14 @@ def test_a_robot_sweep_point_names_only_the_swept_inertia():
         assert msg.startswith("refused: point 5: arm: body 2 (upper_arm_link): not a realisable rigid body with "
                               "I_upper_arm_link_zz = 1.0: ") and "triangle inequality" in msg
         assert "m_shoulder_link" not in msg
+
+
+def test_urdf_values_whose_mass_matrix_overflows_are_refused(tmp_path):
+    """Each number a double, their product not: a centre of mass 1e200 m off gives m c^2 = inf (the
+    reader's composite-body check computed with it, under numpy overflow warnings, and accepted)."""
+    p = tmp_path / "one.urdf"
+    p.write_text(URDF.format(mass="2.0", xyz="0 0 0.3").replace('<origin xyz="0.1 0 0"/>', '<origin xyz="1e200 0 0"/>'))
+    with pytest.raises(RobotFileError) as exc:
+        load_urdf(p)
+    assert str(exc.value) == f"{p}: the mass matrix overflows double precision (at q = 0): masses, lengths or " \
+                             f"inertias are too large"

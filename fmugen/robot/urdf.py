@@ -456,6 +456,12 @@ class _Reader:
         n = len(bodies)
         num = lambda e: float(sp.sympify(e).xreplace(values))  # noqa: E731
         comp = [None] * n  # (m, first moment h, inertia about the body origin) of the subtree, body frame
+        with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused below, by name
+            self._composite(bodies, num, comp)
+        self._check_diagonal(bodies, num, comp)
+
+    def _composite(self, bodies, num, comp) -> None:
+        n = len(bodies)
         for i in range(n - 1, -1, -1):
             b = bodies[i]
             m = num(b.mass)
@@ -474,11 +480,20 @@ class _Reader:
                 I = I + R @ Ik @ R.T + mk * (p @ p * np.eye(3) - np.outer(p, p)) \
                     + 2 * (p @ hr) * np.eye(3) - np.outer(p, hr) - np.outer(hr, p)
             comp[i] = (m, h, I)
+
+    def _check_diagonal(self, bodies, num, comp) -> None:
         scale = max([abs(c[0]) for c in comp] + [np.abs(c[2]).max() for c in comp] + [1e-300])
+        if not all(np.isfinite(c[0]) and np.all(np.isfinite(c[1])) and np.all(np.isfinite(c[2])) for c in comp):
+            raise RobotFileError(f"{self.file}: the mass matrix overflows double precision (at q = 0): masses, "
+                                 f"lengths or inertias are too large")
         for i, b in enumerate(bodies):
             k = np.array([num(x) for x in b.axis])
             m, h, I = comp[i]
-            mii = (k @ I @ k if b.joint == REVOLUTE else m) + num(b.rotor_inertia)
+            with np.errstate(over="ignore", invalid="ignore"):
+                mii = (k @ I @ k if b.joint == REVOLUTE else m) + num(b.rotor_inertia)
+            if not math.isfinite(mii):
+                raise RobotFileError(f"{self.file}: the mass matrix overflows double precision (at q = 0): "
+                                     f"masses, lengths or inertias are too large")
             if mii <= 1e-12 * scale:
                 unit = "kg.m2" if b.joint == REVOLUTE else "kg"
                 raise self._err(f"joint {b.joint_name!r}", "moves no mass and no inertia about its axis (the links "
