@@ -87,6 +87,7 @@ class Progress:
 
     def __init__(self, total: int, done: int, stream=None, enabled: bool = True):
         self.total, self.done, self.failed, self.ran = total, done, 0, 0
+        self.refused = 0  # of the failed: refused by the value checks, never run
         self.stream = stream or sys.stderr
         self.enabled = enabled
         self.tty = enabled and getattr(self.stream, "isatty", lambda: False)()
@@ -98,13 +99,15 @@ class Progress:
         rate = self.ran / dt if dt > 0 else 0.0
         left = self.total - self.done
         eta = f"{left / rate:.0f} s" if rate > 0 else "-"
-        return f"sweep: {self.done}/{self.total} done ({self.failed} failed), {rate:.3g} runs/s, ETA {eta}"
+        bad = f"{self.failed - self.refused} failed, {self.refused} refused" if self.refused else f"{self.failed} failed"
+        return f"sweep: {self.done}/{self.total} done ({bad}), {rate:.3g} runs/s, ETA {eta}"
 
     def update(self, row: Optional[dict] = None) -> None:
         if row is not None:
             self.done += 1
             self.ran += 1
             self.failed += row["status"] != "ok"
+            self.refused += row["status"] == "refused"
         if not self.enabled:
             return
         if self.tty:
