@@ -315,6 +315,17 @@ def robot_value_problem(robot, values: Mapping[str, float], named=None) -> Optio
         x = num(g, new)
         if x is not None and not math.isfinite(x):
             return f"gravity[{k}] = {g} is not finite with {changed}"
+    if complete and not dh and robot.bodies:  # a robot written as joints: M's diagonal by composite bodies
+        from .robot.checks import RobotFileError
+        from .robot.urdf import _Reader
+
+        source = robot.source or "robot"
+        try:
+            _Reader(source)._check_moves_something(robot.bodies, new)
+        except RobotFileError as exc:
+            return f"{str(exc).removeprefix(source + ': ')} with {changed}"
+        except (TypeError, ValueError):  # a quantity left symbolic: not judged here (the build judges it)
+            pass
     if complete and data:
         found = singular_joint(data, robot.convention == MODIFIED, payload)
         if found is not None:

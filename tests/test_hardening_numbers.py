@@ -259,3 +259,18 @@ def test_urdf_values_whose_mass_matrix_overflows_are_refused(tmp_path):
         load_urdf(p)
     assert str(exc.value) == f"{p}: the mass matrix overflows double precision (at q = 0): masses, lengths or " \
                              f"inertias are too large"
+
+
+def test_a_urdf_robot_value_that_leaves_a_joint_moving_nothing_is_refused():
+    """The UR5's last link has its centre of mass on the wrist_3 axis: with its inertia set to zero (a point
+    mass, realisable) the joint moves nothing, M_66 = 0 -- refused as the file's reader refuses it."""
+    import fmugen
+    from fmugen.values import robot_value_problem
+
+    robot = fmugen.load_robot(ROOT / "robots" / "ur5.urdf").robot
+    zero = {f"I_wrist_3_link_{a}": 0.0 for a in ("xx", "yy", "zz")}
+    msg = robot_value_problem(robot, zero)
+    assert msg.startswith("joint 'wrist_3_joint': moves no mass and no inertia about its axis") and \
+        "the mass matrix is singular" in msg and msg.endswith("with I_wrist_3_link_xx = 0.0, "
+                                                              "I_wrist_3_link_yy = 0.0, I_wrist_3_link_zz = 0.0")
+    assert robot_value_problem(robot, {"I_wrist_3_link_yy": 0.02}) is None

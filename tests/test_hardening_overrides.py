@@ -133,7 +133,7 @@ def test_a_sweep_point_failing_the_checks_is_refused_not_run(tmp_path):
 
     plan = SweepPlan(SPLIT, ["joint.J", "actuator.V_t"], tmp_path / "fmus")
     plan.check_point(0, {"joint.J": 0.4, "actuator.V_t": 1e-4})
-    with pytest.raises(PointRefused, match=r"refused: joint.J = -0.2 is not > 0"):
+    with pytest.raises(PointRefused, match=r"refused: point 1: joint.J = -0.2 is not > 0"):
         plan.task(1, "k", {"joint.J": -0.2, "actuator.V_t": 1e-4})
     with pytest.raises(PointRefused, match=r"actuator.V_t = 0.0"):
         plan.check_point(2, {"joint.J": 0.4, "actuator.V_t": 0.0})

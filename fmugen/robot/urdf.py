@@ -497,7 +497,8 @@ class _Reader:
             if mii <= 1e-12 * scale:
                 unit = "kg.m2" if b.joint == REVOLUTE else "kg"
                 raise self._err(f"joint {b.joint_name!r}", "moves no mass and no inertia about its axis (the links "
-                                "it carries have no <inertial>): the mass matrix is singular; give them inertials, "
+                                "it carries have no <inertial>, or no mass off its axis and no inertia about it): "
+                                "the mass matrix is singular; give them inertials, "
                                 "make the joint fixed, or give it a rotor (armature) inertia Ia_<joint> "
                                 f"[{unit}]: armature = {{ {b.joint_name} = 1e-3 }} in a scene's robot instance, "
                                 f"fmugen.load_robot(..., armature={{{b.joint_name!r}: 1e-3}}) "
