@@ -2,9 +2,9 @@
 
 FMI 2.0 names three 64-bit platform folders under ``binaries/``: ``linux64``,
 ``win64`` and ``darwin64`` (FMI 2.0.4, section 2.3, "binaries").  It has no
-folder of its own for arm64 macOS: the practice (the Modelica Association's
-Reference FMUs, fmpy) is a universal Mach-O in ``darwin64`` that holds an
-x86_64 and an arm64 slice, and the loader picks its slice.  Linux on aarch64
+folder of its own for arm64 macOS: importers there look in ``darwin64`` (fmpy
+names an arm64 Mac's platform so), hence a universal Mach-O in ``darwin64``
+that holds an x86_64 and an arm64 slice, of which the loader picks its own.  Linux on aarch64
 has no FMI 2.0 name either -- fmpy on such a machine looks in ``linux64``,
 where the x86_64 library is -- so it is not offered (FMI 3.0 has
 ``aarch64-linux``).
@@ -157,7 +157,7 @@ def resolve(platforms: Optional[Sequence[str]], cc: str = "cc", where: str = "pl
             link = ("-Wl,-exported_symbols_list,{exports}",
                     f"-Wl,-install_name,@rpath/{model_identifier}.dylib")
             # the oldest macOS each slice runs on (zig's default: its newest SDK, macOS 15, which older
-            # dyld versions refuse): 10.13 as the Reference FMUs, 11.0 the first on arm64
+            # dyld versions refuse): 10.13 on Intel, 11.0 (the first macOS on arm64) on Apple silicon
             slices = tuple(Slice(arch, argv, exe, ("-target", triple, "-fvisibility=hidden"), link)
                            for arch, triple in (("x86_64", "x86_64-macos.10.13"), ("arm64", "aarch64-macos.11.0")))
         else:  # linux64 from another host: not offered (a Linux machine builds it)
