@@ -38,21 +38,6 @@ static double dot6(const double *a, const double *b)
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4] + a[5] * b[5];
 }
 
-/* sum_k a[k] b[k], k < len, in four partial sums (independent chains of additions) */
-static double dot_n(const double *a, const double *b, int len)
-{
-    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
-    int k = 0;
-    for (; k + 4 <= len; k += 4) {
-        s0 += a[k] * b[k];
-        s1 += a[k + 1] * b[k + 1];
-        s2 += a[k + 2] * b[k + 2];
-        s3 += a[k + 3] * b[k + 3];
-    }
-    for (; k < len; k++) s0 += a[k] * b[k];
-    return (s0 + s1) + (s2 + s3);
-}
-
 /* o = m x y (motion cross motion) */
 static void crm(const double *m, const double *y, double *o)
 {
@@ -351,38 +336,59 @@ static void add_K(double *K, const double *I, const double *vel)
         }
 }
 
-/* Cholesky A = L L^T in place (lower triangle), then the full symmetric
- * inverse into Minv (n x n): L^{-1} by forward substitution into T, and
- * Minv = L^{-T} L^{-1}, the lower triangle computed and mirrored. */
-static int spd_inverse(int n, double *A, double *T, double *Minv)
+/* M^-1 of a tree from the factorisation M = L^T L without fill-in (Featherstone, "Efficient
+ * factorization of the joint-space inertia matrix for branched kinematic trees", IJRR 2005):
+ * with bodies numbered parents first, L[i][j] is nonzero only for the joints j on the path from
+ * i to the base, and so is X = L^-1; then M^-1 = X X^T, M^-1[a][b] = sum over the joints k on
+ * both paths of X[a][k] X[b][k].  Costs: sum d_i^2 / 2 for L and for X, nb per joint on a path
+ * for the product (d_i the depth of i, nb its block's size), against nb^3 / 2 for a dense
+ * Cholesky factor and inverse.  M (n x n, the entries M[i][j] of j on i's path) is overwritten
+ * by L; X^T is kept block by block like M^-1 (Mb): row k at Xb + off[k], entry b - lo[k] =
+ * X[b][k]; both blocks' rows are full (nb entries, the zeros written). */
+static int tree_minv(int n, const int *jt, double *M, const int *lo, const int *hi, const int *off, double *Xb,
+                     double *Mb)
 {
-    for (int j = 0; j < n; j++) {
-        double d = A[j * n + j] - dot_n(A + j * n, A + j * n, j);
+    for (int k = n - 1; k >= 0; k--) { /* L^T L: leaves first */
+        double d = M[(size_t)k * n + k];
         if (!(d > 0.0) || !isfinite(d)) return FMUGEN_NOT_POSITIVE_DEFINITE;
         d = sqrt(d);
-        A[j * n + j] = d;
-        for (int i = j + 1; i < n; i++) A[i * n + j] = (A[i * n + j] - dot_n(A + i * n, A + j * n, j)) / d;
-    }
-    for (int i = 0; i < n; i++) { /* row i of L^{-1}: T[i][j], j <= i */
-        double *Ti = T + (size_t)i * n;
-        double inv = 1.0 / A[i * n + i];
-        for (int j = 0; j < i; j++) Ti[j] = 0.0;
-        for (int m = 0; m < i; m++) { /* Ti -= L[i][m] T[m] (row m of T is zero beyond m) */
-            double l = A[i * n + m];
-            const double *Tm = T + (size_t)m * n;
-            for (int j = 0; j <= m; j++) Ti[j] -= l * Tm[j];
+        M[(size_t)k * n + k] = d;
+        for (int i = jt[n + k]; i >= 0; i = jt[n + i]) M[(size_t)k * n + i] /= d;
+        for (int i = jt[n + k]; i >= 0; i = jt[n + i]) {
+            double lki = M[(size_t)k * n + i];
+            for (int j = i; j >= 0; j = jt[n + j]) M[(size_t)i * n + j] -= lki * M[(size_t)k * n + j];
         }
-        for (int j = 0; j < i; j++) Ti[j] *= inv;
-        Ti[i] = inv;
     }
-    /* Minv[i][j] = sum_{k >= i} T[k][i] T[k][j] (j <= i): dot products of the
-     * rows of T^T (stored in A, whose factor is no longer needed) */
-    for (int i = 0; i < n; i++)
-        for (int k = i; k < n; k++) A[(size_t)i * n + k] = T[(size_t)k * n + i];
-    for (int i = 0; i < n; i++)
-        for (int j = 0; j <= i; j++)
-            Minv[(size_t)i * n + j] = Minv[(size_t)j * n + i] =
-                dot_n(A + (size_t)i * n + i, A + (size_t)j * n + i, n - i);
+    for (int i = 0; i < n; i++) { /* the rows of every block of X^T, then X = L^-1 row by row */
+        if (lo[i] == i) memset(Xb + off[i], 0, (size_t)(hi[i] - i) * (hi[i] - i) * sizeof(double));
+    }
+    for (int i = 0; i < n; i++) {
+        const double *Li = M + (size_t)i * n;
+        double inv = 1.0 / Li[i];
+        int l = lo[i];
+        Xb[off[i] + i - l] = inv;
+        /* X[i][k] = -(sum over j on the path from lambda(i) up to k of L[i][j] X[j][k]) / L[i][i] */
+        for (int k = jt[n + i]; k >= 0; k = jt[n + k]) {
+            double s = 0.0;
+            for (int j = jt[n + i];; j = jt[n + j]) {
+                s += Li[j] * Xb[off[k] + j - l];
+                if (j == k) break;
+            }
+            Xb[off[k] + i - l] = -s * inv;
+        }
+    }
+    for (int a = 0; a < n; a++) { /* row a of M^-1 = sum over k on a's path of X[a][k] (row k of X^T) */
+        int l = lo[a], nb = hi[a] - l;
+        double *restrict row = Mb + off[a];
+        const double *restrict xk = Xb + off[a];
+        double xa = xk[a - l];
+        for (int r = 0; r < nb; r++) row[r] = xa * xk[r];
+        for (int k = jt[n + a]; k >= 0; k = jt[n + k]) {
+            const double *restrict xr = Xb + off[k];
+            double x = xr[a - l];
+            for (int r = 0; r < nb; r++) row[r] += x * xr[r];
+        }
+    }
     return FMUGEN_OK;
 }
 
@@ -528,6 +534,21 @@ static void root_blocks(int n, const int *jt, int *lo, int *hi)
     }
 }
 
+/* off[i]: where row i of its block starts in a block-by-block n x n store (blocks one after
+ * another, each nb x nb) */
+static void block_offsets(int n, const int *lo, const int *hi, int *off)
+{
+    for (int i = 0, o = 0; i < n; i++) {
+        int l = lo[i], nb = hi[i] - l;
+        if (i == l) {
+            off[i] = o;
+            o += nb * nb;
+        } else {
+            off[i] = off[l] + (i - l) * nb;
+        }
+    }
+}
+
 int fmugen_chain_fd_jacobian(int n, const int *jt, const double *lc, const double *g, const double *q,
                              const double *qd, const double *tau, int ne, const int *ext_link,
                              const double *ext, double *qdd, double *dqdd, double *dp_ee, double *work)
@@ -539,7 +560,7 @@ int fmugen_chain_fd_jacobian(int n, const int *jt, const double *lc, const doubl
     double *c = Q + 6 * n, *pA = c + 6 * n, *U = pA + 6 * n, *D = U + 6 * n, *u = D + n, *acc = u + n;
     double *fx = acc + 6 * n, *cft = fx + 6 * n, *ev = cft + 9 * n, *d = ev + 3 * n;
     double *ICn = d + n, *Kn = ICn + SI_N * n, *HCn = Kn + 36 * n, *Fn = HCn + 6 * n, *XS = Fn + 6 * n;
-    double *M = XS + 16 * n, *A = M + nn, *T = A + nn, *Mb = T + nn, *Xq = Mb + nn, *Xd = Xq + nn;
+    double *M = XS + 16 * n, *A = M + nn, *Mb = A + nn, *Xq = Mb + nn, *Xd = Xq + nn;
     double *Hn = Xd + nn, *Gb = Hn + 6 * nn;
     int *gb = (int *)(Gb + 15 * nn), *freeb = gb + n, *path = freeb + n, *lo = path + n, *hi = lo + n;
     int *off = hi + n;
@@ -553,19 +574,9 @@ int fmugen_chain_fd_jacobian(int n, const int *jt, const double *lc, const doubl
                 M, NULL);
     /* M^-1 block by block: row j of block [lo, hi) at Mb + off[j], its nb entries contiguous */
     root_blocks(n, jt, lo, hi);
-    for (int i = 0, o = 0; i < n; i++) {
-        int l = lo[i], nb = hi[i] - l;
-        if (i != l) {
-            off[i] = off[l] + (i - l) * nb;
-            continue;
-        }
-        for (int r = 0; r < nb; r++)
-            for (int k = 0; k <= r; k++) A[(size_t)r * nb + k] = M[(size_t)(l + r) * n + l + k];
-        st = spd_inverse(nb, A, T, Mb + o);
-        if (st != FMUGEN_OK) return st;
-        off[i] = o;
-        o += nb * nb;
-    }
+    block_offsets(n, lo, hi, off);
+    st = tree_minv(n, jt, M, lo, hi, off, A, Mb);
+    if (st != FMUGEN_OK) return st;
     /* dqdd/dq = -Minv dID/dq, dqdd/dqd = -Minv dID/dqd, column by column, without forming dID:
      *   dID[i][j] (j on the path from i to the base) = -al_i . [w_j; dv_j]  (q),
      *                                                  al_i . [u_j; S_j] + b_j delta_ij  (qd)
