@@ -296,10 +296,6 @@ def make_report(system: CosimSystem, problem: ReferenceProblem, steps: Sequence[
     return rep
 
 
-def _h_label(h: float) -> str:
-    return f"H {h * 1e3:.3g} ms" if h < 1 else f"H {h:.3g} s"
-
-
 def write_report(rep: Report, out_dir) -> dict:
     """report.txt, report.csv and work_precision.png in ``out_dir``; returns their paths."""
     out = Path(out_dir)
@@ -313,52 +309,155 @@ def write_report(rep: Report, out_dir) -> dict:
         for r in rep.rows:
             w.writerow({"system": rep.system, "measure": rep.measure, "reference_error": rep.reference_error,
                         **r.as_dict()})
+    plot_work_precision(rep, paths["plot"])
+    return paths
+
+
+# --------------------------------------------------------------------------
+# the work-precision plot
+# --------------------------------------------------------------------------
+#: the look of each coupling scheme in every plot: a marker and a colour family per scheme (ColorBrewer
+#: sequential ramps, darker for higher extrapolation orders), a line style per extrapolation
+SCHEME_MARKERS = {"jacobi": "o", "gauss-seidel": "s", "iterative": "^", "newton": "D"}
+SCHEME_COLOURS = {
+    "jacobi": ("#6baed6", "#3182bd", "#08519c", "#08306b"),  # blues
+    "gauss-seidel": ("#74c476", "#31a354", "#006d2c", "#00441b"),  # greens
+    "iterative": ("#9e9ac8", "#756bb1", "#54278f", "#3f007d"),  # purples
+    "newton": ("#fd8d3c", "#e6550d", "#a63603", "#7f2704"),  # oranges
+}
+EXTRAPOLATION_ORDER = ("hold", "linear", "quadratic", "cubic")
+EXTRAPOLATION_LINES = {"hold": "-", "linear": "--", "quadratic": "-.", "cubic": ":"}
+_OTHER_COLOURS = ("#000000", "#8c510a", "#c51b7d", "#666666", "#01665e")  # the monolithic FMU, then the rest
+_OTHER_MARKERS = ("*", "P", "X", "v", "h")
+
+
+def scheme_style(label: str, others: Optional[list] = None) -> dict:
+    """Matplotlib style of a report row label: ``scheme/extrapolation`` (a trailing internal-solver setting,
+    as in ``newton/cubic rodas3 1e-10``, keeps the scheme's colour and marker, hollow), anything else
+    (``monolithic FMU``) black stars first; ``others`` lists the labels of that kind seen so far."""
+    head, _, rest = label.partition(" ")
+    scheme, _, ext = head.partition("/")
+    if scheme in SCHEME_MARKERS and ext in EXTRAPOLATION_ORDER:
+        style = {"color": SCHEME_COLOURS[scheme][EXTRAPOLATION_ORDER.index(ext)],
+                 "marker": SCHEME_MARKERS[scheme], "linestyle": EXTRAPOLATION_LINES[ext]}
+        if rest:
+            style["markerfacecolor"] = "none"
+        return style
+    others = others if others is not None else []
+    if label not in others:
+        others.append(label)
+    k = others.index(label)
+    return {"color": _OTHER_COLOURS[k % len(_OTHER_COLOURS)], "marker": _OTHER_MARKERS[k % len(_OTHER_MARKERS)],
+            "linestyle": "-"}
+
+
+def _h_ms(h: float) -> str:
+    return f"{h * 1e3:.3g}"
+
+
+class _Labels:
+    """Small text labels next to markers, placed where they overlap no label placed before: the first of a few
+    offsets that is free, or none (a point among others of its curve keeps its marker and loses its number)."""
+
+    OFFSETS = ((4, 2), (4, -9), (-4, 2), (-4, -9), (0, 5), (0, -12))  # points, right/left of the marker
+
+    def __init__(self, fig):
+        self.fig, self.boxes = fig, []
+
+    def add(self, ax, x, y, text, colour, fontsize=6.0, offsets=OFFSETS) -> None:
+        px, py = ax.transData.transform((x, y)) * 72.0 / self.fig.dpi  # points on the figure
+        w, h = 0.6 * fontsize * len(text), fontsize
+        for dx, dy in offsets:
+            x0 = px + dx if dx >= 0 else px + dx - w
+            box = (x0, py + dy, x0 + w, py + dy + h)
+            if all(box[2] < b[0] or box[0] > b[2] or box[3] < b[1] or box[1] > b[3] for b in self.boxes):
+                self.boxes.append(box)
+                ax.annotate(text, (x, y), textcoords="offset points", xytext=(dx, dy), fontsize=fontsize,
+                            color=colour, ha="left" if dx >= 0 else "right")
+                return
+
+
+def plot_work_precision(rep: Report, path) -> None:
+    """Max error at the communication points against median wall time, log-log, one curve per setting in its
+    fixed style (:func:`scheme_style`), points numbered with their macro step H in ms where there is room.
+    Runs that stopped (failed) go to a strip below, one row per setting at the wall time they ran, each
+    numbered, the steps listed at the row's end; the target and the reference's limit are labelled lines; the
+    legend sits right of the axes."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(8.5, 6.0))
-    measured = [r.err_linf for r in rep.rows if r.err_linf == r.err_linf and r.err_linf > 0]
-    # runs that did not end ok get a band of their own above every measured error, at the wall time
-    # they ran (up to their failure): they are settings tried, and where each scheme stops working
-    top = max(measured + [rep.target, REFUSE_FACTOR * rep.reference_error])
-    band = top * 30.0
-    any_failed = False
-    for lab in dict.fromkeys(r.label for r in rep.rows):
+    labels = list(dict.fromkeys(r.label for r in rep.rows))
+    others: list = []
+    styles = {lab: scheme_style(lab, others) for lab in labels}
+    failed = {lab: [r for r in rep.rows if r.label == lab and r.status != "ok"
+                    and not (r.err_linf == r.err_linf and r.wall_median == r.wall_median)
+                    and r.wall_first == r.wall_first and r.wall_first > 0] for lab in labels}
+    failed = {lab: rs for lab, rs in failed.items() if rs}
+    strip = 0.4 * len(failed) + 0.5 if failed else 0.0
+    fig = plt.figure(figsize=(11.0, 6.5 + strip))
+    grid = fig.add_gridspec(2 if failed else 1, 1, height_ratios=[6.5, strip] if failed else [1], hspace=0.08)
+    ax = fig.add_subplot(grid[0])
+    points, rings = [], []
+    for lab in labels:
+        st = styles[lab]
         rows = [r for r in rep.rows if r.label == lab]
         pts = [(r.wall_median, r.err_linf, r.step) for r in rows
                if r.status == "ok" and r.err_linf == r.err_linf and r.err_linf > 0]
-        (line,) = ax.loglog([p[0] for p in pts], [p[1] for p in pts], "o-", label=lab, ms=4)
-        colour = line.get_color()
-        for w, e, h in pts:
-            ax.annotate(_h_label(h), (w, e), textcoords="offset points", xytext=(3, 3), fontsize=6, color=colour)
-        for r in rows:
-            if r.status == "ok":
-                continue
-            if r.err_linf == r.err_linf and r.err_linf > 0 and r.wall_median == r.wall_median:
-                # measured but not ok (unreliable): where it landed, hollow
-                ax.loglog([r.wall_median], [r.err_linf], "o", mfc="none", mec=colour, ms=8)
-                ax.annotate(f"{_h_label(r.step)} {r.status}", (r.wall_median, r.err_linf), textcoords="offset points",
-                            xytext=(3, -9), fontsize=6, color=colour)
-            elif r.wall_first == r.wall_first and r.wall_first > 0:
-                any_failed = True
-                ax.loglog([r.wall_first], [band], "x", color=colour, ms=7, mew=1.5)
-                ax.annotate(_h_label(r.step), (r.wall_first, band), textcoords="offset points", xytext=(3, 3),
-                            fontsize=6, color=colour, rotation=45)
-    if any_failed:
-        ax.axhline(band / 3.0, color="grey", lw=0.6)
-        ax.annotate("failed (x, at the wall time to the failure)", (0.01, band / 2.2), xycoords=("axes fraction", "data"),
-                    fontsize=7, color="grey")
-    ax.axhline(REFUSE_FACTOR * rep.reference_error, color="grey", ls=":",
-               label=f"100 x reference error estimate ({rep.reference_error:.1g})")
-    ax.axhline(rep.target, color="k", ls="--", lw=0.8, label=f"target {rep.target:g}")
-    ax.set_xlabel("wall time [s] (median)")
+        ax.loglog([p[0] for p in pts], [p[1] for p in pts], label=lab, ms=5, lw=1.2, **st)
+        points += [(w, e, _h_ms(h), st["color"]) for w, e, h in pts]
+        for r in rows:  # measured but not ok (unreliable): where it landed, a large hollow ring
+            if r.status != "ok" and r.err_linf == r.err_linf and r.err_linf > 0 and r.wall_median == r.wall_median:
+                ax.loglog([r.wall_median], [r.err_linf], "o", mfc="none", mec=st["color"], ms=10, mew=1.2)
+                rings.append((r.wall_median, r.err_linf, f"{_h_ms(r.step)} {r.status}", st["color"]))
+    limit = REFUSE_FACTOR * rep.reference_error
+    for y, text, ls, colour in ((rep.target, f"target {rep.target:g}", "--", "k"),
+                                (limit, f"below: not measured (100 x the reference's error estimate "
+                                        f"{rep.reference_error:.1g})", ":", "grey")):
+        ax.axhline(y, color=colour, ls=ls, lw=0.9)
+        ax.annotate(text, (0.995, y), xycoords=("axes fraction", "data"), textcoords="offset points",
+                    xytext=(0, 2), ha="right", va="bottom", fontsize=7, color=colour)
     ax.set_ylabel(f"max error at communication points, {rep.measure}")
-    ax.set_title(f"{rep.system}: error against run time")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(paths["plot"], dpi=120)
+    ax.set_title(f"{rep.system}: error against run time (numbers at the points: macro step H in ms)")
+    ax.grid(True, which="major", alpha=0.35)
+    ax.grid(True, which="minor", alpha=0.1)
+    handles, names = ax.get_legend_handles_labels()
+    ax.legend(handles, names, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, borderaxespad=0.0,
+              title="scheme / inputs", title_fontsize=8)
+    xlabel = "wall time [s] (median of the timed runs; failed runs: up to the failure)"
+    axf = None
+    if failed:
+        axf = fig.add_subplot(grid[1], sharex=ax)
+        rows_f = list(failed)
+        for i, lab in enumerate(rows_f):
+            st = styles[lab]
+            walls = [r.wall_first for r in failed[lab]]
+            axf.semilogx(walls, [i] * len(walls), linestyle="none", marker="x", color=st["color"], ms=7, mew=1.5)
+            axf.annotate(f"failed at H = {', '.join(_h_ms(r.step) for r in failed[lab])} ms", (1.01, i),
+                         xycoords=("axes fraction", "data"), va="center", fontsize=7, color=st["color"])
+        axf.set_yticks(range(len(rows_f)), rows_f, fontsize=7)
+        for tick, lab in zip(axf.get_yticklabels(), rows_f):
+            tick.set_color(styles[lab]["color"])
+        axf.set_ylim(len(rows_f) - 0.5, -0.5)
+        axf.set_title("failed (x: the run stopped with a failure, at the wall time it ran)", fontsize=8, loc="left")
+        axf.grid(True, axis="x", which="major", alpha=0.35)
+        axf.grid(True, axis="x", which="minor", alpha=0.1)
+        plt.setp(ax.get_xticklabels(), visible=False)
+        axf.set_xlabel(xlabel)
+    else:
+        ax.set_xlabel(xlabel)
+    # numbers last, on the final limits, each where it overlaps none placed before (rings' verdicts first)
+    fig.canvas.draw()
+    ax.set_xlim(ax.get_xlim())
+    ax.set_ylim(ax.get_ylim())
+    placer = _Labels(fig)
+    for x, y, text, colour in rings + points:
+        placer.add(ax, x, y, text, colour)
+    if axf is not None:
+        for i, lab in enumerate(failed):
+            for r in failed[lab]:
+                placer.add(axf, r.wall_first, i, _h_ms(r.step), styles[lab]["color"], 5.5,
+                           offsets=((0, 4), (0, -10), (5, 4), (5, -10), (-5, 4), (-5, -10)))
+    fig.savefig(path, dpi=120, bbox_inches="tight")
     plt.close(fig)
-    return paths
