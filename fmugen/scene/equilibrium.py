@@ -95,8 +95,10 @@ def given_state(scene, model, x, values) -> InitialState:
         ev = ModelEvaluator(model)
         with np.errstate(all="ignore"):
             f = np.asarray(ev.f(t0, x, u), dtype=float)
-    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
-        init.note = f"stability not judged: the model cannot be evaluated at the start values ({exc})"
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError, KeyError, TypeError, NotImplementedError,
+            RecursionError) as exc:  # a check, not a gate: the build goes on and says why it was not made
+        init.note = (f"stability not judged: the model cannot be evaluated at the start values "
+                     f"({type(exc).__name__}: {str(exc).splitlines()[0][:120] if str(exc) else ''})")
         return init
     if not np.all(np.isfinite(f)):
         bad = names[int(np.argmax(~np.isfinite(f)))]
@@ -112,8 +114,12 @@ def given_state(scene, model, x, values) -> InitialState:
         init.note = ("the start values are a state of rest; stability not judged: the model's sampled "
                      "(discrete) states close loops a continuous linearisation holds fixed")
         return init
-    with np.errstate(all="ignore"):
-        A = ev.jacobians(t0, x, u)[0]
+    try:
+        with np.errstate(all="ignore"):
+            A = ev.jacobians(t0, x, u)[0]
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError, TypeError) as exc:
+        init.note = f"stability not judged: no Jacobian at the start values ({type(exc).__name__})"
+        return init
     init.unstable = unstable_modes(A, names, nom)
     if not init.unstable:
         init.note = "the start values are a state of rest with no growing mode (linearised there)"
