@@ -346,7 +346,7 @@ static void add_K(double *K, const double *I, const double *vel)
  * by L; X^T is kept block by block like M^-1 (Mb): row k at Xb + off[k], entry b - lo[k] =
  * X[b][k]; both blocks' rows are full (nb entries, the zeros written). */
 static int tree_minv(int n, const int *jt, double *M, const int *lo, const int *hi, const int *off, double *Xb,
-                     double *Mb)
+                     double *Mb, int *end)
 {
     for (int k = n - 1; k >= 0; k--) { /* L^T L: leaves first */
         double d = M[(size_t)k * n + k];
@@ -377,17 +377,24 @@ static int tree_minv(int n, const int *jt, double *M, const int *lo, const int *
             Xb[off[k] + i - l] = -s * inv;
         }
     }
-    for (int a = 0; a < n; a++) { /* row a of M^-1 = sum over k on a's path of X[a][k] (row k of X^T) */
-        int l = lo[a], nb = hi[a] - l;
+    /* X[b][k] is nonzero only for b in the subtree of k, whose indices lie in [k, end[k]) (numbered
+     * parents first; a subtree need not be contiguous, but the others' entries there are zeros) */
+    for (int k = 0; k < n; k++) end[k] = k + 1;
+    for (int k = n - 1; k >= 0; k--)
+        if (jt[n + k] >= 0 && end[jt[n + k]] < end[k]) end[jt[n + k]] = end[k];
+    for (int a = 0; a < n; a++) {
+        /* the lower part of row a, M^-1[a][r] (r <= a) = sum over k on a's path of X[a][k] X[r][k],
+         * then mirrored into column a of the rows before */
+        int l = lo[a];
         double *restrict row = Mb + off[a];
-        const double *restrict xk = Xb + off[a];
-        double xa = xk[a - l];
-        for (int r = 0; r < nb; r++) row[r] = xa * xk[r];
-        for (int k = jt[n + a]; k >= 0; k = jt[n + k]) {
+        for (int r = l; r <= a; r++) row[r - l] = 0.0;
+        for (int k = a; k >= 0; k = jt[n + k]) {
             const double *restrict xr = Xb + off[k];
             double x = xr[a - l];
-            for (int r = 0; r < nb; r++) row[r] += x * xr[r];
+            int top = end[k] < a + 1 ? end[k] : a + 1;
+            for (int r = k; r < top; r++) row[r - l] += x * xr[r - l];
         }
+        for (int r = l; r < a; r++) Mb[off[r] + a - l] = row[r - l];
     }
     return FMUGEN_OK;
 }
@@ -575,7 +582,7 @@ int fmugen_chain_fd_jacobian(int n, const int *jt, const double *lc, const doubl
     /* M^-1 block by block: row j of block [lo, hi) at Mb + off[j], its nb entries contiguous */
     root_blocks(n, jt, lo, hi);
     block_offsets(n, lo, hi, off);
-    st = tree_minv(n, jt, M, lo, hi, off, A, Mb);
+    st = tree_minv(n, jt, M, lo, hi, off, A, Mb, off + 2 * n); /* scratch past usesG (below) */
     if (st != FMUGEN_OK) return st;
     /* dqdd/dq = -Minv dID/dq, dqdd/dqd = -Minv dID/dqd, column by column, without forming dID:
      *   dID[i][j] (j on the path from i to the base) = -al_i . [w_j; dv_j]  (q),
@@ -784,6 +791,56 @@ int fmugen_chain_fd_jacobian(int n, const int *jt, const double *lc, const doubl
             for (int r = 0; r < 3; r++) dp_ee[r * n + j] = Sj[3 + r] + t[r];
         }
     }
+    return FMUGEN_OK;
+}
+
+/* M(q) by composite rigid bodies (CRBA): IC_i = I_i + sum over i's children of IC_c, and
+ * M[i][j] = S_j . IC_i S_i for the joints j on i's path (zero between branches), the rotor
+ * inertia on the diagonal.  M is n x n, both triangles written. */
+static void crba(int n, const int *jt, const double *lc, const double *S, const double *I, double *IC, double *M)
+{
+    memcpy(IC, I, (size_t)SI_N * n * sizeof(double));
+    memset(M, 0, (size_t)n * n * sizeof(double));
+    for (int i = n - 1; i >= 0; i--) {
+        double F[6];
+        int par = jt[n + i];
+        si_apply(IC + SI_N * i, S + 6 * i, F);
+        for (int j = i; j >= 0; j = jt[n + j]) M[(size_t)i * n + j] = M[(size_t)j * n + i] = dot6(F, S + 6 * j);
+        M[(size_t)i * n + i] += lc[FMUGEN_CHAIN_NC * i + FMUGEN_CHAIN_ROTOR];
+        if (par >= 0)
+            for (int k = 0; k < SI_N; k++) IC[SI_N * par + k] += IC[SI_N * i + k];
+    }
+}
+
+int fmugen_chain_mass_matrix(int n, const int *jt, const double *lc, const double *g, const double *q, double *M,
+                             double *work)
+{
+    double *R = work, *p = R + 9 * n, *S = p + 3 * n, *I = S + 6 * n, *IC = I + SI_N * n;
+    kinematics(n, jt, lc, g, q, R, p, S, I, NULL);
+    crba(n, jt, lc, S, I, IC, M);
+    for (size_t k = 0; k < (size_t)n * n; k++)
+        if (!isfinite(M[k])) return FMUGEN_NOT_FINITE;
+    return FMUGEN_OK;
+}
+
+int fmugen_chain_mass_matrix_inverse(int n, const int *jt, const double *lc, const double *g, const double *q,
+                                     double *Minv, double *work)
+{
+    size_t nn = (size_t)n * n;
+    double *R = work, *p = R + 9 * n, *S = p + 3 * n, *I = S + 6 * n, *IC = I + SI_N * n;
+    double *M = IC + SI_N * n, *Xb = M + nn, *Mb = Xb + nn;
+    int *lo = (int *)(Mb + nn), *hi = lo + n, *off = hi + n, *end = off + n;
+    kinematics(n, jt, lc, g, q, R, p, S, I, NULL);
+    crba(n, jt, lc, S, I, IC, M);
+    root_blocks(n, jt, lo, hi);
+    block_offsets(n, lo, hi, off);
+    int st = tree_minv(n, jt, M, lo, hi, off, Xb, Mb, end);
+    if (st != FMUGEN_OK) return st;
+    memset(Minv, 0, nn * sizeof(double));
+    for (int i = 0; i < n; i++)
+        memcpy(Minv + (size_t)i * n + lo[i], Mb + off[i], (size_t)(hi[i] - lo[i]) * sizeof(double));
+    for (size_t k = 0; k < nn; k++)
+        if (!isfinite(Minv[k])) return FMUGEN_NOT_FINITE;
     return FMUGEN_OK;
 }
 

@@ -75,6 +75,15 @@ FMUGEN_MODEL_HIDDEN int fmugen_chain_fd_jacobian(int n, const int *joint, const 
                                                  int ne, const int *ext_link, const double *ext,
                                                  double *qdd, double *dqdd, double *dp_ee, double *work);
 
+/* M(q) (n x n, both triangles; rotor inertia on the diagonal) by composite rigid bodies, and
+ * M(q)^-1 (n x n) from the tree factorisation M = L^T L without fill-in, per root branch.  work:
+ * FMUGEN_CHAIN_FD_WORK(n) doubles for M, FMUGEN_CHAIN_WORK(n) for M^-1. */
+FMUGEN_MODEL_HIDDEN int fmugen_chain_mass_matrix(int n, const int *joint, const double *lc, const double *g,
+                                                 const double *q, double *M, double *work);
+FMUGEN_MODEL_HIDDEN int fmugen_chain_mass_matrix_inverse(int n, const int *joint, const double *lc,
+                                                         const double *g, const double *q, double *Minv,
+                                                         double *work);
+
 /* tau = ID(q, qd, qdd, ext) = M qdd + h (+ rotor inertia, damping, friction) by recursive Newton-Euler,
  * O(n); work: FMUGEN_CHAIN_FD_WORK(n) doubles. */
 FMUGEN_MODEL_HIDDEN int fmugen_chain_id(int n, const int *joint, const double *lc, const double *g,

@@ -14,8 +14,9 @@ friction set to 0, which Pinocchio does not model) and by Pinocchio (``buildMode
    ``computeABADerivatives`` (ddq_dq, ddq_dv, Minv);
 2. each algorithm is timed in alternation with Pinocchio's (``--repeat`` rounds, CPU time): the runtime's
    C functions called in a compiled C loop -- ``fmugen_chain_id``, ``fmugen_chain_fd``,
-   ``fmugen_chain_id_jacobian``, ``fmugen_chain_fd_jacobian``; M and M^-1 are the third blocks of the
-   two Jacobians at qd = 0, as ``fmugen.batch`` computes them by default -- and Pinocchio from Python with
+   ``fmugen_chain_id_jacobian``, ``fmugen_chain_fd_jacobian``, ``fmugen_chain_mass_matrix`` (composite rigid
+   bodies) and ``fmugen_chain_mass_matrix_inverse`` (the tree factorisation M = L^T L), as ``fmugen.batch``
+   computes them by default -- and Pinocchio from Python with
    the call overhead of a 0-DoF model subtracted (examples/bench_timing.py).  Printed: medians of the
    rounds, and the median of the per-round ratios fmugen / Pinocchio (below 1: fmugen faster).
 
@@ -75,7 +76,7 @@ TIMER = r"""
 #include "chain_dynamics.c"
 static double now(void) { struct timespec t; clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t); return t.tv_sec + 1e-9 * t.tv_nsec; }
 /* CPU seconds per call of algorithm `kind` (0 ID, 1 M, 2 Minv, 3 FD, 4 dID, 5 dFD) over k calls;
- * z: n zeros (qd = qdd = tau = 0 for M and M^-1); out: n + 3 n^2 doubles */
+ * z: n zeros (unused since M and M^-1 have their own functions); out: n + 3 n^2 doubles */
 double time_calls(int kind, int k, int n, const int *jt, const double *lc, const double *g, const double *q,
                   const double *qd, const double *x, const double *z, double *out, double *work)
 {
@@ -83,8 +84,8 @@ double time_calls(int kind, int k, int n, const int *jt, const double *lc, const
     for (int i = 0; i < k; i++) {
         switch (kind) {
         case 0: fmugen_chain_id(n, jt, lc, g, q, qd, x, 0, NULL, NULL, out, work); break;
-        case 1: fmugen_chain_id_jacobian(n, jt, lc, g, q, z, z, 0, NULL, NULL, out, out + n, work); break;
-        case 2: fmugen_chain_fd_jacobian(n, jt, lc, g, q, z, z, 0, NULL, NULL, out, out + n, NULL, work); break;
+        case 1: fmugen_chain_mass_matrix(n, jt, lc, g, q, out, work); break;
+        case 2: fmugen_chain_mass_matrix_inverse(n, jt, lc, g, q, out, work); break;
         case 3: fmugen_chain_fd(n, jt, lc, g, q, qd, x, 0, NULL, NULL, out, NULL, work); break;
         case 4: fmugen_chain_id_jacobian(n, jt, lc, g, q, qd, x, 0, NULL, NULL, out, out + n, work); break;
         default: fmugen_chain_fd_jacobian(n, jt, lc, g, q, qd, x, 0, NULL, NULL, out, out + n, NULL, work);

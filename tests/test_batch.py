@@ -68,8 +68,10 @@ def test_batched_results_equal_a_loop_of_pinocchio_calls(robot):
     idd = kernels.id_derivatives(q, qd, x)
     M = kernels.mass_matrix(q)
     M_columns = kernels.mass_matrix(q, method="columns")
+    M_jacobian = kernels.mass_matrix(q, method="jacobian")
     Minv = kernels.mass_matrix_inverse(q)
     Minv_columns = kernels.mass_matrix_inverse(q, method="columns")
+    Minv_jacobian = kernels.mass_matrix_inverse(q, method="jacobian")
     assert qdd.shape == (6, n) and all(b.shape == (6, n, n) for b in fd[1:] + idd[1:]) and M.shape == (6, n, n)
     for k in range(6):
         qp, vp = to_pinocchio(model, mp, q[k], qd[k])
@@ -80,7 +82,8 @@ def test_batched_results_equal_a_loop_of_pinocchio_calls(robot):
         assert rel(fd[1][k], data.ddq_dq[ix]) < RTOL  # continuous joints: along the tangent
         assert rel(fd[2][k], data.ddq_dv[ix]) < RTOL
         assert rel(fd[3][k], sym(data.Minv)[ix]) < RTOL
-        assert rel(Minv[k], sym(data.Minv)[ix]) < RTOL and rel(Minv_columns[k], sym(data.Minv)[ix]) < RTOL
+        for Mi in (Minv, Minv_columns, Minv_jacobian):  # tree factorisation, n ABA columns, Jacobian block
+            assert rel(Mi[k], sym(data.Minv)[ix]) < RTOL
         assert rel(tau[k], pin.rnea(model, data, qp, vp, xp)[iv]) < RTOL
         pin.computeRNEADerivatives(model, data, qp, vp, xp)
         assert rel(idd[0][k], tau[k]) < RTOL
@@ -88,7 +91,8 @@ def test_batched_results_equal_a_loop_of_pinocchio_calls(robot):
         assert rel(idd[2][k], data.dtau_dv[ix]) < RTOL
         assert rel(idd[3][k], sym(data.M)[ix]) < RTOL
         ref = sym(pin.crba(model, data, qp))[ix]
-        assert rel(M[k], ref) < RTOL and rel(M_columns[k], ref) < RTOL
+        for Mk in (M, M_columns, M_jacobian):  # composite rigid bodies, n RNEA columns, Jacobian block
+            assert rel(Mk[k], ref) < RTOL
 
 
 def test_two_threads_equal_one_bit_for_bit(robot):
@@ -171,7 +175,7 @@ def test_a_mass_matrix_that_is_not_positive_definite_is_named():
         k.fd(q, q, q)
     with pytest.raises(StateError, match="fd_derivatives: state 0: the mass matrix is not positive definite"):
         k.fd_derivatives(q, q, q)
-    for method in ("jacobian", "columns"):
+    for method in ("direct", "jacobian", "columns"):
         with pytest.raises(StateError, match="mass_matrix_inverse: state 0: the mass matrix is not positive"):
             k.mass_matrix_inverse(q, method=method)
     assert np.array_equal(k.id(q, q, q), np.zeros((3, 2)))  # the inverse dynamics need no solve

@@ -22,6 +22,8 @@
 #define BATCH_M_JAC 5     /* M(q), the third block of the ID Jacobian at qd = qdd = 0 */
 #define BATCH_MINV_COLUMNS 6 /* M(q)^-1, column j = FD(q, 0, e_j) without gravity: n calls of the ABA */
 #define BATCH_MINV_JAC 7  /* M(q)^-1, the third block (dqdd/dtau) of the FD Jacobian at qd = tau = 0 */
+#define BATCH_M_DIRECT 8  /* M(q) by composite rigid bodies (fmugen_chain_mass_matrix) */
+#define BATCH_MINV_DIRECT 9 /* M(q)^-1 from the tree factorisation M = L^T L (fmugen_chain_mass_matrix_inverse) */
 
 /* status beyond the runtime's FMUGEN_OK / FMUGEN_NOT_POSITIVE_DEFINITE / FMUGEN_NOT_FINITE */
 #define BATCH_INPUT_NOT_FINITE 3
@@ -37,6 +39,8 @@ long fmugen_batch_work(int kind, int n)
     case BATCH_FD_JAC: case BATCH_ID_JAC: return FMUGEN_CHAIN_WORK(n) + 3 * nn;
     case BATCH_M_COLUMNS: case BATCH_MINV_COLUMNS: return FMUGEN_CHAIN_FD_WORK(n) + 3L * n + FMUGEN_CHAIN_NG;
     case BATCH_M_JAC: case BATCH_MINV_JAC: return FMUGEN_CHAIN_WORK(n) + 3 * nn + 2L * n;
+    case BATCH_M_DIRECT: return FMUGEN_CHAIN_FD_WORK(n);
+    case BATCH_MINV_DIRECT: return FMUGEN_CHAIN_WORK(n);
     default: return -1;
     }
 }
@@ -127,6 +131,12 @@ int fmugen_batch(int kind, int n, const int *jt, const double *lc, const double 
                                                    sizeof(double) * n);
             break;
         }
+        case BATCH_M_DIRECT:
+            s = fmugen_chain_mass_matrix(n, jt, lc, g, q, out0 + k * nn, work);
+            break;
+        case BATCH_MINV_DIRECT:
+            s = fmugen_chain_mass_matrix_inverse(n, jt, lc, g, q, out0 + k * nn, work);
+            break;
         case BATCH_M_COLUMNS: case BATCH_MINV_COLUMNS:
             s = columns(kind == BATCH_MINV_COLUMNS, n, jt, lc, g, q, out0 + k * nn, work);
             break;

@@ -40,19 +40,21 @@ _CC = "cc"
 _FLAGS = ("-std=c99", "-O2", "-fPIC", "-shared")
 
 # kinds of batch.c
-_FD, _FD_JAC, _ID, _ID_JAC, _M_COLUMNS, _M_JAC, _MINV_COLUMNS, _MINV_JAC = range(8)
+_FD, _FD_JAC, _ID, _ID_JAC, _M_COLUMNS, _M_JAC, _MINV_COLUMNS, _MINV_JAC, _M_DIRECT, _MINV_DIRECT = range(10)
 _STATUS = {1: "the mass matrix is not positive definite", 2: "a result is NaN or infinite",
            3: "an input is NaN or infinite", 4: "unknown kernel (a bug of fmugen.batch)"}
 
-#: ways of :meth:`Kernels.mass_matrix` and :meth:`Kernels.mass_matrix_inverse`: ``"jacobian"`` (the
-#: default) -- the third block of the analytical Jacobian of the inverse dynamics (M = dtau/dqdd,
-#: ``fmugen_chain_id_jacobian``) or of the forward dynamics (M^-1 = dqdd/dtau, ``fmugen_chain_fd_jacobian``)
-#: at qd = 0; ``"columns"`` -- n calls of recursive Newton-Euler, M e_j = ID(q, 0, e_j), or of the
-#: articulated-body algorithm, M^-1 e_j = FD(q, 0, e_j), gravity off.  Measured on a loaded 2-core machine
-#: (CPU µs per state, M by jacobian / columns): UR5 (6 DoF) 2.3 / 4.8, iiwa (7) 3.3 / 6.6, Panda (9)
-#: 4.0 / 10.2, HyQ (12) 7.1 / 21, Atlas (30) 18 / 107, Talos (44) 21 / 255; M^-1: UR5 4.2 / 7.4, iiwa
-#: 5.5 / 9.5, HyQ 8.9 / 31, Atlas 31 / 200: n full recursions cost more than one pass of derivatives.
-MASS_MATRIX_METHODS = ("jacobian", "columns")
+#: ways of :meth:`Kernels.mass_matrix` and :meth:`Kernels.mass_matrix_inverse`: ``"direct"`` (the
+#: default) -- composite rigid bodies for M (``fmugen_chain_mass_matrix``) and the tree factorisation
+#: M = L^T L without fill-in for M^-1 (``fmugen_chain_mass_matrix_inverse``); ``"jacobian"`` -- the third
+#: block of the analytical Jacobian of the inverse dynamics (M = dtau/dqdd, ``fmugen_chain_id_jacobian``)
+#: or of the forward dynamics (M^-1 = dqdd/dtau, ``fmugen_chain_fd_jacobian``) at qd = 0; ``"columns"`` --
+#: n calls of recursive Newton-Euler, M e_j = ID(q, 0, e_j), or of the articulated-body algorithm,
+#: M^-1 e_j = FD(q, 0, e_j), gravity off.  The last two are kept as independent checks of the first
+#: (``examples/bench_derivatives.py`` times them).
+MASS_MATRIX_METHODS = ("direct", "jacobian", "columns")
+_M_KIND = {"direct": _M_DIRECT, "jacobian": _M_JAC, "columns": _M_COLUMNS}
+_MINV_KIND = {"direct": _MINV_DIRECT, "jacobian": _MINV_JAC, "columns": _MINV_COLUMNS}
 
 
 class StateError(ArithmeticError):
@@ -382,24 +384,23 @@ class Kernels:
         self._run("id_derivatives", _ID_JAC, count, ins, base, 3)
         return tuple(out)
 
-    def mass_matrix(self, q, method: str = "jacobian") -> np.ndarray:
+    def mass_matrix(self, q, method: str = "direct") -> np.ndarray:
         """M(q) per state (N, n, n), symmetric, rotor inertias on the diagonal (Pinocchio's ``crba``, which
         fills the upper triangle).  ``method``: :data:`MASS_MATRIX_METHODS`.  M is not checked for positive
         definiteness here (nothing is solved)."""
         _method("mass_matrix", method)
         count, ins = self._check("mass_matrix", {"q": q})
         M = np.empty((count, self.n, self.n))
-        self._run("mass_matrix", _M_COLUMNS if method == "columns" else _M_JAC, count, ins, _address(M), -1)
+        self._run("mass_matrix", _M_KIND[method], count, ins, _address(M), -1)
         return M
 
-    def mass_matrix_inverse(self, q, method: str = "jacobian") -> np.ndarray:
+    def mass_matrix_inverse(self, q, method: str = "direct") -> np.ndarray:
         """M(q)^-1 per state (N, n, n) (Pinocchio's ``computeMinverse``); ``method``: :data:`MASS_MATRIX_METHODS`.
         Raises StateError where M is not positive definite."""
         _method("mass_matrix_inverse", method)
         count, ins = self._check("mass_matrix_inverse", {"q": q})
         Minv = np.empty((count, self.n, self.n))
-        self._run("mass_matrix_inverse", _MINV_COLUMNS if method == "columns" else _MINV_JAC, count, ins,
-                  _address(Minv), -1)
+        self._run("mass_matrix_inverse", _MINV_KIND[method], count, ins, _address(Minv), -1)
         return Minv
 
     def __repr__(self):
