@@ -70,13 +70,14 @@ def load_scene(path, set=None, allow_factories: bool = False):
     return _load(path, set=set, allow_factories=allow_factories)
 
 
-def load_system(path, record=None):
+def load_system(path, record=None, workdir=None):
     """An SSP archive (``x.ssp``: fmugen's export or anyone's FMI 2.0 FMUs) as a co-simulation system
     for :func:`fmugen.cosim.run`; ``record``: the "component.connector" columns to keep (default:
-    every output, or the scene's record list for an archive fmugen wrote).  See :mod:`fmugen.ssp`."""
+    every output, or the scene's record list for an archive fmugen wrote); ``workdir``: an empty or new
+    folder to extract the archive into (default: a temporary one).  See :mod:`fmugen.ssp`."""
     from .ssp import load_system as _load
 
-    return _load(path, record=record)
+    return _load(path, record=record, workdir=workdir)
 
 
 def build_fmu(model, output_path, fmi_type: str = "both", **options):

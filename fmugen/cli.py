@@ -192,10 +192,12 @@ def _bytes(text: str) -> float:
     """'800M', '1.5G', '512k' or a plain number of bytes."""
     units = {"K": 2**10, "M": 2**20, "G": 2**30}
     t = text.strip().upper().rstrip("B").rstrip("I")
-    try:
-        v = float(t[:-1]) * units[t[-1]] if t and t[-1] in units else float(t)
-    except (ValueError, OverflowError):
-        raise ValueError(f"--budget-memory {text!r}: a size such as 800M, 1.5G or a number of bytes") from None
+    from .values import DECIMAL
+
+    number, scale = (t[:-1], units[t[-1]]) if t and t[-1] in units else (t, 1)
+    if not DECIMAL.fullmatch(number):  # the plain decimal grammar of every number given as text (values.py)
+        raise ValueError(f"--budget-memory {text!r}: a size such as 800M, 1.5G or a number of bytes")
+    v = float(number) * scale
     if not (v > 0 and v < float("inf")):
         raise ValueError(f"--budget-memory {text!r}: a positive size such as 800M, 1.5G")
     return v

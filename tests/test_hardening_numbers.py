@@ -274,3 +274,20 @@ def test_a_urdf_robot_value_that_leaves_a_joint_moving_nothing_is_refused():
         "the mass matrix is singular" in msg and msg.endswith("with I_wrist_3_link_xx = 0.0, "
                                                               "I_wrist_3_link_yy = 0.0, I_wrist_3_link_zz = 0.0")
     assert robot_value_problem(robot, {"I_wrist_3_link_yy": 0.02}) is None
+
+
+def test_run_settings_and_memory_budgets_given_as_text_take_the_decimal_grammar():
+    """Two readers of numbers as text float() still took: a run setting (fmugen.cosim.settings, reached by
+    SSP annotations and the API) and `--budget-memory` (its number before the unit suffix)."""
+    from fmugen.cli import _bytes
+    from fmugen.cosim.errors import CosimError
+    from fmugen.cosim.settings import _number
+
+    assert _number("step", " 2.5e-3 ") == 2.5e-3 and _number("step", 3) == 3.0
+    for bad in ("1_5", "\u0661", "0x10", "inf", "nan", ""):
+        with pytest.raises(CosimError, match="step must be a number"):
+            _number("step", bad)
+    assert _bytes("1.5G") == 1.5 * 2**30 and _bytes("800M") == 800 * 2**20 and _bytes("4096") == 4096
+    for bad in ("1_5G", "\u0663M", "0x10", "infM", "1,5G"):
+        with pytest.raises(ValueError, match="a size such as 800M"):
+            _bytes(bad)

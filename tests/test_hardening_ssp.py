@@ -242,6 +242,13 @@ def test_the_api_refuses_bad_arguments_as_the_cli_does(fmus, tmp_path):
     for path, why in ((3, "path must be a file path"), (tmp_path, "not a file"), (tmp_path / "no.ssp", "no such")):
         with pytest.raises(FmugenError, match=why):
             load_system(path)
+    import fmugen  # the top-level API takes the same arguments (it dropped workdir)
+
+    with pytest.raises(FmugenError, match="is a file, not a folder"):
+        fmugen.load_system(p, workdir=afile)
+    into = tmp_path / "into"
+    system = fmugen.load_system(p, workdir=into)
+    assert system is not None and any(into.rglob("*.fmu"))
 
 
 def test_the_command_line_prints_one_line_and_exits_2(fmus, tmp_path):

@@ -123,6 +123,11 @@ def check_choices(scheme: str, extrapolation: str) -> tuple:
 def _number(where, v):
     if isinstance(v, bool):
         raise CosimError(f"{where} must be a number, not {v!r}")
+    if isinstance(v, str):  # text holding a number: the plain decimal grammar (values.py), not float()'s
+        from ..values import DECIMAL
+
+        if not DECIMAL.fullmatch(v.strip(" \t")):
+            raise CosimError(f"{where} must be a number, not {v!r}")
     try:
         x = float(v)
     except (TypeError, ValueError, OverflowError):
