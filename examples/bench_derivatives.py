@@ -353,8 +353,8 @@ def main(argv=None) -> int:
             gpu = f"{GRID_GPU[a][g]:.1f}" if g is not None else ""
             print(f"| {name} | {r['n']} | {a} ({PINOCCHIO[a]}) | {r['fmugen'][a] * 1e6:.2f} | "
                   f"{r['pinocchio'][a] * 1e6:.2f} | {r['ratio'][a]:.2f} | {r['err'][a]:.1e} | {cpu} | {gpu} |")
-    print("\nfmugen: the looped runtime (c_runtime/chain_dynamics.c) in a compiled C loop, M and M^-1 the "
-          "third blocks of the ID and FD Jacobians; Pinocchio: the call in parentheses, Python's call overhead "
+    print("\nfmugen: the looped runtime (c_runtime/chain_dynamics.c) in a compiled C loop, M by composite "
+          "rigid bodies, M^-1 by the tree factorisation M = L^T L; Pinocchio: the call in parentheses, Python's call overhead "
           "subtracted; ratio: median of the per-round ratios fmugen / Pinocchio.  GRiD columns: published "
           "figures, another machine (i7-10700K 3.8 GHz with Pinocchio; RTX 3080 with GRiD), for context.")
     small = [r for r in names if results[r]["n"] <= 6] if not args.no_straight else []
