@@ -160,6 +160,8 @@ def _cmd_export_urdf(args) -> int:
 def _cmd_build_scene(args) -> int:
     from .scene import load_scene
 
+    if args.fmi_version is not None:
+        raise ValueError(f"{args.file}: --fmi-version does not apply to a scene yet (its FMUs are FMI 2.0)")
     if args.fmi_type is not None:  # one flag for all groups would hide what the file says per FMU
         raise ValueError(f"{args.file}: --fmi-type does not apply to a scene: each FMU's type is its group's "
                          f"fmi_type (\"cs\" or \"me\"; \"me\" FMUs carry both interfaces), e.g. "
@@ -218,6 +220,18 @@ def _cmd_build(args) -> int:
     if args.budget_seconds is not None and not (args.budget_seconds > 0 and args.budget_seconds < float("inf")):
         raise ValueError(f"--budget-seconds {args.budget_seconds!r}: must be a positive number of seconds")
     outputs = tuple(o for o in args.outputs.split(",") if o)
+    fmi_version = 2
+    if args.fmi_version is not None:  # checked, with the platforms, before anything is derived
+        if args.fmi_version.strip() not in ("2", "3"):
+            raise ValueError(f"{path}: --fmi-version {args.fmi_version!r}: give 2 (FMI 2.0, the default) or 3")
+        fmi_version = int(args.fmi_version)
+        from .errors import FmugenError
+        from .fmi.build import _check_fmi_version
+
+        try:
+            _check_fmi_version(fmi_version, args.platforms)
+        except FmugenError as e:
+            raise ValueError(f"{path}: --fmi-version {fmi_version}: {str(e).split(': ', 1)[-1]}") from None
     platforms = None
     if args.platforms is not None:  # checked, and the cross compilers found, before anything is derived
         from .fmi.platforms import resolve
@@ -233,7 +247,8 @@ def _cmd_build(args) -> int:
     fold = None if args.fold == "none" else ("all" if args.fold == "all" else args.fold.split(","))
     out = output_file(args.output or f"{model.name}.fmu", "-o", inputs=[path])
     result = build_fmu(model, out, fmi_type=args.fmi_type or "both", fold_parameters=fold, budget_start=t0,
-                       budget_seconds=args.budget_seconds, budget_memory=memory, platforms=platforms)
+                       budget_seconds=args.budget_seconds, budget_memory=memory, platforms=platforms,
+                       fmi_version=fmi_version)
     t2 = time.perf_counter()
     print(f"wrote {result.path}  (derive {t1 - t0:.2f} s, generate+compile+zip {t2 - t1:.2f} s)")
     if args.ops:
@@ -334,6 +349,9 @@ def _add_own_commands(sub) -> None:
     p.add_argument("--platforms", default=None, metavar="P1,P2,...",
                    help="FMI 2.0 binaries to build: linux64, win64 (MinGW-w64), darwin64 (zig cc: x86_64 + "
                         "arm64 in one file); default this machine's; a scene's [scene] platforms")
+    p.add_argument("--fmi-version", default=None, metavar="2|3",
+                   help="2: FMI 2.0 (default); 3: FMI 3.0, opt-in, this machine (x86_64-linux) only, "
+                        "scalar variables (fmugen/fmi/README.md)")
     p.add_argument("--no-prune", action="store_true", help="scenes: keep what the scene does not need")
     p.add_argument("--no-cache", action="store_true", help="scenes: rebuild every FMU")
     p.add_argument("--allow-factories", action="store_true",

@@ -452,8 +452,9 @@ def build_fmu(
     progress: Optional[bool] = None,
     budget_start: Optional[float] = None,
     platforms: Optional[Sequence[str]] = None,
+    fmi_version: int = 2,
 ) -> BuildResult:
-    """Generate, compile and zip ``model`` into an FMI 2.0 FMU.
+    """Generate, compile and zip ``model`` into an FMI 2.0 FMU (FMI 3.0 with ``fmi_version=3``).
 
     Parameters:
         model            the symbolic model (states, inputs, parameters, outputs)
@@ -484,6 +485,10 @@ def build_fmu(
                          finds them, a missing one refused (PlatformError) before
                          anything is generated; ``cc`` compiles the host's binary,
                          ``extra_cflags`` go to every compiler
+        fmi_version      2 (default) or 3: an FMI 3.0 FMU of the same runtime
+                         (c_runtime/fmi3/fmi3_functions.c) for this machine
+                         (x86_64-linux) only, scalar variables; see
+                         fmugen/fmi/README.md "FMI 3.0"
 
     Temporary files are removed on every way out, including SIGINT and
     SIGTERM (raised as :class:`BuildInterrupted` while the build runs); the
@@ -494,17 +499,45 @@ def build_fmu(
     the message) when compilation fails.
     """
     types = _fmi_types(fmi_type)
+    _check_fmi_version(fmi_version, platforms)
     t0 = time.perf_counter()
     budget = _Budget(budget_seconds, budget_memory, t0 if budget_start is None else budget_start)
     with _terminate_as_exception():
         return _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_sources,
                       model_identifier, default_experiment, budget, _Progress(progress, model.name), t0,
-                      runtime_start, platforms)
+                      runtime_start, platforms, fmi_version)
+
+
+#: FMI 3.0 files of the runtime (c_runtime/fmi3/), copied into sources/ beside the FMI 2.0 ones
+FMI3_RUNTIME = ("fmi3_functions.c", "fmi3_exports.map")
+FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
+#: the FMI 3.0 binaries folder of the one host fmi_version=3 builds for
+FMI3_HOST = ("linux64", "x86_64-linux")
+
+
+def _check_fmi_version(fmi_version, platforms) -> None:
+    """fmi_version 2 or 3; FMI 3.0 for the host only (x86_64 Linux), as fmugen builds it so far."""
+    if fmi_version not in (2, 3) or isinstance(fmi_version, bool):
+        raise FmugenError(f"fmi_version must be 2 or 3, got {fmi_version!r}")
+    if fmi_version == 3:
+        import platform as platform_module
+
+        from .platforms import host_platform, parse_platforms
+
+        host = host_platform()
+        if host != FMI3_HOST[0] or platform_module.machine() not in ("x86_64", "AMD64"):
+            raise FmugenError(f"fmi_version 3: FMI 3.0 FMUs are built on x86_64 Linux only so far (this machine: "
+                              f"{host} {platform_module.machine()})")
+        names = parse_platforms(platforms, "platforms")
+        if names is not None and tuple(names) != (host,):
+            raise FmugenError(f"fmi_version 3: platforms {','.join(names)} not supported yet; FMI 3.0 FMUs are "
+                              f"built for this machine ({FMI3_HOST[1]}) only")
 
 
 def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_sources, model_identifier,
            default_experiment, budget: _Budget, progress: _Progress, t0: float,
-           runtime_start: Optional[dict] = None, platforms: Optional[Sequence[str]] = None) -> BuildResult:
+           runtime_start: Optional[dict] = None, platforms: Optional[Sequence[str]] = None,
+           fmi_version: int = 2) -> BuildResult:
     progress.start("generate", f"{model.nx} states")
     model = _fold(model, fold_parameters)
     ident = model_identifier or c_identifier(model.name)
@@ -518,11 +551,23 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
     if "model.c" in runtime_c:
         raise BuildError(f"{rt}/model.c exists: the runtime must not contain a generated model")
     sources = runtime_c + ["model.c"]
+    if fmi_version == 3:
+        sources = runtime_c + [FMI3_RUNTIME[0], "model.c"]
+        s0 = targets[0].slices[0]
+        # the FMI 3.0 binary exports the fmi3* functions only (the fmi2* ones are its internals)
+        targets = [Target(FMI3_HOST[1], suffix, (Slice(s0.arch, s0.cc, s0.compiler, s0.cflags,
+                                                       (*s0.ldflags, f"-Wl,--version-script={FMI3_RUNTIME[1]}")),))]
 
     # generate with a placeholder GUID, hash C and XML together, substitute
     gen = generate_c(model, model_identifier=ident, guid=GUID_PLACEHOLDER, runtime_start=runtime_start)
-    xml = model_description_xml(model, GUID_PLACEHOLDER, ident, types, sources if keep_sources else (),
-                                default_experiment=default_experiment, runtime_start=runtime_start)
+    if fmi_version == 3:
+        from .model_description3 import model_description3_xml
+
+        xml = model_description3_xml(model, GUID_PLACEHOLDER, ident, types, default_experiment=default_experiment,
+                                      runtime_start=runtime_start)
+    else:
+        xml = model_description_xml(model, GUID_PLACEHOLDER, ident, types, sources if keep_sources else (),
+                                    default_experiment=default_experiment, runtime_start=runtime_start)
     guid = deterministic_guid(gen.source, xml)
     c_src, xml = gen.source.replace(GUID_PLACEHOLDER, guid), xml.replace(GUID_PLACEHOLDER, guid)
     t_gen = time.perf_counter() - t0
@@ -540,6 +585,11 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
             shutil.copy2(rt / name, src / name)
         for name in FMI_HEADERS:
             shutil.copy2(fmi_h / name, src / name)
+        if fmi_version == 3:
+            for name in FMI3_RUNTIME:
+                shutil.copy2(rt / "fmi3" / name, src / name)
+            for name in FMI3_HEADERS:
+                shutil.copy2(fmi_h / name, src / name)
         (src / "model.c").write_text(c_src)
         (root / "modelDescription.xml").write_text(xml, encoding="utf-8")
 
@@ -561,6 +611,15 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
             f"named after the modelIdentifier, e.g. on Linux:\n\n    {portable}\n\n"
             + sources_readme(ident, sources, CFLAGS) +
             f"\nand place it in binaries/<platform>/ (linux64, darwin64, win64).\n")
+        if fmi_version == 3:
+            (src / "README.txt").write_text(
+                f"Sources of the FMI 3.0 FMU {ident} ({model.name}), generated by fmugen {__version__}.\n"
+                f"model.c holds the model (generated); fmi3_functions.c is the FMI 3.0 interface over the\n"
+                f"generic fmugen runtime (the other .c/.h files), with the FMI 2.0 and 3.0 standard headers.\n"
+                f"Compile all .c files into one shared library named after the modelIdentifier, exporting\n"
+                f"only the fmi3* functions, e.g. on Linux:\n\n    "
+                f"{shlex.join(['cc', *CFLAGS, '-I.', '-Wl,--version-script=' + FMI3_RUNTIME[1], '-o', ident + '.so', *sources, '-lm'])}"
+                f"\n\nand place it in binaries/{FMI3_HOST[1]}/.\n")
 
         t2 = time.perf_counter()
         out.parent.mkdir(parents=True, exist_ok=True)  # only now: a failed compile leaves no empty folder

@@ -1,0 +1,196 @@
+"""FMI 3.0 export (opt-in, ``build_fmu(..., fmi_version=3)`` / ``fmugen build --fmi-version 3``).
+
+The FMI 3.0 functions (c_runtime/fmi3/fmi3_functions.c) translate onto the FMI 2.0 runtime, so an
+FMI 3.0 FMU must compute exactly what the FMI 2.0 FMU of the same model computes: the PUMA robot
+and the bouncing ball (state events, a re-initialised state) are built both ways and simulated by
+fmpy with the same settings, ME (fmpy's own solver) and CS, and compared to 1e-12.  fmpy's FMI 3.0
+schema validation must find nothing; misuse through the API returns fmi3Error with a logged message.
+"""
+from __future__ import annotations
+
+import ctypes
+import subprocess
+import zipfile
+from pathlib import Path
+
+import fmpy
+import numpy as np
+import pytest
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi3 import FMU3Model, FMU3Slave
+from fmpy.validation import validate_fmu
+
+import fmugen
+from fmugen.cli import main as cli_main
+from fmugen.components.equations import load_component
+from fmugen.errors import FmugenError
+from fmugen.fmi.build import build_fmu
+from fmugen.fmi.platforms import host_platform
+
+ROOT = Path(__file__).resolve().parent.parent
+PUMA = ROOT / "robots" / "puma_thesis_com.toml"
+BALL = ROOT / "examples" / "components" / "bouncing_ball.toml"
+
+pytestmark = pytest.mark.skipif(host_platform() != "linux64", reason="FMI 3.0 export: x86_64 Linux only so far")
+
+
+@pytest.fixture(scope="module")
+def puma_fmus(tmp_path_factory):
+    d = tmp_path_factory.mktemp("fmi3_puma")
+    m = fmugen.load_robot(str(PUMA)).state_space_model(outputs=("p_ee",))
+    return build_fmu(m, d / "puma2.fmu").path, build_fmu(m, d / "puma3.fmu", fmi_version=3).path
+
+
+@pytest.fixture(scope="module")
+def ball_fmus(tmp_path_factory):
+    d = tmp_path_factory.mktemp("fmi3_ball")
+    m = load_component(BALL)
+    return build_fmu(m, d / "ball2.fmu").path, build_fmu(m, d / "ball3.fmu", fmi_version=3).path
+
+
+def _same(r2, r3, tol=1e-12):
+    assert r2.dtype.names == r3.dtype.names
+    assert len(r2) == len(r3) and len(r2) > 10
+    return max(float(np.max(np.abs(r3[n] - r2[n]))) for n in r2.dtype.names)
+
+
+def test_puma_fmi3_validates_and_has_the_fmi3_layout(puma_fmus):
+    _, p3 = puma_fmus
+    assert validate_fmu(str(p3)) == []
+    md = fmpy.read_model_description(str(p3))
+    assert md.fmiVersion == "3.0" and md.guid.startswith("{")
+    assert md.modelExchange is not None and md.coSimulation is not None
+    names = zipfile.ZipFile(p3).namelist()
+    assert "binaries/x86_64-linux/puma_thesis_com.so" in names
+    assert "sources/fmi3_functions.c" in names and not any(n.endswith(".o") for n in names)
+    vrs = [v.valueReference for v in md.modelVariables]
+    assert len(vrs) == len(set(vrs))  # one value-reference space in FMI 3.0
+    assert len(md.derivatives) == 12 and len(md.outputs) >= 12 and md.initialUnknowns
+
+
+def test_puma_fmi3_exports_only_fmi3_functions(puma_fmus, tmp_path):
+    _, p3 = puma_fmus
+    with zipfile.ZipFile(p3) as z:
+        z.extract("binaries/x86_64-linux/puma_thesis_com.so", tmp_path)
+    so = tmp_path / "binaries/x86_64-linux/puma_thesis_com.so"
+    out = subprocess.run(["nm", "-D", "--defined-only", str(so)], capture_output=True, text=True, check=True)
+    syms = [line.split()[-1] for line in out.stdout.splitlines() if line.strip()]
+    assert len(syms) == 75 and all(s.startswith("fmi3") for s in syms), syms  # the whole FMI 3.0 API
+
+
+@pytest.mark.parametrize("fmi_type", ["ModelExchange", "CoSimulation"])
+def test_puma_fmi3_results_equal_fmi2(puma_fmus, fmi_type):
+    p2, p3 = puma_fmus
+    kw = dict(fmi_type=fmi_type, stop_time=0.5, output_interval=0.01, start_values={"tau[2]": 1.5})
+    r2, r3 = fmpy.simulate_fmu(str(p2), **kw), fmpy.simulate_fmu(str(p3), **kw)
+    assert _same(r2, r3) <= 1e-12
+    assert abs(r3["q[2]"][-1]) > 0.1  # it moved
+
+
+def test_ball_fmi3_validates_and_events_equal_fmi2(ball_fmus):
+    p2, p3 = ball_fmus
+    assert validate_fmu(str(p3)) == []
+    md = fmpy.read_model_description(str(p3))
+    assert len(md.eventIndicators) == 1
+    for fmi_type in ("ModelExchange", "CoSimulation"):
+        kw = dict(fmi_type=fmi_type, stop_time=2.0, output_interval=0.01)
+        r2, r3 = fmpy.simulate_fmu(str(p2), **kw), fmpy.simulate_fmu(str(p3), **kw)
+        assert _same(r2, r3) <= 1e-12, fmi_type
+        assert r3["v"].max() > 1.0  # bounced (the speed reversed upwards)
+
+
+def _model(path, tmp, cls=FMU3Model, name="inst"):
+    md = fmpy.read_model_description(str(path))
+    d = fmpy.extract(str(path), unzipdir=str(tmp))
+    log = []
+    fmu = cls(guid=md.guid, unzipDirectory=d, modelIdentifier=md.modelExchange.modelIdentifier,
+              instanceName=name)
+    return md, fmu, log, (lambda env, status, cat, msg: log.append((status, msg.decode())))
+
+
+def test_fmi3_misuse_returns_error_with_a_message(puma_fmus, tmp_path):
+    _, p3 = puma_fmus
+    md, fmu, log, cb = _model(p3, tmp_path)
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    # a wrong instantiation token: NULL, logged
+    fmu.guid = "{not-this-fmu}"
+    with pytest.raises(Exception):
+        fmu.instantiate(logMessage=cb)
+    assert any("does not match" in m for _, m in log), log
+    fmu.guid = md.guid
+    fmu.instantiate(logMessage=cb)
+
+    def refused(call, text):
+        log.clear()
+        with pytest.raises(FMICallException) as e:
+            call()
+        assert "status 3" in str(e.value)
+        assert any(text in m for _, m in log), log
+        assert not any("fmi2" in m for _, m in log), log  # the importer called fmi3 functions
+
+    refused(lambda: fmu.getFloat64([vr["q[1]"]]), "fmi3GetFloat64: not allowed in state instantiated")
+    refused(lambda: fmu.exitInitializationMode(), "fmi3ExitInitializationMode: not allowed")
+    fmu.enterInitializationMode(startTime=0.0)
+    fmu.exitInitializationMode()
+    refused(lambda: fmu.getFloat64([100000]), "unknown value reference 100000")
+    refused(lambda: fmu.setFloat64([vr["time"]], [1.0]), "cannot set time")
+    refused(lambda: fmu.setFloat64([vr["der(q[1])"]], [1.0]), "cannot set der(q[1])")
+    refused(lambda: fmu.getClock([0]), "not supported")
+    refused(lambda: fmu.getBoolean([0]), "no variables of that type")
+    refused(lambda: fmu.fmi3DoStep(fmu.component, 0.0, 0.1, False, ctypes.byref(fmpy.fmi3.fmi3Boolean()),
+                                   ctypes.byref(fmpy.fmi3.fmi3Boolean()), ctypes.byref(fmpy.fmi3.fmi3Boolean()),
+                                   ctypes.byref(fmpy.fmi3.fmi3Float64())), "Co-Simulation function")
+    # the solver method is an Int32, after the Float64 value references; readable, fixed after init
+    assert fmu.getInt32([vr["solver.method"]]) == [1]
+    assert fmu.getFloat64([vr["time"]]) == [0.0]
+    assert fmu.getNumberOfContinuousStates() == 12 and fmu.getNumberOfEventIndicators() == 0
+    # a NULL instance: fmi3Error, no crash
+    lib = fmu.dll
+    lib.fmi3GetFloat64.restype = ctypes.c_int
+    assert lib.fmi3GetFloat64(None, None, ctypes.c_size_t(0), None, ctypes.c_size_t(0)) == 3
+    lib.fmi3DoStep.restype = ctypes.c_int
+    assert lib.fmi3EnterEventMode(None) == 3
+    fmu.terminate()
+    fmu.freeInstance()
+
+
+def test_fmi3_cs_event_mode_refused_and_fmu_state_round_trip(puma_fmus, tmp_path):
+    _, p3 = puma_fmus
+    md, fmu, log, cb = _model(p3, tmp_path, FMU3Slave)
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    fmu.logMessage = fmpy.fmi3.fmi3LogMessageCallback(cb)
+    inst = fmu.fmi3InstantiateCoSimulation(b"cs", md.guid.encode(), b"", False, False, True, False, None, 0,
+                                           None, fmu.logMessage, fmpy.fmi3.fmi3IntermediateUpdateCallback())
+    assert not inst and any("eventModeUsed" in m for _, m in log), log
+    fmu.instantiate(logMessage=cb)
+    fmu.enterInitializationMode(startTime=0.0)
+    fmu.setFloat64([vr["tau[2]"]], [1.5])
+    fmu.exitInitializationMode()
+    fmu.doStep(0.0, 0.1)
+    state = fmu.getFMUState()
+    blob = fmu.serializeFMUState(state)
+    fmu.doStep(0.1, 0.1)
+    q_a = fmu.getFloat64([vr["q[2]"]])
+    fmu.setFMUState(fmu.deserializeFMUState(blob))
+    fmu.doStep(0.1, 0.1)
+    assert fmu.getFloat64([vr["q[2]"]]) == q_a
+    fmu.freeFMUState(state)
+    fmu.terminate()
+    fmu.freeInstance()
+
+
+def test_fmi_version_refusals(tmp_path):
+    m = load_component(BALL)
+    with pytest.raises(FmugenError, match="fmi_version must be 2 or 3, got 4"):
+        build_fmu(m, tmp_path / "x.fmu", fmi_version=4)
+    with pytest.raises(FmugenError, match="platforms win64 not supported yet"):
+        build_fmu(m, tmp_path / "x.fmu", fmi_version=3, platforms=["win64"])
+    assert not list(tmp_path.iterdir())
+
+
+def test_cli_fmi_version(tmp_path, capsys):
+    assert cli_main(["build", str(BALL), "-o", str(tmp_path / "b.fmu"), "--fmi-version", "3"]) == 0
+    assert fmpy.read_model_description(str(tmp_path / "b.fmu")).fmiVersion == "3.0"
+    assert cli_main(["build", str(BALL), "-o", str(tmp_path / "c.fmu"), "--fmi-version", "2.5"]) != 0
+    err = capsys.readouterr().err
+    assert "--fmi-version" in err and len(err.strip().splitlines()) == 1
