@@ -114,7 +114,8 @@ def symbolic_model(path: Path, outputs=("p_ee",), formulation="newton_euler", mo
                                  f"{did_you_mean(k, names)}; parameters: {', '.join(p.name for p in m.parameters)}")
             if isinstance(v, bool) or not isinstance(v, (int, float)):
                 raise SceneError(f"{path}: --set {k}={v!r}: a number is needed")
-        from .values import as_number, check_model_values, robot_value_problem
+        from .robot.value_checks import robot_value_problem
+        from .values import as_number, check_model_values
 
         sets = {k: as_number(v, f"{path}: --set {k}") for k, v in sets.items()}
         if kind == "robot":  # the robot file's checks, with the link and quantity named
@@ -142,7 +143,7 @@ def _cmd_export_urdf(args) -> int:
     from .scene import parse_sets
 
     from .arguments import output_file
-    from .values import robot_value_problem
+    from .robot.value_checks import robot_value_problem
 
     output_file(args.output, "-o", inputs=[args.robot])  # never over its own input
     robot = load_robot_description(args.robot)

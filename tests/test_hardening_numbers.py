@@ -265,7 +265,7 @@ def test_a_urdf_robot_value_that_leaves_a_joint_moving_nothing_is_refused():
     """The UR5's last link has its centre of mass on the wrist_3 axis: with its inertia set to zero (a point
     mass, realisable) the joint moves nothing, M_66 = 0 -- refused as the file's reader refuses it."""
     import fmugen
-    from fmugen.values import robot_value_problem
+    from fmugen.robot.value_checks import robot_value_problem
 
     robot = fmugen.load_robot(ROOT / "robots" / "ur5.urdf").robot
     zero = {f"I_wrist_3_link_{a}": 0.0 for a in ("xx", "yy", "zz")}

@@ -108,7 +108,8 @@ def _checked_params(arm, params) -> dict:
     """``params`` (name -> value) as finite floats for parameters the robot file has, the file's own checks
     applied to the new values; a symbolic parameter without a value is named with the flag that gives one."""
     from ..scene.errors import did_you_mean
-    from ..values import as_number, robot_value_problem
+    from ..robot.value_checks import robot_value_problem
+    from ..values import as_number
 
     names = {p.name: p for p in arm.robot.parameters}
     out = {}

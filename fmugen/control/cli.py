@@ -102,7 +102,8 @@ def load_model(path: Path, sets: dict, robot_outputs=(), formulation="newton_eul
     if bad:
         raise FmugenError(f"{path}: --set {', '.join(f'{k}={v!r}' for k, v in bad.items())}: a parameter "
                           f"value must be a number")
-    from ..values import as_number, check_model_values, robot_value_problem
+    from ..robot.value_checks import robot_value_problem
+    from ..values import as_number, check_model_values
 
     sets = {k: as_number(v, f"{path}: --set {k}") for k, v in sets.items()}
     if "robot" in data:

@@ -15,7 +15,7 @@ from typing import Optional, Sequence
 
 from ..codegen.model import SymbolicModel
 from ..errors import FmugenError
-from ..values import as_number, check_model_values, robot_value_problem
+from ..values import as_number, check_model_values
 from ..components.assembly import COMPONENT_TYPES
 from .errors import SceneError, did_you_mean
 from .file import InstanceSpec
@@ -58,6 +58,8 @@ def instance_model(spec: InstanceSpec, default_set: str, src: str, sets: Optiona
         origin[k] = f"--set {spec.name}.{k}"
     # the physical checks a file value gets, for a value from parameters, start or --set
     if arm is not None:  # the robot's own checks first: they name the link and the quantity
+        from ..robot.value_checks import robot_value_problem  # (a robot is loaded: its reader's imports are paid)
+
         pnames = {v.name for v in model.parameters}
         given = {k: v for k, v in values.items() if k in pnames}
         problem = robot_value_problem(arm.robot, given)

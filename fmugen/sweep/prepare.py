@@ -153,7 +153,8 @@ class SweepPlan:
         sign, a robot's masses, inertias and mass matrix with the point's values (:mod:`fmugen.values`),
         and a swept start value's declared sign and range.  The message names the point and the swept
         parameter(s), not every value of the model."""
-        from ..values import robot_value_problem, variable_problem
+        from ..robot.value_checks import robot_value_problem
+        from ..values import variable_problem
 
         by_inst: dict = {}
         for n in self.parameters:
