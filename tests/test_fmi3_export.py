@@ -57,7 +57,8 @@ def _same(r2, r3, tol=1e-12):
 def test_puma_fmi3_validates_and_has_the_fmi3_layout(puma_fmus):
     _, p3 = puma_fmus
     assert validate_fmu(str(p3)) == []
-    md = fmpy.read_model_description(str(p3))
+    # fmpy's stricter checks, off by default: the names' EBNF and the model structure's rules
+    md = fmpy.read_model_description(str(p3), validate_variable_names=True, validate_model_structure=True)
     assert md.fmiVersion == "3.0" and md.guid.startswith("{")
     assert md.modelExchange is not None and md.coSimulation is not None
     names = zipfile.ZipFile(p3).namelist()
@@ -90,7 +91,7 @@ def test_puma_fmi3_results_equal_fmi2(puma_fmus, fmi_type):
 def test_ball_fmi3_validates_and_events_equal_fmi2(ball_fmus):
     p2, p3 = ball_fmus
     assert validate_fmu(str(p3)) == []
-    md = fmpy.read_model_description(str(p3))
+    md = fmpy.read_model_description(str(p3), validate_variable_names=True, validate_model_structure=True)
     assert len(md.eventIndicators) == 1
     for fmi_type in ("ModelExchange", "CoSimulation"):
         kw = dict(fmi_type=fmi_type, stop_time=2.0, output_interval=0.01)
@@ -174,9 +175,25 @@ def test_fmi3_cs_event_mode_refused_and_fmu_state_round_trip(puma_fmus, tmp_path
     fmu.setFMUState(fmu.deserializeFMUState(blob))
     fmu.doStep(0.1, 0.1)
     assert fmu.getFloat64([vr["q[2]"]]) == q_a
+    # a state's first output derivative is its derivative
+    assert fmu.getOutputDerivatives([vr["q[2]"]], [1]) == fmu.getFloat64([vr["qd[2]"]])
     fmu.freeFMUState(state)
     fmu.terminate()
+    fmu.reset()  # back to instantiated: initialisable again
+    fmu.enterInitializationMode(startTime=0.0)
+    fmu.exitInitializationMode()
+    assert fmu.getFloat64([vr["q[2]"], vr["time"]]) == [0.0, 0.0]
+    fmu.terminate()
     fmu.freeInstance()
+
+
+def test_fmi3_runtime_compiles_warning_free():
+    from fmugen.fmi.build import fmi_headers_dir, runtime_dir
+
+    out = subprocess.run(["cc", "-fsyntax-only", "-Wall", "-Wextra", "-pedantic", "-std=c99", "-Werror",
+                          f"-I{runtime_dir()}", f"-I{fmi_headers_dir()}",
+                          str(runtime_dir() / "fmi3" / "fmi3_functions.c")], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
 
 
 def test_fmi_version_refusals(tmp_path):
@@ -194,3 +211,60 @@ def test_cli_fmi_version(tmp_path, capsys):
     assert cli_main(["build", str(BALL), "-o", str(tmp_path / "c.fmu"), "--fmi-version", "2.5"]) != 0
     err = capsys.readouterr().err
     assert "--fmi-version" in err and len(err.strip().splitlines()) == 1
+    scene = ROOT / "examples" / "scenes" / "single_joint_split.toml"
+    assert cli_main(["build", str(scene), "-o", str(tmp_path / "s"), "--fmi-version", "3"]) == 2
+    assert "does not apply to a scene yet" in capsys.readouterr().err
+    assert cli_main(["build", str(BALL), "-o", str(tmp_path / "d.fmu"), "--fmi-version", "3",
+                     "--platforms", "win64"]) == 2
+    err = capsys.readouterr().err
+    assert "not supported yet" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "c.fmu").exists() and not (tmp_path / "d.fmu").exists()
+
+
+def test_fmi3_directional_derivative_equals_fmi2(puma_fmus, tmp_path):
+    from fmpy.fmi2 import FMU2Model
+
+    p2, p3 = puma_fmus
+    md3, fmu3, _, cb = _model(p3, tmp_path / "3")
+    md2 = fmpy.read_model_description(str(p2))
+    fmu2 = FMU2Model(guid=md2.guid, unzipDirectory=fmpy.extract(str(p2), unzipdir=str(tmp_path / "2")),
+                     modelIdentifier=md2.modelExchange.modelIdentifier, instanceName="i2")
+    fmu3.instantiate(logMessage=cb)
+    fmu2.instantiate()
+    fmu2.setupExperiment(startTime=0.0)
+    for f in (fmu3, fmu2):
+        f.enterInitializationMode() if f is fmu2 else f.enterInitializationMode(startTime=0.0)
+        f.exitInitializationMode()
+    vr = {v.name: v.valueReference for v in md3.modelVariables}
+    unknowns = [vr[f"der(qd[{k}])"] for k in range(1, 7)] + [vr["p_ee[1]"]]
+    knowns = [vr["q[2]"], vr["qd[3]"], vr["tau[1]"]]
+    seed = [1.0, -0.5, 2.0]
+    d3 = fmu3.getDirectionalDerivative(unknowns, knowns, seed)
+    d2 = fmu2.getDirectionalDerivative(unknowns, knowns, seed)  # the FMI 2.0 Real value references are the same
+    assert list(d3) == list(d2) and any(abs(x) > 1e-3 for x in d3)
+    for f in (fmu3, fmu2):
+        f.terminate()
+        f.freeInstance()
+
+
+def test_fmi3_binary_built_from_the_build_description(puma_fmus, tmp_path):
+    """sources/buildDescription.xml: fmpy compiles the binary from it (CMake), and that FMU computes
+    what fmugen's binary does."""
+    pytest.importorskip("cmake")
+    from fmpy.build import build_platform_binary
+    from fmpy.model_description import read_build_description
+
+    _, p3 = puma_fmus
+    d = tmp_path / "src"
+    with zipfile.ZipFile(p3) as z:
+        z.extractall(d)
+    (bc,) = read_build_description(str(p3))  # schema-validated by fmpy
+    assert "fmi3_functions.c" in bc.sourceFileSets[0].sourceFiles
+    so = d / "binaries/x86_64-linux/puma_thesis_com.so"
+    so.unlink()
+    (tmp_path / "cmake").mkdir()
+    build_platform_binary(str(d.resolve()), build_dir=str(tmp_path / "cmake"))
+    assert so.is_file()
+    kw = dict(fmi_type="CoSimulation", stop_time=0.2, output_interval=0.01, start_values={"tau[2]": 1.5})
+    ref = fmpy.simulate_fmu(str(p3), **kw)
+    assert _same(ref, fmpy.simulate_fmu(str(d), **kw)) <= 1e-12

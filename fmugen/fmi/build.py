@@ -620,6 +620,9 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
                 f"only the fmi3* functions, e.g. on Linux:\n\n    "
                 f"{shlex.join(['cc', *CFLAGS, '-I.', '-Wl,--version-script=' + FMI3_RUNTIME[1], '-o', ident + '.so', *sources, '-lm'])}"
                 f"\n\nand place it in binaries/{FMI3_HOST[1]}/.\n")
+            from .model_description3 import build_description3_xml
+
+            (src / "buildDescription.xml").write_text(build_description3_xml(ident, sources), encoding="utf-8")
 
         t2 = time.perf_counter()
         out.parent.mkdir(parents=True, exist_ok=True)  # only now: a failed compile leaves no empty folder
