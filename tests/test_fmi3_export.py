@@ -100,6 +100,21 @@ def test_ball_fmi3_validates_and_events_equal_fmi2(ball_fmus):
         assert r3["v"].max() > 1.0  # bounced (the speed reversed upwards)
 
 
+def test_sampled_pi_fmi3_time_events_equal_fmi2(tmp_path):
+    """A sampled component: its clock's ticks are time events (nextEventTime in ME, inside the step in
+    CS), as in FMI 2.0; the fmugen clock annotation sits in FMI 3.0's <Annotations>."""
+    m = load_component("lib:discrete_pi", overrides={"K_p": 0.5, "K_i": 2.0, "T_s": 0.1})
+    p2, p3 = build_fmu(m, tmp_path / "pi2.fmu").path, build_fmu(m, tmp_path / "pi3.fmu", fmi_version=3).path
+    assert validate_fmu(str(p3)) == []
+    fmpy.read_model_description(str(p3), validate_variable_names=True, validate_model_structure=True)
+    inp = np.array([(0.0, 1.0, 0.2), (1.0, 1.0, 0.2)], dtype=[("time", float), ("r", float), ("y", float)])
+    for fmi_type in ("ModelExchange", "CoSimulation"):
+        kw = dict(fmi_type=fmi_type, stop_time=1.0, output_interval=0.01, input=inp)
+        r2, r3 = fmpy.simulate_fmu(str(p2), **kw), fmpy.simulate_fmu(str(p3), **kw)
+        assert _same(r2, r3) <= 1e-12, fmi_type
+        assert len(np.unique(r3["u"])) == 11  # held between the ticks at 0, 0.1, ..., 1
+
+
 def _model(path, tmp, cls=FMU3Model, name="inst"):
     md = fmpy.read_model_description(str(path))
     d = fmpy.extract(str(path), unzipdir=str(tmp))

@@ -135,12 +135,6 @@ def model_description3_xml(
         ET.SubElement(cats, "Category", name=name, description=desc)
     if default_experiment:
         _set(ET.SubElement(root, "DefaultExperiment"), **{k: float(v) for k, v in default_experiment.items()})
-    clocks = clock_annotations(model)
-    if clocks:
-        # as for FMI 2.0 (fmugen/cosim/README.md "Sample clocks"); FMI 3.0 clocks are not written yet
-        tool = ET.SubElement(ET.SubElement(root, "VendorAnnotations"), "Tool", name="fmugen")
-        for c in clocks:
-            _set(ET.SubElement(tool, "Clock"), **c)
 
     by_index = {v.index: v for v in layout.variables}
     reinit = model.events is not None and any(
@@ -213,6 +207,14 @@ def model_description3_xml(
     for k in range(len(indicators)):
         # no dependencies attribute: may depend on every known (the indicators read discrete states too)
         ET.SubElement(ms, "EventIndicator", valueReference=str(vrs[f"<event indicator {k}>"]))
+
+    clocks = clock_annotations(model)
+    if clocks:
+        # FMI 2.0's vendor annotation (fmugen/cosim/README.md "Sample clocks") in FMI 3.0's place for it,
+        # last; FMI 3.0 clocks are not written yet (their instants are time events, as in FMI 2.0)
+        tool = ET.SubElement(ET.SubElement(root, "Annotations"), "Annotation", type="fmugen")
+        for c in clocks:
+            _set(ET.SubElement(tool, "Clock"), **c)
 
     for el in root.iter():  # free text (descriptions, units, the model name) made valid XML 1.0 text
         for k, v in el.attrib.items():
