@@ -343,3 +343,42 @@ def test_puma_keeps_straight_line_code():
         robot = load_robot_description(ROOT / "robots" / "puma_thesis_com.toml")
     m = Manipulator(robot).state_space_model()
     assert not any(isinstance(st, ChainDynamics) for st in list(m.program.steps) + list(m.jacobian.steps))
+
+
+def test_builds_in_worker_threads_stop_when_cancelled(tmp_path):
+    """Signals reach only the main thread: a scene's groups build in worker threads (fmugen/scene/build.py)
+    and learn of a Ctrl-C there, or of another group's failure, through fmugen.fmi.build.cancellable.  Two
+    builds held in a 60 s compiler stop within seconds of the event, their compilers killed, no file left."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    from fmugen.fmi.build import BuildInterrupted, build_fmu, cancellable
+    from fmugen.robot.chain import n_link_chain
+
+    pids = tmp_path / "pids"
+    cc = tmp_path / "slowcc"
+    cc.write_text(SLOW_CC.format(pids=pids))
+    cc.chmod(0o755)
+    model = Manipulator(n_link_chain(2)).state_space_model()
+    cancel = threading.Event()
+
+    def one(k):
+        with cancellable(cancel):
+            build_fmu(model, tmp_path / f"m{k}.fmu", cc=str(cc))
+
+    with ThreadPoolExecutor(max_workers=2) as ex:
+        futures = [ex.submit(one, k) for k in range(2)]
+        deadline = time.time() + 120
+        while not (pids.exists() and len(pids.read_text().split()) >= 2) and time.time() < deadline:
+            time.sleep(0.05)
+        assert len(pids.read_text().split()) >= 2, "both builds should be compiling"
+        t0 = time.time()
+        cancel.set()
+        for f in futures:
+            with pytest.raises(BuildInterrupted, match="cancelled"):
+                f.result(timeout=50)  # well inside the compilers' 60 s
+    assert time.time() - t0 < 50
+    for pid in map(int, pids.read_text().split()):
+        with pytest.raises(ProcessLookupError):  # the compilers they started are gone
+            os.kill(pid, 0)
+    assert not list(tmp_path.glob("m*.fmu*")) and not list(tmp_path.glob(".m*"))

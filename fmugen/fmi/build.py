@@ -287,6 +287,30 @@ def _checkpoint() -> None:
     """Raise a signal kept by a shielded block now (a place inside one where stopping is safe)."""
     if _ACTIVE is not None and _in_main_thread():
         _ACTIVE.raise_pending()
+    _check_cancelled()
+
+
+_CANCEL = threading.local()  # the event that cancels the builds of this thread (see cancellable)
+
+
+@contextmanager
+def cancellable(event: threading.Event):
+    """Builds run in this thread stop with :class:`BuildInterrupted` -- compilers killed, files removed --
+    within a poll of their compiler supervisor (20 ms) once ``event`` is set.  Signals reach only the main
+    thread: a scene's groups built in worker threads learn of a Ctrl-C in the main thread, or of another
+    group's failure, through this event, instead of running their compilers on to the end."""
+    previous = getattr(_CANCEL, "event", None)
+    _CANCEL.event = event
+    try:
+        yield
+    finally:
+        _CANCEL.event = previous
+
+
+def _check_cancelled() -> None:
+    event = getattr(_CANCEL, "event", None)
+    if event is not None and event.is_set():
+        raise BuildInterrupted("build cancelled (another part of the build stopped); temporary files removed")
 
 
 @contextmanager
@@ -538,6 +562,7 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
            default_experiment, budget: _Budget, progress: _Progress, t0: float,
            runtime_start: Optional[dict] = None, platforms: Optional[Sequence[str]] = None,
            fmi_version: int = 2) -> BuildResult:
+    _check_cancelled()
     progress.start("generate", f"{model.nx} states")
     model = _fold(model, fold_parameters)
     ident = model_identifier or c_identifier(model.name)

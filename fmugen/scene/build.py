@@ -264,7 +264,7 @@ def build_scene(scene, out_dir, prune: Optional[bool] = None, progress=None, use
     ``jobs`` at a time (default: the number of cores, at most 4) into a
     staging folder and moved into ``out_dir`` together when all succeeded.
     """
-    from ..fmi.build import build_fmu
+    from ..fmi.build import build_fmu, cancellable
 
     progress = progress or Progress()
     prune = scene.spec.prune if prune is None else bool(prune)
@@ -348,9 +348,24 @@ def build_scene(scene, out_dir, prune: Optional[bool] = None, progress=None, use
             return r
 
         jobs = jobs or min(4, os.cpu_count() or 1)
+        # the groups build in worker threads, where no signal arrives: a Ctrl-C (or SIGTERM) in the main
+        # thread, or one group's failure, sets `cancel`, and every other group's build stops within a
+        # poll of its compilers, killing them, instead of running them to the end
+        cancel = threading.Event()
+
+        def cancellable_one(g):
+            with cancellable(cancel):
+                return one(g)
+
         with ThreadPoolExecutor(max_workers=jobs) as ex:
-            futures = {g: ex.submit(one, g) for g in plan}
-            reports = {g: f.result() for g, f in futures.items()}
+            futures = {g: ex.submit(cancellable_one, g) for g in plan}
+            try:
+                reports = {g: f.result() for g, f in futures.items()}
+            except BaseException:
+                cancel.set()
+                for f in futures.values():
+                    f.cancel()
+                raise
         for g in plan:
             os.replace(stage / f"{g}.fmu", out / f"{g}.fmu")
         ok = True
