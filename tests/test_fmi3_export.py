@@ -115,6 +115,23 @@ def test_sampled_pi_fmi3_time_events_equal_fmi2(tmp_path):
         assert len(np.unique(r3["u"])) == 11  # held between the ticks at 0, 0.1, ..., 1
 
 
+def test_urdf_robot_aliases_and_ranges_fmi3_equal_fmi2(tmp_path):
+    """A URDF robot: joint-name aliases (<Alias> children in FMI 3.0), validity ranges
+    (needsCompletedIntegratorStep)."""
+    from fmugen.cli import symbolic_model
+
+    m = symbolic_model(ROOT / "robots" / "ur5.urdf", ("p:tool0",), "newton_euler", "forward_dynamics")
+    p2, p3 = build_fmu(m, tmp_path / "u2.fmu").path, build_fmu(m, tmp_path / "u3.fmu", fmi_version=3).path
+    assert validate_fmu(str(p3)) == []
+    md = fmpy.read_model_description(str(p3), validate_variable_names=True, validate_model_structure=True)
+    assert md.modelExchange.needsCompletedIntegratorStep
+    assert "<Alias name=\"shoulder_pan_joint.q\"" in zipfile.ZipFile(p3).read("modelDescription.xml").decode()
+    for fmi_type in ("ModelExchange", "CoSimulation"):
+        kw = dict(fmi_type=fmi_type, stop_time=0.2, output_interval=0.01, start_values={"tau[2]": 5.0})
+        r2, r3 = fmpy.simulate_fmu(str(p2), **kw), fmpy.simulate_fmu(str(p3), **kw)
+        assert _same(r2, r3) <= 1e-12, fmi_type
+
+
 def _model(path, tmp, cls=FMU3Model, name="inst"):
     md = fmpy.read_model_description(str(path))
     d = fmpy.extract(str(path), unzipdir=str(tmp))

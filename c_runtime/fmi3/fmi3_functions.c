@@ -88,7 +88,8 @@ static void fmi3_text(const char *in, char *out, size_t n)
             in += 2;
             continue;
         }
-        if (strncmp(in, "fmi2", 4) == 0) {
+        /* an FMI name (fmi2DoStep, fmi2True): "fmi2" and a capital, so a variable named fmi2x stays */
+        if (strncmp(in, "fmi2", 4) == 0 && in[4] >= 'A' && in[4] <= 'Z') {
             const char *to = "fmi3";
             size_t from_len = 4;
             for (size_t k = 0; k < sizeof renames / sizeof renames[0]; k++) {
