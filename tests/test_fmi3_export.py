@@ -300,3 +300,38 @@ def test_fmi3_binary_built_from_the_build_description(puma_fmus, tmp_path):
     kw = dict(fmi_type="CoSimulation", stop_time=0.2, output_interval=0.01, start_values={"tau[2]": 1.5})
     ref = fmpy.simulate_fmu(str(p3), **kw)
     assert _same(ref, fmpy.simulate_fmu(str(d), **kw)) <= 1e-12
+
+
+def test_fmi3_model_exchange_misuse_and_logging(ball_fmus, tmp_path):
+    """ME of the bouncing ball: wrong array lengths, a function out of its mode, an unknown log
+    category: fmi3Error and a message; debug logging reaches FMI 3.0's logger with fmi3 names; the
+    event indicator read as a variable equals fmi3GetEventIndicators."""
+    _, p3 = ball_fmus
+    md, fmu, log, cb = _model(p3, tmp_path)
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    fmu.instantiate(loggingOn=True, logMessage=cb)
+    fmu.setDebugLogging(True, ["logEvents"])
+    fmu.enterInitializationMode(startTime=0.0)
+    fmu.exitInitializationMode()
+    assert any("fmi3InstantiateModelExchange" not in m and "fmi3" in m for _, m in log)  # OK messages arrived
+    assert not any("fmi2" in m for _, m in log), log
+
+    def refused(call, text):
+        log.clear()
+        with pytest.raises(FMICallException):
+            call()
+        assert any(text in m for _, m in log), log
+
+    x3 = (fmpy.fmi3.fmi3Float64 * 3)()
+    refused(lambda: fmu.getContinuousStates(x3, 3), "nx = 3, but the model has 2")
+    refused(lambda: fmu.getEventIndicators(x3, 3), "= 3, but the model has 1")
+    refused(lambda: fmu.setDebugLogging(True, ["logNothing"]), "unknown log category")
+    refused(lambda: fmu.enterContinuousTimeMode() or fmu.updateDiscreteStates(),
+            "fmi3UpdateDiscreteStates: not allowed in state continuousTimeMode")
+    refused(lambda: fmu.setContinuousStates((fmpy.fmi3.fmi3Float64 * 2)(float("nan"), 0.0), 2), "")
+    fmu.setTime(0.1)
+    z = (fmpy.fmi3.fmi3Float64 * 1)()
+    fmu.getEventIndicators(z, 1)
+    assert fmu.getFloat64([vr["solver.event_indicator_1"]]) == [z[0]] and z[0] > 0  # h above the ground
+    fmu.terminate()
+    fmu.freeInstance()
