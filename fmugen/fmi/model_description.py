@@ -256,6 +256,31 @@ def _set(el, **attrs):
         el.set(k, v if isinstance(v, str) else _fmt(v))
 
 
+def unit_definitions(root, layout, model_name: str) -> list:
+    """``<UnitDefinitions>`` of the variables' units in order of first use, each as SI base-unit exponents
+    and factor (the element is the same in FMI 2.0 and 3.0); a unit fmugen cannot decompose is refused
+    naming the first variable that has it.  Returns the units."""
+    units = []
+    for v in layout.variables:
+        if v.unit and v.unit not in units:
+            units.append(v.unit)
+    if not units:
+        return units
+    ud = ET.SubElement(root, "UnitDefinitions")
+    for u in units:
+        try:
+            b = base_units(u)
+        except ValueError as e:
+            owners = [v.name for v in layout.variables if v.unit == u]
+            raise FmugenError(f"model {model_name!r}, variable {owners[0]}: {e}") from None
+        uel = ET.SubElement(ud, "Unit", name=u)
+        bel = ET.SubElement(uel, "BaseUnit")
+        _set(bel, **{k: int(x) for k, x in b.exponents().items()})
+        if b.factor != 1.0:
+            _set(bel, factor=b.factor)
+    return units
+
+
 def model_description_xml(
     model: SymbolicModel,
     guid: str,
@@ -312,23 +337,7 @@ def model_description_xml(
         interface("CoSimulation", canHandleVariableCommunicationStepSize=True, canInterpolateInputs=True,
                   maxOutputDerivativeOrder=1 if (has_jac or not computed) else 0, canRunAsynchronuously=False)
 
-    units = []
-    for v in layout.variables:
-        if v.unit and v.unit not in units:
-            units.append(v.unit)
-    if units:
-        ud = ET.SubElement(root, "UnitDefinitions")
-        for u in units:
-            try:
-                b = base_units(u)
-            except ValueError as e:
-                owners = [v.name for v in layout.variables if v.unit == u]
-                raise FmugenError(f"model {model.name!r}, variable {owners[0]}: {e}") from None
-            uel = ET.SubElement(ud, "Unit", name=u)
-            bel = ET.SubElement(uel, "BaseUnit")
-            _set(bel, **{k: int(x) for k, x in b.exponents().items()})
-            if b.factor != 1.0:
-                _set(bel, factor=b.factor)
+    unit_definitions(root, layout, model.name)
 
     cats = ET.SubElement(root, "LogCategories")
     for name, desc in LOG_CATEGORIES:

@@ -29,9 +29,8 @@ import sympy as sp
 from ..codegen.model import SymbolicModel
 from ..codegen.runtime_parameters import header_defines, runtime_starts
 from ..errors import FmugenError
-from .model_description import (GENERATION_TOOL, _XML_INVALID, _set, clock_annotations, variable_layout,
-                                xml_text)
-from .units import base_units
+from .model_description import (GENERATION_TOOL, _XML_INVALID, _set, clock_annotations, unit_definitions,
+                                variable_layout, xml_text)
 
 FMI3_VERSION = "3.0"
 
@@ -112,23 +111,7 @@ def model_description3_xml(
                   maxOutputDerivativeOrder=1 if (has_jac or not computed) else 0, hasEventMode=False,
                   providesIntermediateUpdate=False, mightReturnEarlyFromDoStep=False)
 
-    units = []
-    for v in layout.variables:
-        if v.unit and v.unit not in units:
-            units.append(v.unit)
-    if units:
-        ud = ET.SubElement(root, "UnitDefinitions")
-        for u in units:
-            try:
-                b = base_units(u)
-            except ValueError as e:
-                owners = [v.name for v in layout.variables if v.unit == u]
-                raise FmugenError(f"model {model.name!r}, variable {owners[0]}: {e}") from None
-            uel = ET.SubElement(ud, "Unit", name=u)
-            bel = ET.SubElement(uel, "BaseUnit")
-            _set(bel, **{k: int(x) for k, x in b.exponents().items()})
-            if b.factor != 1.0:
-                _set(bel, factor=b.factor)
+    units = unit_definitions(root, layout, model.name)
 
     cats = ET.SubElement(root, "LogCategories")
     for name, desc in LOG_CATEGORIES3:
