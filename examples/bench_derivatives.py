@@ -54,7 +54,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # examples/: the benchmarks' shared timing helper
-from bench_timing import per_call  # noqa: E402
+from bench_timing import per_call, robots_dir  # noqa: E402
 
 GRID_ROBOTS = {"iiwa": "iiwa.urdf", "hyq": "hyq.urdf", "atlas": "atlas.urdf"}
 ERD_ROBOTS = {"ur5": "ur_description/urdf/ur5_robot.urdf", "panda": "panda_description/urdf/panda.urdf",
@@ -94,19 +94,6 @@ double time_calls(int kind, int k, int n, const int *jt, const double *lc, const
     return (now() - t) / k;
 }
 """
-
-
-def robots_dir() -> Path:
-    """example-robot-data's robots/ folder (the package installs files, no Python module)."""
-    from importlib.metadata import PackageNotFoundError, distribution
-
-    try:
-        d = Path(distribution("example-robot-data").locate_file("cmeel.prefix/share/example-robot-data/robots"))
-    except PackageNotFoundError as e:
-        raise ImportError("example-robot-data is not installed") from e
-    if not d.is_dir():
-        raise ImportError(f"example-robot-data's robots folder not found at {d}")
-    return d
 
 
 def runtime_version() -> str:

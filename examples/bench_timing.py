@@ -15,8 +15,22 @@ from __future__ import annotations
 import argparse
 import functools
 import time
+from pathlib import Path
 
 import numpy as np
+
+
+def robots_dir() -> Path:
+    """example-robot-data's robots/ folder (the package installs files, no Python module)."""
+    from importlib.metadata import PackageNotFoundError, distribution
+
+    try:
+        d = Path(distribution("example-robot-data").locate_file("cmeel.prefix/share/example-robot-data/robots"))
+    except PackageNotFoundError as e:
+        raise ImportError("example-robot-data is not installed") from e
+    if not d.is_dir():
+        raise ImportError(f"example-robot-data's robots folder not found at {d}")
+    return d
 
 
 def per_call(fn, args, k: int) -> float:

@@ -42,7 +42,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # examples/: the benchmarks' shared timing helper
-from bench_timing import c_loop, pinocchio_per_call  # noqa: E402
+from bench_timing import c_loop, pinocchio_per_call, robots_dir  # noqa: E402
 ROBOTS = ["talos_data/robots/talos_full_v2.urdf", "tiago_description/robots/tiago_dual.urdf"]
 ARMS = ["ur_description/urdf/ur5_robot.urdf", "panda_description/urdf/panda.urdf"]
 
@@ -64,19 +64,6 @@ double time_calls(int kind, int k, int n, const int *jt, const double *lc, const
     return (now() - t) / k;
 }
 """
-
-
-def robots_dir() -> Path:
-    """example-robot-data's robots/ folder (the package installs files, no Python module)."""
-    from importlib.metadata import PackageNotFoundError, distribution
-
-    try:
-        d = Path(distribution("example-robot-data").locate_file("cmeel.prefix/share/example-robot-data/robots"))
-    except PackageNotFoundError as e:
-        raise ImportError("example-robot-data is not installed") from e
-    if not d.is_dir():
-        raise ImportError(f"example-robot-data's robots folder not found at {d}")
-    return d
 
 
 def tree_of(model):
