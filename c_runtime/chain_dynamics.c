@@ -621,10 +621,11 @@ int fmugen_chain_fd_jacobian(int n, const int *jt, const double *lc, const doubl
         if (usesG[i]) continue;
         int nb = hi[i] - lo[i];
         const double *restrict Mi = Mb + off[i], *ali = al + 12 * i;
-        double *restrict xqi = Xq + (size_t)n * i, *restrict xdi = Xd + (size_t)n * i;
+        /* not restrict: at j == i the columns of i and j are one */
+        double *xqi = Xq + (size_t)n * i, *xdi = Xd + (size_t)n * i;
         for (int j = i; j >= 0; j = jt[n + j]) {
             const double *Sj = S + 6 * j;
-            double *restrict xqj = Xq + (size_t)n * j, *restrict xdj = Xd + (size_t)n * j;
+            double *xqj = Xq + (size_t)n * j, *xdj = Xd + (size_t)n * j;
             /* i in the subtree of j: -dID[i][j] = al_i . [w_j; dv_j] (- e_i . s_w,j), and for qd
              * -(al_i . [u_j; S_j] + b_j delta_ij) */
             double cq = dot6(ali, w + 6 * j) + dot6(ali + 6, dv + 6 * j);
