@@ -161,8 +161,6 @@ def _cmd_export_urdf(args) -> int:
 def _cmd_build_scene(args) -> int:
     from .scene import load_scene
 
-    if args.fmi_version is not None:
-        raise ValueError(f"{args.file}: --fmi-version does not apply to a scene yet (its FMUs are FMI 2.0)")
     if args.fmi_type is not None:  # one flag for all groups would hide what the file says per FMU
         raise ValueError(f"{args.file}: --fmi-type does not apply to a scene: each FMU's type is its group's "
                          f"fmi_type (\"cs\" or \"me\"; \"me\" FMUs carry both interfaces), e.g. "
@@ -173,13 +171,17 @@ def _cmd_build_scene(args) -> int:
     if args.output:
         output_folder(args.output, "-o", inputs=[args.file])
     sets = args.set
-    if args.platforms is not None:  # the scene's [scene] platforms, as --set scene.platforms would give it
+    # --platforms and --fmi-version are the scene's [scene] platforms and fmi_version, as --set would give them
+    for flag, key, value in (("--platforms", "platforms", args.platforms), ("--fmi-version", "fmi_version",
+                                                                               args.fmi_version)):
+        if value is None:
+            continue
         from .scene import parse_sets
 
-        sets = parse_sets(args.set)
-        if "scene.platforms" in sets:
-            raise ValueError(f"{args.file}: --platforms and --set scene.platforms both given; give one")
-        sets["scene.platforms"] = args.platforms
+        sets = parse_sets(sets)
+        if f"scene.{key}" in sets:
+            raise ValueError(f"{args.file}: {flag} and --set scene.{key} both given; give one")
+        sets[f"scene.{key}"] = value
     scene = load_scene(args.file, set=sets, allow_factories=args.allow_factories)
     out = Path(args.output) if args.output else Path(scene.name)
     if out.suffix == ".fmu":

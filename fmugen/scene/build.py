@@ -168,6 +168,7 @@ def _group_key(scene, group: str, prune: bool, x0: dict, u0: Optional[dict] = No
         "external": scene.external_links(members),
         "run": [scene.spec.start, scene.spec.stop, scene.spec.step, scene.spec.tolerance],
         "platforms": scene.spec.platforms,
+        "fmi_version": scene.spec.fmi_version,
         "default_set": _set_digest(scene.spec.parameter_set),
         # validity ranges the group's sources take from the inputs they drive (other instances' models)
         "ranges": sorted((si, sv, scene._var(ti, tv, scene.src)[1].min, scene._var(ti, tv, scene.src)[1].max)
@@ -326,7 +327,8 @@ def build_scene(scene, out_dir, prune: Optional[bool] = None, progress=None, use
                                 model_identifier=gname,
                                 default_experiment={"startTime": scene.spec.start, "stopTime": scene.spec.stop,
                                                     "stepSize": default_step, "tolerance": tol},
-                                runtime_start=_runtime_start(scene, g), platforms=scene.spec.platforms)
+                                runtime_start=_runtime_start(scene, g), platforms=scene.spec.platforms,
+                                fmi_version=scene.spec.fmi_version)
             except ValueError as exc:
                 raise SceneError(f"{scene.src}: [fmus.{gname}]: {exc}") from None
             r = FmuReport(group=gname, path=out / target.name, members=tuple(g.members), states=model.nx,

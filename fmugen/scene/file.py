@@ -20,7 +20,7 @@ from .errors import SceneError, did_you_mean
 
 SCENE_KEYS = {"name", "description", "parameter_set", "start", "stop", "step", "tolerance", "record",
               "initial", "prune", "connections", "monolithic", "connect", "record_bonds",
-              "inputs", "platforms"}
+              "inputs", "platforms", "fmi_version"}
 COMMON_INSTANCE_KEYS = {"parameters", "fixed", "start", "hold"}
 ROBOT_KEYS = {"robot", "formulation", "locked", "outputs", "mimic", "armature", "friction", "limits"}
 FACTORY_KEYS = {"factory", "options", "parameter_set"}
@@ -79,6 +79,7 @@ class SceneSpec:
     inputs: tuple = ()  # undriven inputs kept as inputs of the FMUs (not fixed) when pruning
     external: Optional[dict] = None  # [external]: an SSP's components beside the instances (scene/external.py)
     platforms: Optional[tuple] = None  # FMI 2.0 binaries/ folders of every FMU (None: this machine's only)
+    fmi_version: int = 2  # of every FMU of the scene: 2 (FMI 2.0) or 3 (FMI 3.0)
 
 
 def _number(v, where, positive=False, nonneg=False) -> float:
@@ -243,6 +244,7 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
         platforms = parse_platforms(sc.get("platforms"), f"{src}: [scene]")
     except ValueError as exc:
         raise SceneError(str(exc)) from None
+    fmi_version = _fmi_version(sc.get("fmi_version", 2), platforms, src)
 
     inst_tab = data.get("instances")
     if not isinstance(inst_tab, dict) or not inst_tab:
@@ -324,7 +326,26 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
                      prune=sc.get("prune", True), connections=tuple(conns), instances=instances,
                      groups=groups, monolithic=bool(monolithic), cosim=dict(cosim),
                      connect=tuple(tuple(c) for c in connect), record_bonds=bool(sc.get("record_bonds", False)),
-                     inputs=exposed, external=data.get("external"), platforms=platforms)
+                     inputs=exposed, external=data.get("external"), platforms=platforms,
+                     fmi_version=fmi_version)
+
+
+def _fmi_version(value, platforms, src) -> int:
+    """[scene] fmi_version: 2 or 3 (an integer; "3" from --set or --fmi-version is read as one), checked with
+    the platforms as build_fmu checks them, so that a scene which cannot be built is refused on loading."""
+    if isinstance(value, str) and value.strip() in ("2", "3"):
+        value = int(value)
+    if isinstance(value, float) and value in (2.0, 3.0):
+        value = int(value)
+    if isinstance(value, bool) or value not in (2, 3):
+        raise SceneError(f"{src}: [scene] fmi_version = {value!r}; give 2 (FMI 2.0, the default) or 3 (FMI 3.0)")
+    from ..fmi.build import _check_fmi_version
+
+    try:
+        _check_fmi_version(value, platforms)
+    except ValueError as exc:
+        raise SceneError(f"{src}: [scene] {exc}") from None
+    return value
 
 
 def _instance(iname: str, spec, path: Path) -> InstanceSpec:
