@@ -43,16 +43,23 @@ def _label(name: str, path: Path) -> str:
     return f"FMU {name!r} ({path})"
 
 
-def platform_binary(model_identifier: str) -> str:
-    """``binaries/<platform>/<model identifier><extension>`` of this machine (FMI 2.0 sec. 2.3)."""
-    from fmpy import platform, sharedLibraryExtension
+#: the FMI versions the master runs (fmugen/cosim/units.py: FMI 2.0, units3.py: FMI 3.0)
+VERSIONS = ("2.0", "3.0")
+RUNS = "the master runs FMI 2.0 FMUs and FMI 3.0 FMUs"
 
-    return f"binaries/{platform}/{model_identifier}{sharedLibraryExtension}"
+
+def platform_binary(model_identifier: str, fmi_version: str = "2.0") -> str:
+    """``binaries/<platform>/<model identifier><extension>`` of this machine: FMI 2.0's platform names
+    (``linux64``, sec. 2.3), FMI 3.0's platform tuples (``x86_64-linux``, sec. 2.5.1)."""
+    from fmpy import platform, platform_tuple, sharedLibraryExtension
+
+    folder = platform_tuple if fmi_version.startswith("3") else platform
+    return f"binaries/{folder}/{model_identifier}{sharedLibraryExtension}"
 
 
 def read_description(name: str, path, interface: str):
     """The fmpy model description of the FMU at ``path`` (unit ``name``), checked to be a
-    readable FMI 2.0 FMU with the ``interface`` ("cs" or "me") and its binary for this platform;
+    readable FMI 2.0 or 3.0 FMU with the ``interface`` ("cs" or "me") and its binary for this platform;
     else :class:`CosimError` naming the FMU and the problem."""
     path = Path(path)
     where = _label(name, path)
@@ -95,8 +102,8 @@ def read_description(name: str, path, interface: str):
     # the FMI version before the schema check: an FMI 1.0 description fails the 2.0 schema, and the
     # schema's complaint would hide that it is simply another version
     m = re.search(r"<fmiModelDescription\b[^>]*?\bfmiVersion\s*=\s*[\"']([^\"']{0,20})[\"']", head)
-    if m and m.group(1) != "2.0":
-        raise CosimError(f"{where}: FMI {m.group(1)}; the master runs FMI 2.0 FMUs")
+    if m and m.group(1) not in VERSIONS:
+        raise CosimError(f"{where}: FMI {m.group(1)}; {RUNS}")
     from fmpy import read_model_description
 
     try:
@@ -107,14 +114,14 @@ def read_description(name: str, path, interface: str):
         text = " ".join(str(e).split()) or type(e).__name__
         raise CosimError(f"{where}: modelDescription.xml cannot be read ({type(e).__name__}: {text[:300]})") from None
     version = str(getattr(md, "fmiVersion", "") or "?")
-    if version != "2.0":
-        raise CosimError(f"{where}: FMI {version}; the master runs FMI 2.0 FMUs")
+    if version not in VERSIONS:
+        raise CosimError(f"{where}: FMI {version}; {RUNS}")
     part = md.coSimulation if interface == "cs" else md.modelExchange
     if part is None:
         kind = "Co-Simulation" if interface == "cs" else "Model-Exchange"
         raise CosimError(f"{where} has no {kind} interface (fmi_type = {interface!r})")
     ident = str(part.modelIdentifier or "")
-    binary = platform_binary(ident)
+    binary = platform_binary(ident, version)
     if binary not in names:
         have = sorted({n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") >= 2
                        and n.split("/")[1]})

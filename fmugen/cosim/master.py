@@ -41,7 +41,8 @@ from .schemes import SCHEMES, FixedPoint, GaussSeidel, Jacobi, Newton
 from .settings import check_choices, resolve
 from .stepsize import StepSizeController
 from .system import CosimSystem
-from .units import STATUS, ModelUnit, SlaveUnit, UnitFailure, dptr, vr_array
+from .units import STATUS, SimulationTerminated, UnitFailure, dptr, vr_array
+from .units3 import open_unit
 
 __all__ = ["CosimResult", "FailureReport", "Master", "Summary", "run", "check_choices", "SCHEMES",
            "EXTRAPOLATIONS"]
@@ -147,10 +148,8 @@ class Master:
         try:
             for u in system.units:
                 ft = str(u.fmi_type).lower()
-                if ft == "cs":
-                    self.units.append(SlaveUnit(u, system.start_time, system.stop_time))
-                elif ft == "me":
-                    self.units.append(ModelUnit(u, system.start_time, system.stop_time))
+                if ft in ("cs", "me"):  # an FMI 2.0 or FMI 3.0 unit, by the FMU's version
+                    self.units.append(open_unit(u, system.start_time, system.stop_time))
                 else:
                     raise CosimError(f"{system.name}: FMU {u.name!r}: fmi_type must be 'cs' or 'me', not {u.fmi_type!r}")
             self._resolve()
@@ -344,8 +343,8 @@ class Master:
                                  f"FMU has them with its Jacobian: jacobian = true in the scene); use "
                                  f"{self.scheme}/linear")
             if u.n_in and not u.can_interpolate:
-                raise CosimError(f"{what}: FMU {u.name!r} cannot interpolate inputs (canInterpolateInputs = "
-                                 f"false); use {self.scheme}/linear")
+                raise CosimError(f"{what}: FMU {u.name!r} cannot interpolate inputs ({u.no_interpolation}); "
+                                 f"use {self.scheme}/linear")
 
     def _check_step_sizes(self, t0: float, stop: float, H: float, adaptive: bool) -> None:
         """An FMU that declares canHandleVariableCommunicationStepSize = false (FMI 2.0's default) takes only
@@ -512,6 +511,13 @@ class Master:
             summ.warnings.append(f"no coupling error estimate: FMU {u.name!r} declares {flag}=\"false\", and the "
                                  f"estimate reruns windows of macro steps from saved FMU states with H/2")
         summ.warnings.extend(self.me_block.warnings() if self.me_block is not None else ())
+        # FMI 3.0 has no input derivatives: what such an FMU does instead of the extrapolant, said once
+        held = [u.name for u in self.units if u.kind == "cs" and u.n_in and getattr(u, "VERSION", "2.0") != "2.0"]
+        if held and not self.hold_only:
+            summ.warnings.append(f"FMU {', '.join(map(repr, held))}: FMI 3.0 has no input derivatives (no "
+                                 f"canInterpolateInputs): its inputs are held at the midpoint of the "
+                                 f"{'line U_n -> V' if implicit else 'extrapolant'} over each macro step, as an FMI "
+                                 f"2.0 FMU's with canInterpolateInputs = false")
         if estimate and len(self.rec_idx) and not lacking:
             rtols = [r for r in map(internal_rtol, self.units) if r is not None]
             est = ErrorEstimate(self.scheme, self.extrapolation, int((stop - t0) / H0), self.columns,
@@ -663,6 +669,8 @@ class Master:
                     if est is not None and monitor.count == 0:  # a block ended: a window if the defect rose
                         est.active(monitor.level, summ.macro_steps)
                 H = control.accept(H, err) if adaptive else min(H0, Hmax)
+        except SimulationTerminated as e:  # an FMU ended the simulation: the run stops there and says so
+            failure = FailureReport(t, "terminated", str(e), unit=e.unit, fmu_messages=e.messages)
         except UnitFailure as e:
             failure = self._diagnose(e, t, H, d, scale0, monitor)
         except _Stop:
@@ -767,11 +775,11 @@ class Master:
         j = int(np.argmax(np.abs(d[: self.nu]) / np.maximum(scale0[: self.nu], 1e-300)))
         if monitor.physics:
             msg = (f"the system diverges: the interface values grew over the last macro steps until FMU {e.unit!r} "
-                   f"failed ({e.call} returned {STATUS_NAMES.get(e.status, e.status)}); "
+                   f"failed ({e.call} returned {e.status_name}); "
                    f"{monitor._stability_limit(H)}")
         else:
             msg = (f"the coupling diverges: the interface defect grew over the last macro steps until FMU "
-                   f"{e.unit!r} failed ({e.call} returned {STATUS_NAMES.get(e.status, e.status)}). The inputs "
+                   f"{e.unit!r} failed ({e.call} returned {e.status_name}). The inputs "
                    f"this FMU was given jumped, so the coupling (H = {H:.4g} s is above this scheme's stability "
                    f"limit: {monitor.advice}) is the cause, not stiffness of the FMU, whatever its message suggests")
         return FailureReport(t, "diverged", msg, unit=e.unit, coupling=self.coupling_labels[j],

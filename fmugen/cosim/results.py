@@ -14,7 +14,8 @@ class FailureReport:
     """Why and where a run stopped early."""
 
     time: float  # last accepted communication point [s]
-    cause: str  # "fmu-failure", "diverged", "tolerance", "not-converged", "non-finite"
+    cause: str  # "fmu-failure", "diverged", "tolerance", "not-converged", "non-finite", "terminated" (an FMU
+    # asked to end the simulation: terminateSimulation = true)
     message: str
     unit: Optional[str] = None  # the FMU that failed
     coupling: Optional[str] = None  # "src.var -> dst.var"

@@ -11,6 +11,11 @@ master can roll back or report.
 
 Messages the FMU logs are kept (the last :data:`LOG_KEEP`) for failure
 reports.
+
+FMI 3.0 FMUs are units3.py's :class:`~.units3.Slave3Unit` and
+:class:`~.units3.Model3Unit`: subclasses that bind the same entry points to
+adapters over the fmi3 functions (``units3.open_unit`` picks the class by
+the FMU's version), so that this FMI 2.0 path stays the direct C call.
 """
 from __future__ import annotations
 
@@ -122,30 +127,26 @@ class _Unit:
 
     kind = ""
 
-    def __init__(self, unit, start_time: float, stop_time: float):
-        from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                               fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
-        from fmpy import calloc, free
+    VERSION = "2.0"
+    #: the names of the FMI status values this unit's functions return (UnitFailure's text)
+    STATUS = STATUS
+    #: why the master holds this FMU's inputs over a step, if it does (canInterpolateInputs = false)
+    no_interpolation = "canInterpolateInputs = false"
+    #: the type name of a coupled (floating-point) variable in fmpy's model description
+    REAL = "Real"
 
+    def __init__(self, unit, start_time: float, stop_time: float, md=None):
         self.name = unit.name
         self.unit = unit
         self.c = None
         path = Path(unit.path)
         # a broken or foreign FMU: one line naming it (not the zip/XML/fmpy exception)
-        self.md = read_description(unit.name, path, self.kind)
+        self.md = md if md is not None else read_description(unit.name, path, self.kind)
+        if str(self.md.fmiVersion) != self.VERSION:  # units3.open_unit picks the class of the FMU's version
+            raise CosimError(f"FMU {unit.name!r} ({path}): FMI {self.md.fmiVersion}; {type(self).__name__} runs "
+                             f"FMI {self.VERSION} FMUs (fmugen.cosim.units3.open_unit opens either)")
         self.variables = {v.name: v for v in self.md.modelVariables}
         self.log = deque(maxlen=LOG_KEEP)
-        log = self.log
-
-        def logger(env, instance, status, category, message):
-            text = message.decode("utf-8", "replace").replace("%%", "%")
-            log.append(f"[{STATUS[status] if 0 <= status < 6 else status}] {text}")
-
-        cb = fmi2CallbackFunctions()
-        cb.logger = fmi2CallbackLoggerTYPE(logger)
-        cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        self._callbacks = cb  # keep the CFUNCTYPE alive as long as the instance
         try:
             self._unzip = _extract(path)
         except Exception as e:
@@ -161,27 +162,51 @@ class _Unit:
             # fmpy changes into the binary's folder to load it and changes back only when the load works: a
             # broken binary left the host process in a temporary folder (every relative path after it broke)
             os.chdir(cwd)
+        self._instantiate(path)
+        self.c = self.fmu.component
+        self._bind(self.fmu._functions)
+        self._apply_start_values(unit.start_values)
+        self.clocks = _clocks(self._unzip, self.variables, unit.start_values)
+        self._initialize(start_time, stop_time)
+        self.n_calls = 4
+        self.do_steps = 0  # fmi2DoStep calls by the master (counted per FMU: one thread steps it at a time)
+
+    def _instantiate(self, path) -> None:
+        from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                               fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+        from fmpy import calloc, free
+
+        log = self.log
+
+        def logger(env, instance, status, category, message):
+            text = message.decode("utf-8", "replace").replace("%%", "%")
+            log.append(f"[{STATUS[status] if 0 <= status < 6 else status}] {text}")
+
+        cb = fmi2CallbackFunctions()
+        cb.logger = fmi2CallbackLoggerTYPE(logger)
+        cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        self._callbacks = cb  # keep the CFUNCTYPE alive as long as the instance
         try:
             self.fmu.instantiate(callbacks=cb, loggingOn=False)
         except Exception as e:  # fmi2Instantiate returned NULL (e.g. the GUID is not the binary's)
-            raise load_failure(unit.name, path, "fmi2Instantiate", e, list(self.log)) from None
-        self.c = self.fmu.component
-        f = self.fmu._functions
+            raise load_failure(self.name, path, "fmi2Instantiate", e, list(self.log)) from None
+
+    def _bind(self, f) -> None:
         self._getReal = f["fmi2GetReal"]
         self._setReal = f["fmi2SetReal"]
         self._getState = f["fmi2GetFMUstate"]
         self._setState = f["fmi2SetFMUstate"]
         self._freeState = f["fmi2FreeFMUstate"]
         self._dirDer = f["fmi2GetDirectionalDerivative"]
-        self._apply_start_values(unit.start_values)
-        self.clocks = _clocks(self._unzip, self.variables, unit.start_values)
+
+    def _initialize(self, start_time: float, stop_time: float) -> None:
+        f = self.fmu._functions
         # the raw C functions return the status (fmpy's wrappers raise without the FMU's message)
         # no stop time: a run may be continued or given a later stop than the system's
         self.check(f["fmi2SetupExperiment"](self.c, 0, 0.0, start_time, 0, stop_time), "fmi2SetupExperiment")
         self.check(f["fmi2EnterInitializationMode"](self.c), "fmi2EnterInitializationMode")
         self.check(f["fmi2ExitInitializationMode"](self.c), "fmi2ExitInitializationMode")
-        self.n_calls = 4
-        self.do_steps = 0  # fmi2DoStep calls by the master (counted per FMU: one thread steps it at a time)
 
     # -- set-up ---------------------------------------------------------------
     def _apply_start_values(self, values) -> None:
@@ -211,8 +236,8 @@ class _Unit:
             near = difflib.get_close_matches(name, self.variables, n=3)
             hint = f" (did you mean {', '.join(near)}?)" if near else ""
             raise CosimError(f"FMU {self.name!r} ({self.unit.path}): no variable {name!r}{hint}")
-        if v.type != "Real":
-            raise CosimError(f"FMU {self.name!r}: variable {name!r} is {v.type}; couplings need Real")
+        if v.type != self.REAL:
+            raise CosimError(f"FMU {self.name!r}: variable {name!r} is {v.type}; couplings need {self.REAL}")
         if causality is not None and v.causality not in causality:
             raise CosimError(f"FMU {self.name!r}: variable {name!r} has causality {v.causality}, "
                              f"expected {' or '.join(causality)}")
@@ -220,7 +245,7 @@ class _Unit:
 
     def check(self, status: int, what: str) -> None:
         if status > 1:
-            raise UnitFailure(self.name, what, status, list(self.log))
+            raise UnitFailure(self.name, what, status, list(self.log), self.STATUS)
 
     def messages(self) -> list:
         return list(self.log)
@@ -333,18 +358,68 @@ class ModelUnit(_Unit):
         self._getX = f["fmi2GetContinuousStates"]
         self._getDer = f["fmi2GetDerivatives"]
         self._completed = f["fmi2CompletedIntegratorStep"]
+        self._getZ = f["fmi2GetEventIndicators"]
         self.x_vrs = [d.variable.derivative.valueReference for d in self.md.derivatives]
         self.der_vrs = [d.variable.valueReference for d in self.md.derivatives]
+        self.nominals = self.get_nominals()
+
+    def get_nominals(self) -> np.ndarray:
         nom = (c_double * max(1, self.nx))()
-        self.check(f["fmi2GetNominalsOfContinuousStates"](self.c, nom, self.nx), "fmi2GetNominalsOfContinuousStates")
-        self.nominals = np.array(nom[: self.nx], dtype=float)
+        self.check(self.fmu._functions["fmi2GetNominalsOfContinuousStates"](self.c, nom, self.nx),
+                   "fmi2GetNominalsOfContinuousStates")
+        return np.array(nom[: self.nx], dtype=float)
+
+    # -- events (the ME block's state events: me_block.py) -------------------------
+    def update_discrete_states(self):
+        """One fmi2NewDiscreteStates: (discrete states need another update, values of the continuous states
+        changed, nominals changed, next time event or None).  terminateSimulation ends the run."""
+        from fmpy.fmi2 import fmi2EventInfo
+
+        ev = fmi2EventInfo()
+        self.check(self.fmu._functions["fmi2NewDiscreteStates"](self.c, byref(ev)), "fmi2NewDiscreteStates")
+        if ev.terminateSimulation:
+            raise SimulationTerminated(self.name, "fmi2NewDiscreteStates", list(self.log), self.STATUS)
+        return (bool(ev.newDiscreteStatesNeeded), bool(ev.valuesOfContinuousStatesChanged),
+                bool(ev.nominalsOfContinuousStatesChanged),
+                float(ev.nextEventTime) if ev.nextEventTimeDefined else None)
+
+    def enter_event_mode(self) -> None:
+        self.check(self.fmu._functions["fmi2EnterEventMode"](self.c), "fmi2EnterEventMode")
+
+    def reenter_continuous_time(self) -> None:
+        self.check(self.fmu._functions["fmi2EnterContinuousTimeMode"](self.c), "fmi2EnterContinuousTimeMode")
+
+    def completed_integrator_step(self) -> bool:
+        """fmi2CompletedIntegratorStep after an accepted step of the ME block: whether the FMU asks for an
+        event (enterEventMode); terminateSimulation ends the run.  noSetFMUStatePriorToCurrentPoint is false:
+        the master may restore an earlier FMU state (rollback, iterated schemes)."""
+        enter, term = c_int(0), c_int(0)
+        self.check(self._completed(self.c, 0, byref(enter), byref(term)), "fmi2CompletedIntegratorStep")
+        if term.value:
+            raise SimulationTerminated(self.name, "fmi2CompletedIntegratorStep", list(self.log), self.STATUS)
+        return bool(enter.value)
 
 
 class UnitFailure(Exception):
-    """An FMU returned fmi2Discard, fmi2Error or fmi2Fatal."""
+    """An FMU returned fmi2Discard, fmi2Error or fmi2Fatal (fmi3Discard, ... of an FMI 3.0 FMU: ``names``
+    are the status names of its version)."""
 
-    def __init__(self, unit: str, call: str, status: int, messages: list):
+    def __init__(self, unit: str, call: str, status: int, messages: list, names=STATUS):
         self.unit, self.call, self.status, self.messages = unit, call, status, messages
-        name = STATUS[status] if 0 <= status < len(STATUS) else str(status)
+        self.status_name = names[status] if 0 <= status < len(names) else str(status)
         tail = ("; last message: " + messages[-1]) if messages else ""
-        super().__init__(f"FMU {unit!r}: {call} returned {name}{tail}")
+        super().__init__(f"FMU {unit!r}: {call} returned {self.status_name}{tail}")
+
+
+class SimulationTerminated(UnitFailure):
+    """An FMU asked to end the simulation (terminateSimulation = true from fmi3DoStep,
+    fmi3CompletedIntegratorStep, fmi3UpdateDiscreteStates or FMI 2.0's event info): not an error of the
+    call (its status was OK), but the run cannot go on past it."""
+
+    def __init__(self, unit: str, call: str, messages: list, names=STATUS):
+        Exception.__init__(self)
+        self.unit, self.call, self.status, self.messages = unit, call, 0, messages
+        self.status_name = names[0]
+        tail = ("; last message: " + messages[-1]) if messages else ""
+        self.args = (f"FMU {unit!r}: {call} returned terminateSimulation = true: the FMU ended the "
+                     f"simulation{tail}",)
