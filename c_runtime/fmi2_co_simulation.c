@@ -228,7 +228,11 @@ static int tick_at(fmugen_instance *inst, double t)
     return fmugen_next_tick(inst, t, &next, &at) == FMUGEN_OK && at;
 }
 
-static int handle_event(fmugen_instance *inst, fmugen_ode *ode, long long n_in_step, char *msg, size_t n)
+/* The event iteration at the located state event at inst->s.time with the inputs u there; fn names the
+ * FMI function in the log message (fmi2DoStep inside the step, fmi3UpdateDiscreteStates in FMI 3.0's
+ * Event Mode, which must run exactly this iteration so that both give the same results). */
+static int event_at(fmugen_instance *inst, const double *u, long long n_in_step, const char *fn, char *msg,
+                    size_t n)
 {
     const double te = inst->s.time;
     char zname[160];
@@ -249,15 +253,46 @@ static int handle_event(fmugen_instance *inst, fmugen_ode *ode, long long n_in_s
                      "indicator %s", te, FMUGEN_EVENT_MAX_PER_STEP, zname);
         return FMUGEN_SOLVER_FAILED;
     }
-    double *u = ode->u_work;
-    fmugen_inputs_at(inst, ode->t0, ode->u0, te, u);
     char why[300];
     if (fmugen_event_iteration(inst, u, why, sizeof why) != FMUGEN_OK) {
         snprintf(msg, n, "at the event on indicator %.150s: %s", zname, why);
         return FMUGEN_SOLVER_FAILED;
     }
-    fmugen_log(inst, fmi2OK, FMUGEN_LOG_EVENTS, "fmi2DoStep: state event at t = %.17g on indicator %s", te, zname);
+    fmugen_log(inst, fmi2OK, FMUGEN_LOG_EVENTS, "%s: state event at t = %.17g on indicator %s", fn, te, zname);
     return FMUGEN_SOLVER_OK;
+}
+
+static int handle_event(fmugen_instance *inst, fmugen_ode *ode, long long n_in_step, char *msg, size_t n)
+{
+    double *u = ode->u_work;
+    fmugen_inputs_at(inst, ode->t0, ode->u0, inst->s.time, u);
+    return event_at(inst, u, n_in_step, "fmi2DoStep", msg, n);
+}
+
+int fmugen_cs_event_update(fmugen_instance *inst, const char *fn, int inputs_changed, char *msg, size_t n)
+{
+    const int pending = inst->s.cs_event_pending;
+    inst->s.cs_event_pending = 0;
+    /* fmi2DoStep left inst->u at the inputs of the event's time (the importer may have set others in
+     * Event Mode since): what handle_event and the sample instant below compute inside the step */
+    if (pending & FMUGEN_PENDING_STATE_EVENT) {
+        /* one event per step: the step stopped at it (n_in_step counts the events of one step) */
+        if (event_at(inst, inst->u, 1, fn, msg, n) != FMUGEN_SOLVER_OK) return FMUGEN_NOT_FINITE;
+    }
+    if (pending & FMUGEN_PENDING_TICK) {
+        char why[300];
+        if (fmugen_tick_iteration(inst, inst->u, why, sizeof why) != FMUGEN_OK) {
+            snprintf(msg, n, "at the sample instant t = %.17g: %s", inst->s.time, why);
+            return FMUGEN_NOT_FINITE;
+        }
+        inst->s.fsal_valid = 0;
+    }
+    if (!pending && inputs_changed && fmugen_has_events(inst->model)) {
+        /* no event of the FMU's own, but inputs set in Event Mode: the clauses see them (a guard on an
+         * input), as at any event */
+        if (fmugen_event_iteration(inst, inst->u, msg, n) != FMUGEN_OK) return FMUGEN_NOT_FINITE;
+    }
+    return FMUGEN_OK;
 }
 
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
@@ -281,7 +316,10 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     }
     {
         const double advanced = (tc + H) - tc;
-        if (advanced == 0 || fabs(advanced - H) > FMUGEN_STEP_REL_RESOLUTION * H) {
+        /* after an early return (FMI 3.0) the rest of a communication step can be any sliver of it: it
+         * needs only to advance time, and ends where the importer's tc + h rounds to */
+        const int sliver_ok = inst->cs_ext && inst->cs_ext->early_return_allowed && advanced > 0;
+        if (advanced == 0 || (fabs(advanced - H) > FMUGEN_STEP_REL_RESOLUTION * H && !sliver_ok)) {
             fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
                        "fmi2DoStep: a step of %.17g s at t = %.17g cannot be resolved in double precision "
                        "(t + h - t = %.17g); time would %s. Start the experiment at a smaller time or take larger "
@@ -320,6 +358,14 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     const long long steps0 = inst->s.n_steps, rej0 = inst->s.n_rejected, rhs0 = inst->s.n_rhs;
     int rc;
     long long events = 0;
+    /* FMI 3.0 (NULL for FMI 2.0): events left to the importer's Event Mode, early returns */
+    fmugen_cs_ext *const ext = inst->cs_ext;
+    const int to_event_mode = ext && ext->event_mode_used;
+    if (ext) {
+        ext->step_end = t_end;
+        ext->stop_at = HUGE_VAL;
+        ext->returned_early = 0;
+    }
     for (;;) {
         /* a sampled component's next tick inside the step is a time event: integrate exactly to it */
         double target = t_end, tick = HUGE_VAL;
@@ -328,20 +374,49 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
         if (m->ns && fmugen_next_tick(inst, inst->s.time, &tick, &at) == FMUGEN_OK &&
             t_end - tick > 1e-9 * H + 8 * DBL_EPSILON * fabs(t_end))
             target = tick;
-        const int to_tick = target < t_end || (m->ns && tick_at(inst, t_end));
+        int to_tick = target < t_end || (m->ns && tick_at(inst, t_end));
+        if (ext) {
+            if (ext->stop_at < target) { /* the importer's earlyReturnTime comes first */
+                target = ext->stop_at;
+                to_tick = 0;
+            }
+            ext->target = target;
+        }
         switch (inst->s.solver) {
         case FMUGEN_SOLVER_IMPLICIT: rc = fmugen_solve_rodas3(&ode, target, msg, sizeof msg); break;
         case FMUGEN_SOLVER_RK4: rc = fmugen_solve_rk4(&ode, target, msg, sizeof msg); break;
         default: rc = fmugen_solve_dopri5(&ode, target, msg, sizeof msg); break;
         }
+        if (rc == FMUGEN_SOLVER_EARLY) {
+            /* the importer asked for an early return in the intermediate update: at this step's end, or
+             * on to the later earlyReturnTime it gave */
+            rc = FMUGEN_SOLVER_OK;
+            if (ext->stop_at > inst->s.time) continue;
+            break;
+        }
         if (rc == FMUGEN_SOLVER_EVENT) {
+            if (to_event_mode && ext->early_return_allowed) {
+                /* the step ends at the event, the state just after the crossing: the importer's Event
+                 * Mode runs its iteration (fmugen_cs_event_update) */
+                inst->s.cs_event_pending |= FMUGEN_PENDING_STATE_EVENT;
+                rc = FMUGEN_SOLVER_OK;
+                break;
+            }
             /* a state event located inside the step: the event iteration at its
              * time with the inputs there, then on to the communication point */
             rc = handle_event(inst, &ode, ++events, msg, sizeof msg);
             if (rc != FMUGEN_SOLVER_OK) break;
+            if (ext && ext->early_return_allowed) break; /* a communication point at the discontinuity */
             continue;
         }
         if (rc != FMUGEN_SOLVER_OK) break;
+        if (to_tick && to_event_mode && (ext->early_return_allowed || target >= t_end)) {
+            /* the sample instant is the importer's event (eventHandlingNeeded): ended here, the clocks'
+             * iteration left to its Event Mode */
+            inst->s.time = target;
+            inst->s.cs_event_pending |= FMUGEN_PENDING_TICK;
+            break;
+        }
         if (to_tick) { /* the sample instant: the clocks' event iteration, with the inputs there */
             inst->s.time = target;
             fmugen_inputs_at(inst, tc, u0, target, u_work);
@@ -354,9 +429,13 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
             /* not counted in n_events: a sample instant is a time event a master knows beforehand (the
              * clocks are in the description), not a discontinuity it has to find */
             inst->s.fsal_valid = 0;
+            if (ext && ext->early_return_allowed && target < t_end) break; /* a communication point there */
         }
         if (target >= t_end) break;
+        if (ext && inst->s.time >= ext->stop_at) break; /* the importer's earlyReturnTime reached */
     }
+    /* FMI 3.0: the step ended before tc + h (an event, the importer's request); never for FMI 2.0 */
+    const int early = ext && rc == FMUGEN_SOLVER_OK && inst->s.time < t_end;
     /* inputs at the time reached, so that outputs and the next step see a
      * continuous input */
     fmugen_inputs_at(inst, tc, u0, inst->s.time, inst->u);
@@ -385,7 +464,8 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
                    tc, t_end, msg, inst->s.time);
         return fmi2Discard;
     }
-    inst->s.time = t_end;
+    if (!early) inst->s.time = t_end;
+    const double t_reached = inst->s.time;
     /* never fmi2OK about an unchecked point: states, and outputs and
      * derivatives at the end point, finite; values inside their validity ranges */
     fmi2Status checked = fmugen_check_step_result(inst, "fmi2DoStep", msg, sizeof msg);
@@ -393,6 +473,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
         /* the state goes back to where the step started, so that fmi2GetReal
          * gives what the message and fmi2LastSuccessfulTime say */
         restore_step_start(inst, tc);
+        inst->s.cs_event_pending = 0; /* the event it stopped at is undone with it */
         inst->s.fmi_state = FMUGEN_STEP_FAILED;
         inst->s.last_do_step_status = fmi2Discard;
         inst->s.last_successful_time = tc;
@@ -401,11 +482,12 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
                    "t = %.17g (fmi2GetRealStatus(fmi2LastSuccessfulTime))", tc, t_end, msg, tc);
         return fmi2Discard;
     }
-    inst->s.last_successful_time = t_end;
+    inst->s.last_successful_time = t_reached;
     inst->s.last_do_step_status = checked;
-    fmugen_log(inst, fmi2OK, FMUGEN_LOG_ALL, "fmi2DoStep to t = %.17g with %s: %lld steps, %lld rejected, %lld f",
-               t_end, solver_name(inst->s.solver), inst->s.n_steps - steps0, inst->s.n_rejected - rej0,
-               inst->s.n_rhs - rhs0);
+    if (ext) ext->returned_early = early;
+    fmugen_log(inst, fmi2OK, FMUGEN_LOG_ALL, "fmi2DoStep to t = %.17g with %s: %lld steps, %lld rejected, %lld f%s",
+               t_reached, solver_name(inst->s.solver), inst->s.n_steps - steps0, inst->s.n_rejected - rej0,
+               inst->s.n_rhs - rhs0, early ? " (returned early)" : "");
     return checked;
 }
 

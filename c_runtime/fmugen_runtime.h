@@ -97,7 +97,32 @@ typedef struct fmugen_scalars {
     int x_reinit;              /* ME: a state was re-initialised in the current event iteration */
     int tick_done;             /* the clocks' ticks at tick_time have been processed */
     double tick_time;          /* time of the last processed tick */
+    /* FMI 3.0 Co-Simulation with eventModeUsed: FMUGEN_PENDING_* bits of the event fmi2DoStep stopped at
+     * (s.time) and left to the importer's Event Mode; 0 for FMI 2.0.  Part of fmi2GetFMUstate's copy, not
+     * of the serialised form (fmu_state.c writes the FMI 2.0 fields). */
+    int cs_event_pending;
 } fmugen_scalars;
+
+#define FMUGEN_PENDING_STATE_EVENT 1 /* a located state event: the event iteration has not run yet */
+#define FMUGEN_PENDING_TICK 2        /* a sample instant: the clocks' event iteration has not run yet */
+
+struct fmugen_ode;
+
+/* What fmi2DoStep does beyond FMI 2.0 for an FMI 3.0 Co-Simulation instance that asked for it
+ * (c_runtime/fmi3/fmi3_functions.c owns it).  An FMI 2.0 instance has none (fmugen_instance.cs_ext NULL),
+ * and every step of it is exactly what it was before this existed. */
+typedef struct fmugen_cs_ext {
+    int event_mode_used;       /* eventModeUsed: an event ends the step unhandled, for the importer's Event Mode */
+    int early_return_allowed;  /* earlyReturnAllowed: the step may end before tc + h */
+    /* After each accepted internal solver step (solver.h, fmugen_step_accepted): the importer's
+     * intermediate update.  1: the importer asked to return early (stop_at set), the solver stops here.
+     * NULL: no callback. */
+    int (*step_accepted)(struct fmugen_ode *ode);
+    double step_end;           /* tc + h of the running fmi2DoStep */
+    double target;             /* where the running solver call ends (step_end, a sample instant, stop_at) */
+    double stop_at;            /* the importer's earlyReturnTime in the running step; HUGE_VAL: none */
+    int returned_early;        /* the last fmi2DoStep ended before tc + h */
+} fmugen_cs_ext;
 
 /* Tag of a live instance (fmugen_instance.tag), cleared by fmi2FreeInstance:
  * a second free, or a call on a freed instance whose memory has not been
@@ -141,6 +166,7 @@ typedef struct fmugen_instance {
     double *step_start;
 
     int range_messages;        /* validity-range warnings logged so far (bounded) */
+    fmugen_cs_ext *cs_ext;     /* FMI 3.0 Co-Simulation extensions of fmi2DoStep; NULL for FMI 2.0 */
 } fmugen_instance;
 
 /* 1 for a live instance of this runtime: non-NULL and tagged (see FMUGEN_INSTANCE_TAG) */
@@ -222,6 +248,13 @@ FMUGEN_INTERNAL int fmugen_event_round(fmugen_instance *inst, const double *u, i
 FMUGEN_INTERNAL int fmugen_event_iteration(fmugen_instance *inst, const double *u, char *msg, size_t n);
 /* zpre = the indicators at the current point.  FMUGEN_OK or a code. */
 FMUGEN_INTERNAL int fmugen_event_remember(fmugen_instance *inst, const double *u);
+/* FMI 3.0 Co-Simulation Event Mode (fmi2_co_simulation.c): the event iteration of the event fmi2DoStep
+ * stopped at (s.cs_event_pending), at the current time with the inputs inst->u -- the same iteration
+ * fmi2DoStep runs inside the step without Event Mode; with nothing pending but inputs_changed, the
+ * clauses' iteration for the new inputs.  Clears the pending bits.  FMUGEN_OK, or non-zero with the
+ * reason in msg.  fn names the FMI function in the log message of a state event. */
+FMUGEN_INTERNAL int fmugen_cs_event_update(fmugen_instance *inst, const char *fn, int inputs_changed, char *msg,
+                                           size_t n);
 /* Name of indicator i into buf */
 FMUGEN_INTERNAL const char *fmugen_indicator_name(const fmugen_instance *inst, int i, char *buf, size_t n);
 

@@ -20,6 +20,10 @@
  * just after the crossing; fmi2DoStep runs the event iteration and goes on */
 #define FMUGEN_SOLVER_EVENT 2
 
+/* stopped after an accepted internal step because the importer asked for an early return in FMI 3.0's
+ * intermediate update (fmugen_cs_ext): inst->s.time and inst->x are that step's end */
+#define FMUGEN_SOLVER_EARLY 3
+
 /* internal steps allowed in one communication step */
 #define FMUGEN_SOLVER_MAX_STEPS 100000
 
@@ -72,6 +76,15 @@ FMUGEN_INTERNAL fmi2Status fmugen_check_ranges(fmugen_instance *inst, const char
  * indicators could not be evaluated (reason in msg). */
 FMUGEN_INTERNAL int fmugen_step_event(fmugen_ode *ode, double t0, const double *x0, const double *f0, double t1,
                                       const double *x1, const double *f1, const double *r5, char *msg, size_t n);
+
+/* Every solver calls this after each accepted internal step, when inst->s.time, inst->x and its step-size
+ * memory are that step's end: FMI 3.0's intermediate update (fmugen_cs_ext.step_accepted).  1: return
+ * FMUGEN_SOLVER_EARLY now.  Always 0 for FMI 2.0 (no cs_ext), so the step is what it was without it. */
+static inline int fmugen_step_accepted(fmugen_ode *ode)
+{
+    const fmugen_cs_ext *e = ode->inst->cs_ext;
+    return e != NULL && e->step_accepted != NULL && e->step_accepted(ode);
+}
 
 FMUGEN_INTERNAL int fmugen_solve_dopri5(fmugen_ode *ode, double t_end, char *msg, size_t n);
 FMUGEN_INTERNAL int fmugen_solve_rodas3(fmugen_ode *ode, double t_end, char *msg, size_t n);

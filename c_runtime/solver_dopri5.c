@@ -251,6 +251,7 @@ int fmugen_solve_dopri5(fmugen_ode *ode, double t_end, char *msg, size_t msgn)
              * against the step the controller wanted */
             h = last ? fmax(hnew, h_prop) : hnew;
             inst->s.h_next = h;
+            if (fmugen_step_accepted(ode)) return FMUGEN_SOLVER_EARLY;
         } else {
             inst->s.n_rejected++;
             h = h / fmin(facc1, fac11 / safe);

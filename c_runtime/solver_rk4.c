@@ -265,6 +265,7 @@ int fmugen_solve_rk4(fmugen_ode *ode, double t_end, char *msg, size_t msgn)
         memcpy(x, xn, (size_t)n * sizeof(double));
         inst->s.time = tn;
         inst->s.n_steps++;
+        if (fmugen_step_accepted(ode)) return FMUGEN_SOLVER_EARLY;
     }
     return FMUGEN_SOLVER_OK;
 }

@@ -183,6 +183,7 @@ int fmugen_solve_rodas3(fmugen_ode *ode, double t_end, char *msg, size_t msgn)
             last_problem = NULL;
             h = last ? fmax(hnew, h_prop) : hnew;
             inst->s.h_next = h;
+            if (fmugen_step_accepted(ode)) return FMUGEN_SOLVER_EARLY;
         } else {
             reject_more = reject_last;
             reject_last = 1;

@@ -23,14 +23,36 @@
  *     (fmugen/fmi/model_description3.py) writes the same layout;
  *   - fmi3EnterInitializationMode takes fmi2SetupExperiment's arguments;
  *   - fmi3UpdateDiscreteStates / fmi3DoStep return fmi2EventInfo's flags and
- *     fmi2GetRealStatus's lastSuccessfulTime as output arguments.
+ *     fmi2GetRealStatus's lastSuccessfulTime as output arguments;
+ *   - Co-Simulation Event Mode and early return (FMI 3.0 sec. 4.1 "Early
+ *     Return", 4.2 Step Mode and fmi3EnterEventMode): eventModeUsed and
+ *     earlyReturnAllowed of fmi3InstantiateCoSimulation go to fmi2DoStep
+ *     through fmugen_cs_ext (inst->cs_ext; NULL when neither is asked for and
+ *     there is no callback, and for FMI 2.0, so those steps stay exactly FMI
+ *     2.0's).  With eventModeUsed an event ends the step unhandled:
+ *     eventHandlingNeeded, earlyReturn (when allowed; not for an event at the
+ *     step's end), lastSuccessfulTime = its time; fmi3EnterEventMode,
+ *     fmi3UpdateDiscreteStates (the whole event iteration of the step, with the
+ *     inputs set in Event Mode: discreteStatesNeedUpdate false after one call)
+ *     and fmi3EnterStepMode go on.  fmi3ExitInitializationMode enters Event
+ *     Mode then (the initial iteration has run; nothing is pending).
+ *     hasEventMode is true for models with events only (modelDescription.xml);
+ *     eventModeUsed is refused for the others, as the standard requires;
+ *   - the intermediate update: after every accepted internal solver step the
+ *     importer's callback, with intermediateVariableSetRequested false (inputs
+ *     are not taken inside a step), intermediateVariableGetAllowed and
+ *     intermediateStepFinished true, canReturnEarly = earlyReturnAllowed before
+ *     the step's end; earlyReturnRequested ends the step at earlyReturnTime (at
+ *     the callback's time when that has passed).  Inside the callback only
+ *     getting is allowed: everything that changes the instance returns
+ *     fmi3Error with a message (a nested fmi3DoStep, setting, Event Mode, FMU
+ *     state, fmi3FreeInstance, fmi3Terminate ...).
  *
  * Not supported yet (present, because the standard requires every symbol,
  * and returning fmi3Error with a logged message): Scheduled Execution,
- * clocks, Co-Simulation event mode and early return (eventModeUsed is
- * refused; fmi3DoStep never returns early), intermediate update,
- * configuration mode, adjoint derivatives, variable dependencies at run time,
- * and variables of types other than Float64 and Int32 (there are none).
+ * clocks, setting inputs in the intermediate update, configuration mode,
+ * adjoint derivatives, variable dependencies at run time, and variables of
+ * types other than Float64 and Int32 (there are none).
  */
 #include <math.h>
 #include <stdarg.h>
@@ -38,6 +60,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include "fmugen_runtime.h"
+#include "solver.h"
 #include "fmi3Functions.h"
 
 #define INST ((fmugen_instance *)instance)
@@ -52,10 +75,18 @@
 /* the logger                                                                */
 /* ------------------------------------------------------------------------ */
 
+/* The FMI 2.0 logger's environment, and with it what FMI 3.0 Co-Simulation adds to an instance: the
+ * runtime reaches it as inst->cb.componentEnvironment, fmi2DoStep as inst->cs_ext (&ext). */
 typedef struct fmi3_bridge {
     fmi3LogMessageCallback log;
     fmi3InstanceEnvironment env;
+    fmugen_cs_ext ext;                              /* eventModeUsed, earlyReturnAllowed, the step hook */
+    fmi3IntermediateUpdateCallback intermediate_update; /* NULL: none given */
+    int in_intermediate_update;                     /* inside that callback: Intermediate Update Mode */
+    int inputs_set_in_event_mode;                   /* an input was set in Co-Simulation Event Mode */
 } fmi3_bridge;
+
+#define BRIDGE(inst) ((fmi3_bridge *)(inst)->cb.componentEnvironment)
 
 /* fmi2 names in the runtime's messages and what the FMI 3.0 importer called;
  * longest first where one name begins another; any other "fmi2" becomes
@@ -143,6 +174,62 @@ static fmi3Status st(fmi2Status s) { return s == fmi2Pending ? fmi3Error : (fmi3
 #define LIVE_OR_ERROR \
     if (!fmugen_live(INST)) return fmi3Error
 
+/* Inside the intermediate-update callback (Intermediate Update Mode) the importer may only get values
+ * (intermediateVariableGetAllowed; setting is never requested): anything that changes the instance --
+ * above all a nested fmi3DoStep, or freeing it under the running step -- is refused. */
+static int in_update(fmugen_instance *inst, const char *fn)
+{
+    if (!BRIDGE(inst)->in_intermediate_update) return 0;
+    fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+               "%s: not allowed in Intermediate Update Mode (inside the intermediate-update callback at t = %.17g: "
+               "only getting values is allowed, intermediateVariableSetRequested is false)", fn, inst->s.time);
+    return 1;
+}
+#define NOT_IN_UPDATE_INST(inst, fn) \
+    if (in_update((inst), (fn))) return fmi3Error
+#define NOT_IN_UPDATE(fn) NOT_IN_UPDATE_INST(INST, fn)
+
+/* fmugen_cs_ext.step_accepted: FMI 3.0's intermediate update after each accepted internal solver step
+ * of fmi3DoStep (solver.h).  The importer may read every variable at the step's end (outputs computed
+ * there with the inputs there, as fmi3DoStep gives them at a communication point) and may ask to return
+ * early; the solver's state is not touched, so the step goes on exactly as without the callback.
+ * Returns 1 when the solver is to stop now. */
+static int intermediate_update(struct fmugen_ode *ode)
+{
+    fmugen_instance *inst = ode->inst;
+    fmi3_bridge *b = BRIDGE(inst);
+    fmugen_cs_ext *e = &b->ext;
+    const double t = inst->s.time;
+    /* the solvers move x in place and hold the inputs in their own buffer: what fmi3GetFloat64 reads */
+    fmugen_inputs_at(inst, ode->t0, ode->u0, t, inst->u);
+    fmugen_invalidate(inst);
+    const fmi3Boolean can = e->early_return_allowed && t < e->step_end ? fmi3True : fmi3False;
+    fmi3Boolean requested = fmi3False;
+    fmi3Float64 when = t;
+    b->in_intermediate_update = 1;
+    /* intermediateVariableSetRequested false: inputs are not taken inside a step; intermediateStepFinished
+     * true: the callback comes only after accepted steps, never for a trial */
+    b->intermediate_update(b->env, t, fmi3False, fmi3True, fmi3True, can, &requested, &when);
+    b->in_intermediate_update = 0;
+    if (!requested) return 0;
+    if (!can) { /* "only if canReturnEarly": an early return not allowed is not taken */
+        fmugen_log(inst, fmi2OK, FMUGEN_LOG_EVENTS,
+                   "fmi3DoStep: early return requested at t = %.17g ignored (canReturnEarly is false)", t);
+        return 0;
+    }
+    if (!(when < e->step_end)) return 0; /* the step ends there anyway (NaN too) */
+    e->stop_at = when > t ? when : t;   /* a time already passed: here */
+    fmugen_log(inst, fmi2OK, FMUGEN_LOG_EVENTS, "fmi3DoStep: early return requested at t = %.17g for t = %.17g", t,
+               e->stop_at);
+    /* before the solver's own end: stop now (fmi2DoStep integrates on to a later stop_at); at or after it
+     * fmi2DoStep stops there itself */
+    return e->stop_at < e->target;
+}
+
+static int is_cs(const fmugen_instance *inst) { return inst->type == fmi2CoSimulation; }
+/* a Co-Simulation instance with eventModeUsed = true */
+static int cs_event_mode(const fmugen_instance *inst) { return is_cs(inst) && BRIDGE(inst)->ext.event_mode_used; }
+
 static int refuse(fmugen_instance *inst, const char *fn, const char *why)
 {
     fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "%s: %s", fn, why);
@@ -164,7 +251,9 @@ fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, siz
 
 static fmi3Instance instantiate(const char *fn, fmi2Type type, fmi3String instanceName,
                                 fmi3String instantiationToken, fmi3String resourcePath, fmi3Boolean visible,
-                                fmi3Boolean loggingOn, fmi3InstanceEnvironment env, fmi3LogMessageCallback log)
+                                fmi3Boolean loggingOn, fmi3InstanceEnvironment env, fmi3LogMessageCallback log,
+                                fmi3Boolean eventModeUsed, fmi3Boolean earlyReturnAllowed,
+                                fmi3IntermediateUpdateCallback intermediateUpdate)
 {
     if (!log) return NULL; /* nobody to tell why */
     fmi3_bridge *b = calloc(1, sizeof *b);
@@ -183,6 +272,22 @@ static fmi3Instance instantiate(const char *fn, fmi2Type type, fmi3String instan
         free(b);
         return NULL;
     }
+    if (eventModeUsed && !fmugen_has_events(inst->model)) {
+        /* hasEventMode is false for a model without events: the standard requires the error */
+        early_log(log, env,
+                  "%s: eventModeUsed = true, but hasEventMode is false in modelDescription.xml (the model has no "
+                  "events: no state event, clause or sample clock)", fn);
+        fmi2FreeInstance(inst);
+        free(b);
+        return NULL;
+    }
+    b->ext.event_mode_used = eventModeUsed ? 1 : 0;
+    b->ext.early_return_allowed = earlyReturnAllowed ? 1 : 0;
+    b->ext.stop_at = HUGE_VAL;
+    b->intermediate_update = intermediateUpdate;
+    b->ext.step_accepted = intermediateUpdate ? intermediate_update : NULL;
+    /* none of the three asked for: no extension, fmi2DoStep exactly as for FMI 2.0 */
+    if (b->ext.event_mode_used || b->ext.early_return_allowed || intermediateUpdate) inst->cs_ext = &b->ext;
     return inst;
 }
 
@@ -192,7 +297,8 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
                                           fmi3LogMessageCallback logMessage)
 {
     return instantiate("fmi3InstantiateModelExchange", fmi2ModelExchange, instanceName, instantiationToken,
-                       resourcePath, visible, loggingOn, instanceEnvironment, logMessage);
+                       resourcePath, visible, loggingOn, instanceEnvironment, logMessage, fmi3False, fmi3False,
+                       NULL);
 }
 
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
@@ -204,20 +310,13 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
                                          fmi3LogMessageCallback logMessage,
                                          fmi3IntermediateUpdateCallback intermediateUpdate)
 {
-    /* fmi3DoStep never returns early and never calls intermediateUpdate
-     * (providesIntermediateUpdate is false): allowing either changes nothing */
-    (void)earlyReturnAllowed;
+    /* every output and state may be read in the intermediate update (intermediateUpdate = "true" on
+     * them in modelDescription.xml), none set: the list needs no checking against the FMU's */
     (void)requiredIntermediateVariables;
     (void)nRequiredIntermediateVariables;
-    (void)intermediateUpdate;
-    if (eventModeUsed) {
-        early_log(logMessage, instanceEnvironment,
-                  "fmi3InstantiateCoSimulation: eventModeUsed = true is not supported (hasEventMode is false in "
-                  "modelDescription.xml: the FMU handles its events inside fmi3DoStep)");
-        return NULL;
-    }
     return instantiate("fmi3InstantiateCoSimulation", fmi2CoSimulation, instanceName, instantiationToken,
-                       resourcePath, visible, loggingOn, instanceEnvironment, logMessage);
+                       resourcePath, visible, loggingOn, instanceEnvironment, logMessage, eventModeUsed,
+                       earlyReturnAllowed, intermediateUpdate);
 }
 
 fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
@@ -238,6 +337,7 @@ fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3Stri
 void fmi3FreeInstance(fmi3Instance instance)
 {
     if (!fmugen_live(INST)) return; /* NULL or already freed: see fmi2FreeInstance */
+    if (in_update(INST, "fmi3FreeInstance")) return; /* the step that called the callback still runs on it */
     void *b = INST->cb.componentEnvironment;
     fmi2FreeInstance(instance);
     free(b);
@@ -247,6 +347,7 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
                                        fmi3Float64 startTime, fmi3Boolean stopTimeDefined, fmi3Float64 stopTime)
 {
     LIVE_OR_ERROR;
+    NOT_IN_UPDATE("fmi3EnterInitializationMode");
     if (!fmugen_check_state(INST, FMUGEN_INSTANTIATED, "fmi3EnterInitializationMode")) return fmi3Error;
     fmi2Status s = fmi2SetupExperiment(instance, toleranceDefined ? fmi2True : fmi2False, tolerance, startTime,
                                        stopTimeDefined ? fmi2True : fmi2False, stopTime);
@@ -258,25 +359,53 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
 fmi3Status fmi3ExitInitializationMode(fmi3Instance instance)
 {
     LIVE_OR_ERROR;
-    return st(fmi2ExitInitializationMode(instance));
+    NOT_IN_UPDATE("fmi3ExitInitializationMode");
+    fmi2Status s = fmi2ExitInitializationMode(instance);
+    if (s <= fmi2Warning && cs_event_mode(INST)) {
+        /* FMI 3.0: with eventModeUsed, Co-Simulation leaves initialisation into Event Mode (the initial
+         * event iteration has run, as for FMI 2.0 Co-Simulation: fmi3UpdateDiscreteStates finds nothing
+         * pending), and fmi3EnterStepMode goes on */
+        INST->s.fmi_state = FMUGEN_EVENT_MODE;
+        BRIDGE(INST)->inputs_set_in_event_mode = 0;
+        fmugen_log(INST, fmi2OK, FMUGEN_LOG_EVENTS, "fmi3ExitInitializationMode: now in eventMode (eventModeUsed)");
+    }
+    return st(s);
 }
 
 fmi3Status fmi3EnterEventMode(fmi3Instance instance)
 {
     LIVE_OR_ERROR;
-    return st(fmi2EnterEventMode(instance));
+    const char *fn = "fmi3EnterEventMode";
+    NOT_IN_UPDATE(fn);
+    if (!is_cs(INST)) return st(fmi2EnterEventMode(instance));
+    if (!BRIDGE(INST)->ext.event_mode_used) {
+        fmugen_log(INST, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                   "%s: this Co-Simulation instance was instantiated with eventModeUsed = false: it handles its "
+                   "events inside fmi3DoStep, and the function must not be called", fn);
+        return fmi3Error;
+    }
+    /* from Step Mode only (not after a discarded step: the state is the last good point, no event) */
+    if (!fmugen_check_state(INST, FMUGEN_STEP_COMPLETE, fn)) return fmi3Error;
+    INST->s.fmi_state = FMUGEN_EVENT_MODE;
+    BRIDGE(INST)->inputs_set_in_event_mode = 0;
+    fmugen_log(INST, fmi2OK, FMUGEN_LOG_EVENTS, "%s at t = %.17g%s", fn, INST->s.time,
+               INST->s.cs_event_pending ? " (the event fmi3DoStep stopped at)" : "");
+    return fmi3OK;
 }
 
 fmi3Status fmi3Terminate(fmi3Instance instance)
 {
     LIVE_OR_ERROR;
+    NOT_IN_UPDATE("fmi3Terminate");
     return st(fmi2Terminate(instance));
 }
 
 fmi3Status fmi3Reset(fmi3Instance instance)
 {
     LIVE_OR_ERROR;
-    return st(fmi2Reset(instance));
+    NOT_IN_UPDATE("fmi3Reset");
+    BRIDGE(INST)->inputs_set_in_event_mode = 0;
+    return st(fmi2Reset(instance)); /* clears s.cs_event_pending with the other scalars */
 }
 
 /* ------------------------------------------------------------------------ */
@@ -357,6 +486,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
 {
     LIVE_OR_ERROR;
     const char *fn = "fmi3SetFloat64";
+    NOT_IN_UPDATE(fn);
     fmugen_instance *inst = INST;
     const fmugen_model_def *m = inst->model;
     if (bad_arrays(inst, fn, nValueReferences, valueReferences, nValues, values)) return fmi3Error;
@@ -380,7 +510,10 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
             return fmi3Error;
         }
     }
-    return st(fmi2SetReal(instance, valueReferences, nValueReferences, values));
+    fmi2Status s = fmi2SetReal(instance, valueReferences, nValueReferences, values);
+    if (s <= fmi2Warning && nValueReferences > 0 && inst->s.fmi_state == FMUGEN_EVENT_MODE && is_cs(inst))
+        BRIDGE(inst)->inputs_set_in_event_mode = 1; /* the event iteration sees them (fmi3UpdateDiscreteStates) */
+    return st(s);
 }
 
 /* Int32 value references -> the FMI 2.0 Integer ones in buf (NULL after a logged refusal) */
@@ -432,6 +565,7 @@ fmi3Status fmi3SetInt32(fmi3Instance instance, const fmi3ValueReference valueRef
 {
     LIVE_OR_ERROR;
     const char *fn = "fmi3SetInt32";
+    NOT_IN_UPDATE(fn);
     if (bad_arrays(INST, fn, nValueReferences, valueReferences, nValues, values)) return fmi3Error;
     fmi2ValueReference *vr = int_refs(INST, fn, valueReferences, nValueReferences);
     if (!vr) return fmi3Error;
@@ -623,13 +757,32 @@ fmi3Status fmi3SetShiftFraction(fmi3Instance instance, const fmi3ValueReference 
 
 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance instance)
 {
-    return unsupported(instance, "fmi3EvaluateDiscreteStates", "it has no clocks (Scheduled Execution, CS event mode)");
+    return unsupported(instance, "fmi3EvaluateDiscreteStates", "providesEvaluateDiscreteStates is false");
 }
 
 fmi3Status fmi3EnterStepMode(fmi3Instance instance)
 {
-    return unsupported(instance, "fmi3EnterStepMode",
-                       "Co-Simulation event mode is not supported: fmi3ExitInitializationMode enters Step Mode");
+    LIVE_OR_ERROR;
+    const char *fn = "fmi3EnterStepMode";
+    NOT_IN_UPDATE(fn);
+    if (!cs_event_mode(INST)) {
+        fmugen_log(INST, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                   "%s: only for a Co-Simulation instance with eventModeUsed = true (%s)", fn,
+                   is_cs(INST) ? "this one is in Step Mode from fmi3ExitInitializationMode on"
+                               : "this is a Model Exchange instance");
+        return fmi3Error;
+    }
+    if (!fmugen_check_state(INST, FMUGEN_EVENT_MODE, fn)) return fmi3Error;
+    if (INST->s.cs_event_pending) {
+        /* leaving it would step on from the state just before the event's update (a ball below ground) */
+        fmugen_log(INST, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                   "%s: the event at t = %.17g that fmi3DoStep stopped at is not handled yet: call "
+                   "fmi3UpdateDiscreteStates first", fn, INST->s.time);
+        return fmi3Error;
+    }
+    INST->s.fmi_state = FMUGEN_STEP_COMPLETE;
+    fmugen_log(INST, fmi2OK, FMUGEN_LOG_EVENTS, "%s at t = %.17g", fn, INST->s.time);
+    return fmi3OK;
 }
 
 fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference clockReference,
@@ -646,24 +799,28 @@ fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference 
 fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
 {
     LIVE_OR_ERROR;
+    NOT_IN_UPDATE("fmi3GetFMUState");
     return st(fmi2GetFMUstate(instance, (fmi2FMUstate *)FMUState));
 }
 
 fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState)
 {
     LIVE_OR_ERROR;
+    NOT_IN_UPDATE("fmi3SetFMUState");
     return st(fmi2SetFMUstate(instance, FMUState));
 }
 
 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
 {
     LIVE_OR_ERROR;
+    NOT_IN_UPDATE("fmi3FreeFMUState");
     return st(fmi2FreeFMUstate(instance, (fmi2FMUstate *)FMUState));
 }
 
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState, size_t *size)
 {
     LIVE_OR_ERROR;
+    NOT_IN_UPDATE("fmi3SerializedFMUStateSize");
     return st(fmi2SerializedFMUstateSize(instance, FMUState, size));
 }
 
@@ -671,6 +828,7 @@ fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState, f
                                  size_t size)
 {
     LIVE_OR_ERROR;
+    NOT_IN_UPDATE("fmi3SerializeFMUState");
     return st(fmi2SerializeFMUstate(instance, FMUState, (fmi2Byte *)serializedState, size));
 }
 
@@ -678,6 +836,7 @@ fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte seriali
                                    fmi3FMUState *FMUState)
 {
     LIVE_OR_ERROR;
+    NOT_IN_UPDATE("fmi3DeserializeFMUState");
     return st(fmi2DeSerializeFMUstate(instance, (const fmi2Byte *)serializedState, size, (fmi2FMUstate *)FMUState));
 }
 
@@ -687,6 +846,7 @@ fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueRe
 {
     LIVE_OR_ERROR;
     const char *fn = "fmi3GetDirectionalDerivative";
+    NOT_IN_UPDATE(fn); /* forbidden in Intermediate Update Mode */
     if (nSeed != nKnowns || nSensitivity != nUnknowns) {
         fmugen_log(INST, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
                    "%s: nSeed = %zu, nKnowns = %zu, nSensitivity = %zu, nUnknowns = %zu: this FMU has scalar "
@@ -701,6 +861,56 @@ fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueRe
 /* Model Exchange                                                            */
 /* ------------------------------------------------------------------------ */
 
+/* Co-Simulation Event Mode: the whole event iteration in one call (discreteStatesNeedUpdate is false
+ * after it), the one fmi2DoStep runs inside a step without Event Mode (fmugen_cs_event_update). */
+static fmi3Status cs_update_discrete_states(fmugen_instance *inst, fmi3Boolean *discreteStatesNeedUpdate,
+                                            fmi3Boolean *terminateSimulation,
+                                            fmi3Boolean *nominalsOfContinuousStatesChanged,
+                                            fmi3Boolean *valuesOfContinuousStatesChanged,
+                                            fmi3Boolean *nextEventTimeDefined, fmi3Float64 *nextEventTime)
+{
+    const char *fn = "fmi3UpdateDiscreteStates";
+    const fmugen_model_def *m = inst->model;
+    NOT_IN_UPDATE_INST(inst, fn);
+    if (!BRIDGE(inst)->ext.event_mode_used) {
+        fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                   "%s: this Co-Simulation instance was instantiated with eventModeUsed = false: it has no Event "
+                   "Mode (fmi3DoStep handles the events)", fn);
+        return fmi3Error;
+    }
+    if (!fmugen_check_state(inst, FMUGEN_EVENT_MODE, fn)) return fmi3Error;
+    double *x0 = calloc((size_t)m->nx + 1, sizeof *x0);
+    if (!x0) return refuse(inst, fn, "out of memory"), fmi3Error;
+    if (m->nx) memcpy(x0, inst->x, (size_t)m->nx * sizeof(double));
+    char msg[600];
+    int rc = fmugen_cs_event_update(inst, fn, BRIDGE(inst)->inputs_set_in_event_mode, msg, sizeof msg);
+    BRIDGE(inst)->inputs_set_in_event_mode = 0;
+    int x_changed = 0;
+    for (int i = 0; i < m->nx; i++) x_changed |= x0[i] != inst->x[i];
+    free(x0);
+    if (rc != FMUGEN_OK) {
+        fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR, "%s: %s", fn, msg);
+        return fmi3Error;
+    }
+    fmugen_invalidate(inst);
+    if (fmugen_evaluate_cached(inst, fn) != FMUGEN_OK) return fmi3Error; /* outputs after the event, checked */
+    *discreteStatesNeedUpdate = fmi3False;
+    *terminateSimulation = fmi3False;
+    *nominalsOfContinuousStatesChanged = fmi3False;
+    *valuesOfContinuousStatesChanged = x_changed ? fmi3True : fmi3False;
+    *nextEventTimeDefined = fmi3False;
+    *nextEventTime = 0.0;
+    if (m->ns) { /* the next sample instant: a time event the importer may plan its steps to */
+        double next;
+        int at;
+        if (fmugen_next_tick(inst, inst->s.time, &next, &at) == FMUGEN_OK && isfinite(next)) {
+            *nextEventTimeDefined = fmi3True;
+            *nextEventTime = next;
+        }
+    }
+    return fmi3OK;
+}
+
 fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discreteStatesNeedUpdate,
                                     fmi3Boolean *terminateSimulation, fmi3Boolean *nominalsOfContinuousStatesChanged,
                                     fmi3Boolean *valuesOfContinuousStatesChanged, fmi3Boolean *nextEventTimeDefined,
@@ -710,6 +920,10 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
     if (!discreteStatesNeedUpdate || !terminateSimulation || !nominalsOfContinuousStatesChanged ||
         !valuesOfContinuousStatesChanged || !nextEventTimeDefined || !nextEventTime)
         return refuse(INST, "fmi3UpdateDiscreteStates", "an output argument is NULL"), fmi3Error;
+    if (is_cs(INST))
+        return cs_update_discrete_states(INST, discreteStatesNeedUpdate, terminateSimulation,
+                                         nominalsOfContinuousStatesChanged, valuesOfContinuousStatesChanged,
+                                         nextEventTimeDefined, nextEventTime);
     fmi2EventInfo ei;
     memset(&ei, 0, sizeof ei);
     fmi2Status s = fmi2NewDiscreteStates(instance, &ei);
@@ -824,13 +1038,23 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
                       fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime)
 {
     LIVE_OR_ERROR;
+    const char *fn = "fmi3DoStep";
+    NOT_IN_UPDATE(fn); /* a step inside the callback of the running one */
     if (!eventHandlingNeeded || !terminateSimulation || !earlyReturn || !lastSuccessfulTime)
-        return refuse(INST, "fmi3DoStep", "an output argument is NULL"), fmi3Error;
+        return refuse(INST, fn, "an output argument is NULL"), fmi3Error;
+    if (INST->s.cs_event_pending && INST->s.fmi_state == FMUGEN_STEP_COMPLETE) {
+        fmugen_log(INST, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                   "%s: the last fmi3DoStep returned eventHandlingNeeded = true at t = %.17g: call "
+                   "fmi3EnterEventMode and fmi3UpdateDiscreteStates before the next step", fn, INST->s.time);
+        return fmi3Error;
+    }
     fmi2Status s = fmi2DoStep(instance, currentCommunicationPoint, communicationStepSize,
                               noSetFMUStatePriorToCurrentPoint ? fmi2True : fmi2False);
-    /* events are located and handled inside the step (no CS event mode), and the step never ends early */
-    *eventHandlingNeeded = fmi3False;
-    *earlyReturn = fmi3False;
+    /* without eventModeUsed events are handled inside the step; with it, an event ends the step
+     * (earlyReturnAllowed) or, at the step's end, waits there for the importer's Event Mode */
+    const fmugen_cs_ext *e = INST->cs_ext;
+    *eventHandlingNeeded = s <= fmi2Warning && INST->s.cs_event_pending ? fmi3True : fmi3False;
+    *earlyReturn = s <= fmi2Warning && e && e->returned_early ? fmi3True : fmi3False;
     fmi2Boolean terminated = fmi2False;
     if (s <= fmi2Discard && fmi2GetBooleanStatus(instance, fmi2Terminated, &terminated) != fmi2OK)
         terminated = fmi2False;

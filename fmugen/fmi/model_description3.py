@@ -62,6 +62,14 @@ def fmi3_value_references(model: SymbolicModel) -> dict:
     return out
 
 
+def has_event_mode(model: SymbolicModel) -> bool:
+    """``hasEventMode`` of the FMI 3.0 Co-Simulation interface: the model has events (event indicators,
+    clauses or sample clocks -- ``fmugen_has_events`` of the runtime, which refuses ``eventModeUsed``
+    otherwise)."""
+    ev = model.events
+    return ev is not None and bool(ev.indicators or ev.clauses or ev.clocks)
+
+
 def model_description3_xml(
     model: SymbolicModel,
     instantiation_token: str,
@@ -106,10 +114,14 @@ def model_description3_xml(
         interface("ModelExchange", needsCompletedIntegratorStep=ranged)
     if "cs" in fmi_types:
         computed = len(model.outputs) > 0
-        # events are handled inside fmi3DoStep: no event mode, no early return, no intermediate update
+        # Event Mode for a model with events (state events, clauses, sample clocks): with eventModeUsed an
+        # event ends fmi3DoStep and the importer's fmi3UpdateDiscreteStates runs its iteration; a model
+        # without any has none to hand over, and eventModeUsed = true is refused for it (fmi3_functions.c).
+        # The intermediate update after each accepted solver step, and an early return from it, for all.
         interface("CoSimulation", canHandleVariableCommunicationStepSize=True,
-                  maxOutputDerivativeOrder=1 if (has_jac or not computed) else 0, hasEventMode=False,
-                  providesIntermediateUpdate=False, mightReturnEarlyFromDoStep=False)
+                  maxOutputDerivativeOrder=1 if (has_jac or not computed) else 0,
+                  hasEventMode=has_event_mode(model), providesIntermediateUpdate=True,
+                  mightReturnEarlyFromDoStep=True, canReturnEarlyAfterIntermediateUpdate=True)
 
     units = unit_definitions(root, layout, model.name)
 
@@ -139,6 +151,8 @@ def model_description3_xml(
         desc = v.description.replace("fmi2", "fmi3") if v.kind == "runtime" else v.description
         _set(el, name=v.name, valueReference=vrs[v.name], description=desc, causality=v.causality,
              variability=v.variability, initial=v.initial)
+        if "cs" in fmi_types and v.causality == "output":
+            _set(el, intermediateUpdate=True)  # readable in the intermediate-update callback
         if v.type == "Real":
             deriv = None if v.derivative is None else by_index[v.derivative]  # the state (FMI 2.0 index)
             _set(el, unit=v.unit, min=v.min, max=v.max, nominal=v.nominal, start=v.start,
