@@ -239,16 +239,16 @@ def test_unsupported_parts_are_refused_with_one_line(fmus, tmp_path):
         with pytest.raises(InputFileError, match=match) as exc:
             fmugen.load_system(p)
         assert "\n" not in str(exc.value), name
-    # an FMI 3.0 component
-    fmu3 = tmp_path / "mass3.fmu"
-    with zipfile.ZipFile(fmus["mass"]) as src, zipfile.ZipFile(fmu3, "w") as dst:
+    # an FMI 1.0 component (FMI 3.0 ones run: tests/test_cosim_fmi3.py)
+    fmu1 = tmp_path / "mass1.fmu"
+    with zipfile.ZipFile(fmus["mass"]) as src, zipfile.ZipFile(fmu1, "w") as dst:
         for i in src.infolist():
             data = src.read(i)
             if i.filename == "modelDescription.xml":
-                data = data.replace(b'fmiVersion="2.0"', b'fmiVersion="3.0"')
+                data = data.replace(b'fmiVersion="2.0"', b'fmiVersion="1.0"')
             dst.writestr(i, data)
-    p = write_ssp(tmp_path / "fmi3.ssp", {"mass": fmu3, "spring": fmus["spring"]})
-    with pytest.raises(InputFileError, match="FMI 3.0 is not supported"):
+    p = write_ssp(tmp_path / "fmi1.ssp", {"mass": fmu1, "spring": fmus["spring"]})
+    with pytest.raises(InputFileError, match=r"FMI 1\.0 is not supported \(FMI 2\.0 and 3\.0\)"):
         fmugen.load_system(p)
 
 

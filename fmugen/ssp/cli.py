@@ -59,10 +59,9 @@ def settable(system, name: str, where: str, error=None, hint: str = "") -> tuple
     """(component, variable, fmpy ScalarVariable) of ``name`` = 'component.variable' whose start value a
     run may set: a parameter (fixed or tunable), an input, or a state (an output or local with an exact
     start).  One check for ``--set`` on ``fmugen cosim/report x.ssp`` and for ``fmugen sweep x.ssp``."""
-    from fmpy import read_model_description
-
     from ..errors import InputFileError
     from .loader import can_set
+    from .ssd import read_fmi_description
 
     error = error or InputFileError
     units = {u.name: u for u in system.units}
@@ -72,7 +71,7 @@ def settable(system, name: str, where: str, error=None, hint: str = "") -> tuple
     if comp not in units or not var:
         raise error(f"{where}: {name}: name a component's variable, 'component.variable' (components: "
                     f"{', '.join(units)}){hint}")
-    v = {x.name: x for x in read_model_description(str(units[comp].path), validate=False).modelVariables}.get(var)
+    v = {x.name: x for x in read_fmi_description(units[comp].path).modelVariables}.get(var)
     if v is None or not can_set(v):
         raise error(f"{where}: {name}: {comp} has no parameter, input or state {var!r}")
     return comp, var, v

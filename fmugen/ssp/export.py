@@ -34,8 +34,8 @@ from typing import Optional
 
 from .. import __version__
 from ..errors import FmugenError
-from .ssd import (FMUGEN_ANNOTATION, FMUGEN_NS, NS, OSP_ANNOTATION, OSP_NS, SSD_NAME, parse_xml, validate,
-                  without_aliases)
+from .ssd import (FMUGEN_ANNOTATION, FMUGEN_NS, NS, OSP_ANNOTATION, OSP_NS, SSD_NAME, parse_xml,
+                  read_fmi_description, validate, without_aliases)
 
 #: what an SSP cannot say and other importers therefore do not do (written into the annotation)
 NOT_EXPRESSIBLE = (
@@ -103,7 +103,6 @@ def _ssv(name: str, md, bound: dict) -> bytes:
 
 def ssd_xml(built, settings: dict, libcosim_step: float) -> tuple:
     """(SystemStructure.ssd bytes, {group: .ssv bytes}) of a built scene (:class:`BuiltScene`)."""
-    from fmpy import read_model_description
     from lxml import etree
 
     scene, system = built.scene, built.system
@@ -123,7 +122,7 @@ def ssd_xml(built, settings: dict, libcosim_step: float) -> tuple:
     stems = resource_stems([u.name for u in system.units])
     units, ssvs, mds = [], {}, {}
     for u in system.units:
-        md = read_model_description(str(u.path))
+        md = read_fmi_description(u.path, validate=True)  # FMI 2.0 or 3.0, types under SSP 1.0's names
         mds[u.name] = md
         comp = etree.SubElement(elements, f"{{{D}}}Component", name=u.name,
                                 source=f"resources/{stems[u.name]}.fmu",

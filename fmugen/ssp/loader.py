@@ -4,7 +4,7 @@
 into the same in-memory system a scene build gives, so every scheme of the
 master runs it:
 
-* each component is a :class:`Unit`: its FMU (FMI 2.0 CS or ME -- ME when
+* each component is a :class:`Unit`: its FMU (FMI 2.0 or 3.0, CS or ME -- ME when
   it has no Co-Simulation interface), start values = its parameter
   bindings (parameters, and inputs: SSP binds inputs' start values too);
 * each connection between components is a :class:`Coupling` with the
@@ -186,12 +186,10 @@ def _fmi(fmu: Path, name: str, where: str):
     import zipfile
     import zlib
 
-    from fmpy import read_model_description
-
-    from .ssd import MAX_XML_BYTES, parse_xml
+    from .ssd import MAX_XML_BYTES, parse_xml, read_fmi_description
 
     cw = f"{where}: component {name} ({fmu.name})"
-    try:  # the version first, with the same safe parser as the SSD: FMI 1.0/3.0 are refused by name
+    try:  # the version first, with the same safe parser as the SSD: FMI 1.0 and others are refused by name
         with zipfile.ZipFile(fmu) as zf:
             info = zf.getinfo("modelDescription.xml")
             if info.file_size > MAX_XML_BYTES:
@@ -200,14 +198,14 @@ def _fmi(fmu: Path, name: str, where: str):
     except (zipfile.BadZipFile, KeyError, OSError, EOFError, zlib.error, NotImplementedError, RuntimeError) as exc:
         raise InputFileError(f"{cw}: not an FMU (zip with modelDescription.xml): "
                              f"{' '.join(str(exc).split())[:200] or type(exc).__name__}") from None
-    if version != "2.0":
-        raise InputFileError(f"{cw}: FMI {version} is not supported (FMI 2.0 only)")
+    if version not in ("2.0", "3.0"):
+        raise InputFileError(f"{cw}: FMI {version} is not supported (FMI 2.0 and 3.0)")
     try:
-        md = read_model_description(str(fmu), validate=False)
+        md = read_fmi_description(fmu)  # FMI 3.0's Float64/Int32 under SSP 1.0's names Real/Integer
     except Exception as exc:  # fmpy raises many kinds on a broken FMU
         raise InputFileError(f"{cw}: cannot read its FMU: {' '.join(str(exc).split())[:200]}") from None
-    if md.fmiVersion != "2.0":
-        raise InputFileError(f"{cw}: FMI {md.fmiVersion} is not supported (FMI 2.0 only)")
+    if md.fmiVersion not in ("2.0", "3.0"):
+        raise InputFileError(f"{cw}: FMI {md.fmiVersion} is not supported (FMI 2.0 and 3.0)")
     if md.coSimulation is None and md.modelExchange is None:
         raise InputFileError(f"{cw}: its modelDescription.xml has neither a CoSimulation nor a ModelExchange "
                              f"interface")

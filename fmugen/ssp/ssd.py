@@ -524,7 +524,27 @@ def is_ssp(path) -> bool:
 
 
 __all__ = ["Ssd", "Component", "Connector", "Connection", "open_ssp", "read_ssd", "extract", "parse_xml",
-           "validate", "schema", "NS", "FMUGEN_NS", "FMUGEN_ANNOTATION", "OSP_NS", "OSP_ANNOTATION", "is_ssp"]
+           "validate", "schema", "NS", "FMUGEN_NS", "FMUGEN_ANNOTATION", "OSP_NS", "OSP_ANNOTATION", "is_ssp",
+           "read_fmi_description", "SSP_TYPE_OF_FMI3"]
+
+
+#: SSP 1.0's connector and parameter types (ssc:Real, ssc:Integer, ...) are FMI 2.0's; an FMI 3.0 FMU's
+#: Float64 is an ssc:Real, its Int32 an ssc:Integer.  Its other types keep their FMI 3.0 names, which no
+#: SSP 1.0 type holds, so what refuses an unsupported type refuses them by name.
+SSP_TYPE_OF_FMI3 = {"Float64": "Real", "Int32": "Integer"}
+
+
+def read_fmi_description(path, validate: bool = False):
+    """fmpy's model description of the FMU at ``path`` (FMI 2.0 or 3.0), its variables' types under SSP
+    1.0's names (:data:`SSP_TYPE_OF_FMI3`), so that one check of a connector's or binding's type serves
+    both FMI versions.  A fresh description per call: changing its types touches nobody else's."""
+    from fmpy import read_model_description
+
+    md = read_model_description(str(path), validate=validate)
+    if str(md.fmiVersion).startswith("3"):
+        for v in md.modelVariables:
+            v.type = SSP_TYPE_OF_FMI3.get(v.type, v.type)
+    return md
 
 
 def without_aliases(model_description) -> list:
