@@ -463,13 +463,15 @@ def _fmusim():
 
 
 def test_fmusim_event_mode_and_early_return(fmus, tmp_path):
-    """fmusim (Reference-FMUs) with --event-mode-used --early-return-allowed: every fmi3 call returns OK,
-    it samples at each impact (before and after the event) at the closed-form times, and at the 0.01 s
-    grid its results equal those without the options and fmpy's event-mode run."""
+    """fmusim (Reference-FMUs) with --event-mode-used --early-return-allowed (and
+    --record-intermediate-values): every fmi3 call returns OK, it samples at each impact (before and
+    after the event) at the closed-form times, and at the 0.01 s grid its results equal those without
+    the options and fmpy's event-mode run."""
     exe = _fmusim()
     ball = fmus["ball"]
     res = {}
-    for key, extra in (("plain", ()), ("events", ("--event-mode-used", "--early-return-allowed"))):
+    events = ("--event-mode-used", "--early-return-allowed")
+    for key, extra in (("plain", ()), ("events", events), ("intermediate", events + ("--record-intermediate-values",))):
         out, log = tmp_path / f"{key}.csv", tmp_path / f"{key}.log"
         r = subprocess.run([exe, "--interface-type", "cs", "--stop-time", "2.0", "--output-interval", "0.01", *extra,
                             "--log-fmi-calls", "--fmi-log-file", str(log), "--output-file", str(out),
@@ -489,3 +491,12 @@ def test_fmusim_event_mode_and_early_return(fmus, tmp_path):
     assert max(np.max(np.abs(ev[n][keep] - plain[n])) for n in ("h", "v")) < 1e-12
     grid, _, _, _ = run(ball, 2.0, 0.01, ("h", "v"), event_mode=True, early=True)
     assert np.max(np.abs(grid - np.c_[plain["h"], plain["v"]])) < 1e-12
+    # --record-intermediate-values: fmusim samples in the callback too (after each solver step: here one
+    # per 0.01 s step, the ball's flight being a parabola), the values at the grid unchanged
+    iv = res["intermediate"][0]
+    ti = iv["time"]
+    assert np.all(np.diff(ti) >= 0) and len(ti) > len(t) + 150
+    off = ~np.isclose(ti / 0.01, np.round(ti / 0.01), atol=1e-6, rtol=0)
+    keep = ~off & np.r_[np.diff(ti) != 0, True]
+    assert np.array_equal(ti[keep], plain["time"])
+    assert max(np.max(np.abs(iv[n][keep] - plain[n])) for n in ("h", "v")) < 1e-12
