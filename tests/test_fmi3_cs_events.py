@@ -24,6 +24,7 @@ from fmpy.validation import validate_fmu
 from fmugen.components.equations import load_component
 from fmugen.fmi.build import build_fmu
 from fmugen.fmi.platforms import host_platform
+from test_fmi3_export import _fmusim  # finds fmusim as there (tests/tools/build_fmusim.sh), skips without
 
 ROOT = Path(__file__).resolve().parent.parent
 BALL = ROOT / "examples" / "components" / "bouncing_ball.toml"
@@ -410,6 +411,36 @@ def test_cs_event_mode_misuse_returns_error_with_a_message(fmus):
     f.freeInstance()
 
 
+def test_fmu_state_taken_at_an_early_return_keeps_its_event(fmus):
+    """fmi3GetFMUState between the early return and Event Mode: restored, the event is pending again
+    (fmi3DoStep refuses to step over it) and handling it gives the same continuation, bit for bit."""
+    ball = fmus["ball"]
+    vr = [ball.vr["h"], ball.vr["v"]]
+    f = ball.slave(eventModeUsed=True, earlyReturnAllowed=True)
+    f.enterInitializationMode(startTime=0.0)
+    f.exitInitializationMode()
+    f.enterStepMode()
+    event, _, early_return, t1 = f.doStep(0.0, 0.6)
+    assert event and early_return
+    state = f.getFMUState()
+
+    def finish():
+        f.enterEventMode()
+        f.updateDiscreteStates()
+        f.enterStepMode()
+        assert f.doStep(t1, 0.6 - t1)[:3] == (False, False, False)
+        return f.getFloat64(vr)
+
+    first = finish()
+    f.setFMUState(state)
+    with pytest.raises(FMICallException):
+        f.doStep(t1, 0.6 - t1)
+    assert finish() == first and first[1] > 0
+    f.freeFMUState(state)
+    f.terminate()
+    f.freeInstance()
+
+
 def test_intermediate_update_refuses_all_but_getting(fmus):
     """Inside the callback (Intermediate Update Mode) a nested fmi3DoStep, setting an input, Event Mode,
     FMU state and freeing the instance are refused with a message; the step goes on unharmed."""
@@ -447,19 +478,6 @@ def test_intermediate_update_refuses_all_but_getting(fmus):
         assert any(m.startswith(f"{fn}: not allowed in Intermediate Update Mode") for m in msgs), (fn, msgs)
     assert returns == [] and np.array_equal(grid, plain)
     f.freeInstance()
-
-
-def _fmusim():
-    """fmusim as tests/test_fmi3_export.py finds it: $FMUSIM, on the PATH, or where
-    tests/tools/build_fmusim.sh puts it; the test skips without it."""
-    import os
-    import shutil
-
-    for cand in (os.environ.get("FMUSIM"), shutil.which("fmusim"),
-                 Path.home() / ".cache" / "fmugen" / "fmusim" / "fmusim"):
-        if cand and Path(cand).is_file() and os.access(cand, os.X_OK):
-            return str(cand)
-    pytest.skip("fmusim not found: build it with tests/tools/build_fmusim.sh (or set $FMUSIM)")
 
 
 def test_fmusim_event_mode_and_early_return(fmus, tmp_path):
