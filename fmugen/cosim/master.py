@@ -385,7 +385,7 @@ class Master:
                     st = u._getOutDer(u.c, u.out_vr, u.n_src, u.out_order1, u.dy_ptr)
                     calls += 1
                     if st > 1:
-                        raise UnitFailure(u.name, "fmi2GetRealOutputDerivatives", st, u.messages())
+                        raise UnitFailure(u.name, u.OUTPUT_DERIVATIVES, st, u.messages(), u.STATUS)
             D = G[nu:]
             self.DY.take(self.S, out=D)
             if not self._unit_factors:

@@ -130,6 +130,8 @@ class _Unit:
     VERSION = "2.0"
     #: the names of the FMI status values this unit's functions return (UnitFailure's text)
     STATUS = STATUS
+    #: the function behind ``_getOutDer`` (its status is returned, not raised, in both versions)
+    OUTPUT_DERIVATIVES = "fmi2GetRealOutputDerivatives"
     #: why the master holds this FMU's inputs over a step, if it does (canInterpolateInputs = false)
     no_interpolation = "canInterpolateInputs = false"
     #: the type name of a coupled (floating-point) variable in fmpy's model description

@@ -19,7 +19,9 @@ themselves (units.py: nothing between the hot loop and the C call).  :class:`Sla
 
 A closure raises :class:`~.units.UnitFailure` itself when the status is fmi3Discard or worse, naming the
 fmi3 call and the fmi3 status; the master's own check of the status (written for FMI 2.0, naming the fmi2
-call) then never sees one.  An fmi3Discard of fmi3DoStep is status 2 as in FMI 2.0, so an adaptive run
+call) then never sees one.  The one exception is ``_getOutDer``, whose refusal dense output takes as "no
+slopes" (dense.py), as from an FMI 2.0 FMU: it returns the status, and the master names the call by the
+unit's ``OUTPUT_DERIVATIVES``.  An fmi3Discard of fmi3DoStep is status 2 as in FMI 2.0, so an adaptive run
 retries it smaller as it does an fmi2Discard.
 
 What FMI 3.0 does not have is what the master does without: input derivatives (no canInterpolateInputs, no
@@ -79,6 +81,7 @@ class _FMI3:
 
     VERSION = "3.0"
     STATUS = STATUS3
+    OUTPUT_DERIVATIVES = "fmi3GetOutputDerivatives"
     REAL = "Float64"
     #: why the master holds this FMU's inputs over a step (Summary.warnings, refusals of Hermite inputs)
     no_interpolation = "FMI 3.0 has no input derivatives (no canInterpolateInputs, no fmi2SetRealInputDerivatives)"
@@ -244,10 +247,9 @@ class Slave3Unit(_FMI3, SlaveUnit):
             return st
 
         def getOutDer(c, vrs, n, orders, values):
-            st = od(c, vrs, n, orders, values, n)
-            if st > 1:
-                raise UnitFailure(name, "fmi3GetOutputDerivatives", st, list(log), STATUS3)
-            return st
+            # the status returned, not raised: dense output takes a refusal as "no slopes from this FMU"
+            # (dense.py); the master names the call by OUTPUT_DERIVATIVES where it is a failure
+            return od(c, vrs, n, orders, values, n)
 
         def setInDer(*_):
             raise CosimError(f"FMU {name!r}: FMI 3.0 has no input derivatives (fmi2SetRealInputDerivatives)")
