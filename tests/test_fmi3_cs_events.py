@@ -168,6 +168,24 @@ def test_ball_returns_early_at_each_impact_and_equals_the_run_without_event_mode
     assert max(plain[:, 1]) > 1.0  # bounced
 
 
+def test_fmpy_simulate_fmu_with_event_mode(fmus):
+    """fmpy's own Co-Simulation loop (simulate_fmu with use_event_mode and early_return_allowed): a row
+    before and after each impact, at its closed-form time; the rows on the 0.01 s grid equal the run
+    without Event Mode bit for bit."""
+    ball = fmus["ball"]
+    kw = dict(fmi_type="CoSimulation", stop_time=2.0, output_interval=0.01)
+    plain = fmpy.simulate_fmu(str(ball.path), **kw)
+    ev = fmpy.simulate_fmu(str(ball.path), use_event_mode=True, early_return_allowed=True, **kw)
+    t = ev["time"]
+    grid = np.isclose(t / 0.01, np.round(t / 0.01), atol=1e-6, rtol=0)
+    off = t[~grid]
+    assert len(off) == 8 and np.array_equal(off[::2], off[1::2])  # before and after each of 4 impacts
+    assert np.max(np.abs(off[::2] - impact_times(4))) < 1e-9
+    keep = grid & np.r_[np.diff(t) != 0, True]
+    assert np.array_equal(t[keep], plain["time"])
+    assert all(np.array_equal(ev[n][keep], plain[n]) for n in ("h", "v"))
+
+
 def test_ball_event_mode_without_early_return_handles_inside_the_step(fmus):
     """eventModeUsed without earlyReturnAllowed: the FMU cannot stop at the event, so the step handles it
     inside as without Event Mode (Reference-FMUs do the same) -- the same trajectory, no early return."""
