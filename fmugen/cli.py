@@ -239,7 +239,7 @@ def _cmd_build(args) -> int:
     if args.platforms is not None:  # checked, and the cross compilers found, before anything is derived
         from .fmi.platforms import resolve
 
-        platforms = [t.name for t in resolve(args.platforms, where=f"{path}: --platforms")]
+        platforms = [t.name for t in resolve(args.platforms, where=f"{path}: --platforms", fmi_version=fmi_version)]
     if sys.stderr.isatty():  # progress of the first stage; build_fmu reports the others
         print(f"fmugen build {path.name}: derive ...", end="", file=sys.stderr, flush=True)
     model = symbolic_model(path, outputs, args.formulation, args.model, sets=args.set, strategy=args.strategy,
@@ -350,11 +350,13 @@ def _add_own_commands(sub) -> None:
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="set a parameter, start value or option (repeatable), e.g. m=1 or joint.J=5")
     p.add_argument("--platforms", default=None, metavar="P1,P2,...",
-                   help="FMI 2.0 binaries to build: linux64, win64 (MinGW-w64), darwin64 (zig cc: x86_64 + "
-                        "arm64 in one file); default this machine's; a scene's [scene] platforms")
+                   help="binaries to build: linux64, win64 (MinGW-w64), darwin64 (zig cc: x86_64 + "
+                        "arm64 in one file); with --fmi-version 3 also the FMI 3.0 folders x86_64-linux, "
+                        "x86_64-windows, x86_64-darwin, aarch64-darwin, aarch64-linux (zig cc); default this "
+                        "machine's; a scene's [scene] platforms")
     p.add_argument("--fmi-version", default=None, metavar="2|3",
-                   help="2: FMI 2.0 (default); 3: FMI 3.0, opt-in, this machine (x86_64-linux) only, "
-                        "scalar variables (fmugen/fmi/README.md)")
+                   help="2: FMI 2.0 (default); 3: FMI 3.0, opt-in, built on x86_64 Linux, scalar variables "
+                        "(fmugen/fmi/README.md); a scene's [scene] fmi_version")
     p.add_argument("--no-prune", action="store_true", help="scenes: keep what the scene does not need")
     p.add_argument("--no-cache", action="store_true", help="scenes: rebuild every FMU")
     p.add_argument("--allow-factories", action="store_true",

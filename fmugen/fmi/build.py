@@ -36,7 +36,7 @@ from ..codegen.c_code import GUID_PLACEHOLDER, c_identifier, deterministic_guid,
 from ..codegen.model import SymbolicModel
 from ..errors import IDENTIFIER_PATTERN, MAX_IDENTIFIER_LENGTH, FmugenError
 from .model_description import model_description_xml
-from .platforms import Slice, Target, link_flags, resolve, sources_readme, universal_binary
+from .platforms import Slice, link_flags, resolve, sources_readme, universal_binary
 
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 CFLAGS = ("-O2", "-fPIC", "-shared", "-Wall", "-Wextra", "-std=c99")
@@ -432,8 +432,8 @@ def _compile(cc: Union[str, Slice], extra: list, sources: list, src: Path, lib: 
     _run_jobs(jobs, src, what, budget, "compile")
     if cached is not None and not hit:
         _store_objects(cached, [objs[i] for i in runtime])
-    link = [*s.cc, *s.cflags, "-shared", *extra, "-o", str(lib), *map(str, objs), "-lm",
-            *link_flags(s, objs[0].parent)]
+    workdir = objdir or src.parent / "obj"  # never the cache folder the runtime's objects may come from
+    link = [*s.cc, *s.cflags, "-shared", *extra, "-o", str(lib), *map(str, objs), "-lm", *link_flags(s, workdir)]
     _run_jobs([link], src, what, budget, "link")
     return link
 
@@ -539,8 +539,28 @@ FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
 FMI3_HOST = ("linux64", "x86_64-linux")
 
 
+#: the FMI 3.0 build's define that leaves the runtime's fmi2* functions (its internals) unexported
+FMI3_HIDE_FMI2 = "-DFMI2_Export="
+_FMI2_EXPORT_BLOCK = "#if defined _WIN32 || defined __CYGWIN__\n    /* Note: both gcc & MSVC on Windows support this syntax. */"
+
+
+def fmi2_header_for_fmi3(text: str) -> str:
+    """fmi2Functions.h for an FMI 3.0 FMU's sources: its FMI2_Export definition made conditional, as in the
+    FMI standard's own header (fmpy's copy defines it always), so that ``-DFMI2_Export=`` keeps the runtime's
+    fmi2* functions out of the binary's exports on every platform -- Windows' dllexport and zig's Mach-O
+    linker, which ignores exported-symbols lists, included."""
+    start = text.find(_FMI2_EXPORT_BLOCK)
+    end = text.find("#endif", text.find("#endif", start) + 1) if start >= 0 else -1
+    if start < 0 or end < 0 or "FMI2_Export" not in text[start:end]:
+        raise BuildError("fmi2Functions.h of this fmpy has no FMI2_Export block fmugen knows: the FMI 3.0 build "
+                         "cannot keep the fmi2* functions unexported")
+    end += len("#endif")
+    return (text[:start] + "#if !defined(FMI2_Export) /* fmugen: -DFMI2_Export= in FMI 3.0 FMUs */\n"
+            + text[start:end] + "\n#endif" + text[end:])
+
+
 def _check_fmi_version(fmi_version, platforms) -> None:
-    """fmi_version 2 or 3; FMI 3.0 for the host only (x86_64 Linux), as fmugen builds it so far."""
+    """fmi_version 2 or 3; FMI 3.0 built on x86_64 Linux (its host binary linked by GNU ld's version script)."""
     if fmi_version not in (2, 3) or isinstance(fmi_version, bool):
         raise FmugenError(f"fmi_version must be 2 or 3, got {fmi_version!r}")
     if fmi_version == 3:
@@ -552,10 +572,7 @@ def _check_fmi_version(fmi_version, platforms) -> None:
         if host != FMI3_HOST[0] or platform_module.machine() not in ("x86_64", "AMD64"):
             raise FmugenError(f"fmi_version 3: FMI 3.0 FMUs are built on x86_64 Linux only so far (this machine: "
                               f"{host} {platform_module.machine()})")
-        names = parse_platforms(platforms, "platforms")
-        if names is not None and tuple(names) != (host,):
-            raise FmugenError(f"fmi_version 3: platforms {','.join(names)} not supported yet; FMI 3.0 FMUs are "
-                              f"built for this machine ({FMI3_HOST[1]}) only")
+        parse_platforms(platforms, "platforms", 3)  # the names FMI 3.0 builds
 
 
 def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_sources, model_identifier,
@@ -567,7 +584,8 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
     model = _fold(model, fold_parameters)
     ident = model_identifier or c_identifier(model.name)
     _check_identifier(ident, model.name, model_identifier is not None)
-    targets = resolve(platforms, cc, "platforms", ident)  # a missing cross compiler: refused before any work
+    # a missing cross compiler: refused before any work
+    targets = resolve(platforms, cc, "platforms", ident, fmi_version)
     rt, fmi_h = runtime_dir(), fmi_headers_dir()
     suffix = targets[0].suffix
 
@@ -576,12 +594,8 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
     if "model.c" in runtime_c:
         raise BuildError(f"{rt}/model.c exists: the runtime must not contain a generated model")
     sources = runtime_c + ["model.c"]
-    if fmi_version == 3:
+    if fmi_version == 3:  # the binaries export the fmi3* functions only (the fmi2* ones are its internals)
         sources = runtime_c + [FMI3_RUNTIME[0], "model.c"]
-        s0 = targets[0].slices[0]
-        # the FMI 3.0 binary exports the fmi3* functions only (the fmi2* ones are its internals)
-        targets = [Target(FMI3_HOST[1], suffix, (Slice(s0.arch, s0.cc, s0.compiler, s0.cflags,
-                                                       (*s0.ldflags, f"-Wl,--version-script={FMI3_RUNTIME[1]}")),))]
 
     # generate with a placeholder GUID, hash C and XML together, substitute
     gen = generate_c(model, model_identifier=ident, guid=GUID_PLACEHOLDER, runtime_start=runtime_start)
@@ -615,6 +629,8 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
                 shutil.copy2(rt / "fmi3" / name, src / name)
             for name in FMI3_HEADERS:
                 shutil.copy2(fmi_h / name, src / name)
+            (src / FMI_HEADERS[0]).write_text(fmi2_header_for_fmi3((fmi_h / FMI_HEADERS[0]).read_text()))
+            extra_cflags = [*extra_cflags, FMI3_HIDE_FMI2]
         (src / "model.c").write_text(c_src)
         (root / "modelDescription.xml").write_text(xml, encoding="utf-8")
 
@@ -642,9 +658,11 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
                 f"model.c holds the model (generated); fmi3_functions.c is the FMI 3.0 interface over the\n"
                 f"generic fmugen runtime (the other .c/.h files), with the FMI 2.0 and 3.0 standard headers.\n"
                 f"Compile all .c files into one shared library named after the modelIdentifier, exporting\n"
-                f"only the fmi3* functions, e.g. on Linux:\n\n    "
-                f"{shlex.join(['cc', *CFLAGS, '-I.', '-Wl,--version-script=' + FMI3_RUNTIME[1], '-o', ident + '.so', *sources, '-lm'])}"
-                f"\n\nand place it in binaries/{FMI3_HOST[1]}/.\n")
+                f"only the fmi3* functions ({FMI3_HIDE_FMI2} keeps the runtime's fmi2* functions unexported),\n"
+                f"e.g. on Linux:\n\n    "
+                f"{shlex.join(['cc', *CFLAGS, FMI3_HIDE_FMI2, '-I.', '-Wl,--version-script=' + FMI3_RUNTIME[1], '-o', ident + '.so', *sources, '-lm'])}"
+                f"\n\nand place it in binaries/<architecture>-<system>/ (x86_64-linux, x86_64-windows,\n"
+                f"x86_64-darwin, aarch64-darwin, aarch64-linux).\n")
             from .model_description3 import build_description3_xml
 
             (src / "buildDescription.xml").write_text(build_description3_xml(ident, sources), encoding="utf-8")

@@ -19,7 +19,18 @@ The cross compilers are found, never installed:
               on PATH), which carries the macOS libc headers and libSystem
               stubs: one slice per architecture, joined into a universal
               binary here (the fat header is a few words); exports limited to
-              _fmi2* by an exported-symbols list
+              _fmi2* by -fvisibility=hidden (the exported-symbols list beside
+              it is for Apple's ld64: zig's linker ignores it)
+
+FMI 3.0 (section 2.5.1.4) names a folder ``<architecture>-<operating system>``
+per binary, one architecture each: ``x86_64-linux``, ``x86_64-windows``,
+``x86_64-darwin``, ``aarch64-darwin`` -- and ``aarch64-linux``, which zig's
+compiler (``-target aarch64-linux-gnu``, glibc 2.17 and later) builds as cheaply
+as the macOS slices.  ``fmi_version=3`` takes these names or the FMI 2.0 ones
+(``darwin64`` is then both macOS folders) and exports the fmi3* functions only:
+the runtime's fmi2* functions, the binary's internals, are compiled without
+FMI2_Export (fmugen/fmi/build.py: ``fmi2_header_for_fmi3``), and on Linux a
+version script exports fmi3* alone.
 
 A platform whose compiler is missing is refused, before anything is
 generated, in one line that names the compiler and how to install it.
@@ -49,11 +60,20 @@ NOT_FMI2 = {
     "darwin32": "fmugen builds 64-bit binaries only",
 }
 
+#: the FMI 3.0 folders of each name fmi_version=3 takes (FMI 2.0 names stand for theirs)
+FMI3_FOLDERS = {"linux64": ("x86_64-linux",), "win64": ("x86_64-windows",),
+                "darwin64": ("x86_64-darwin", "aarch64-darwin"),
+                "x86_64-linux": ("x86_64-linux",), "x86_64-windows": ("x86_64-windows",),
+                "x86_64-darwin": ("x86_64-darwin",), "aarch64-darwin": ("aarch64-darwin",),
+                "aarch64-linux": ("aarch64-linux",)}
+FMI3_SUFFIX = {"linux": ".so", "windows": ".dll", "darwin": ".dylib"}
+
 MINGW = "x86_64-w64-mingw32-gcc"
 INSTALL = {
     "win64": "install MinGW-w64, e.g. `apt-get install gcc-mingw-w64-x86-64`",
     "darwin64": "install zig's C compiler, e.g. `pip install ziglang`",
 }
+INSTALL["aarch64-linux"] = INSTALL["darwin64"]
 
 
 class PlatformError(FmugenError):
@@ -69,6 +89,7 @@ class Slice:
     cflags: tuple  # target flags for every compile, before fmugen's CFLAGS
     ldflags: tuple  # target flags of the link (after -shared)
     pic: bool = True  # -fPIC (PE code is position-independent anyway, and MinGW would say so)
+    exports: str = "fmi2"  # the prefix of the exported functions (Mach-O's exported-symbols list)
 
 
 @dataclass(frozen=True)
@@ -80,7 +101,7 @@ class Target:
 
     @property
     def host(self) -> bool:
-        return self.name == host_platform()
+        return self.name in (host_platform(), host_tuple())
 
 
 def host_platform() -> str:
@@ -90,9 +111,16 @@ def host_platform() -> str:
     return platform
 
 
-def parse_platforms(value: Union[None, str, Sequence[str]], where: str) -> Optional[tuple]:
+def host_tuple() -> str:
+    """This machine's FMI 3.0 platform folder (``x86_64-linux`` ...)."""
+    system = {"linux": "linux", "win32": "windows", "darwin": "darwin"}.get(sys.platform, sys.platform)
+    return f"{_host_arch().replace('arm64', 'aarch64')}-{system}"
+
+
+def parse_platforms(value: Union[None, str, Sequence[str]], where: str, fmi_version: int = 2) -> Optional[tuple]:
     """``"linux64,win64"`` or ``["linux64", "win64"]`` -> ``("linux64", "win64")``; None stays None
-    (the host only).  Unknown names and duplicates are refused, naming ``where``."""
+    (the host only).  Unknown names and duplicates are refused, naming ``where``.  With ``fmi_version``
+    3 the FMI 3.0 folders those names stand for (``darwin64``: ``x86_64-darwin``, ``aarch64-darwin``)."""
     if value is None:
         return None
     if isinstance(value, str):
@@ -105,8 +133,14 @@ def parse_platforms(value: Union[None, str, Sequence[str]], where: str) -> Optio
     if not items or any(not v for v in items):
         raise PlatformError(f"{where}: platforms {value!r} names an empty platform; choose from "
                             f"{', '.join(PLATFORMS)}")
+    if fmi_version == 3:
+        for v in items:
+            if v not in FMI3_FOLDERS:
+                raise PlatformError(f"{where}: platform {v!r} is not one fmugen builds as FMI 3.0; choose from "
+                                    f"{', '.join(FMI3_FOLDERS)}")
+        items = [f for v in items for f in FMI3_FOLDERS[v]]
     for v in items:
-        if v not in PLATFORMS:
+        if v not in PLATFORMS and fmi_version != 3:
             why = NOT_FMI2.get(v.lower())
             raise PlatformError(f"{where}: platform {v!r} is not one fmugen builds"
                                 f"{' (' + why + ')' if why else ''}; choose from {', '.join(PLATFORMS)}")
@@ -131,9 +165,11 @@ def _zig() -> Optional[tuple]:
 
 
 def resolve(platforms: Optional[Sequence[str]], cc: str = "cc", where: str = "platforms",
-            model_identifier: str = "model") -> list:
+            model_identifier: str = "model", fmi_version: int = 2) -> list:
     """The :class:`Target` of each requested platform (None: the host only), or a :class:`PlatformError`
     naming the first missing compiler.  The host platform is compiled by ``cc``."""
+    if fmi_version == 3:
+        return _resolve3(platforms, cc, where, model_identifier)
     host = host_platform()
     names = parse_platforms(platforms, where) or (host,)
     targets = []
@@ -166,6 +202,51 @@ def resolve(platforms: Optional[Sequence[str]], cc: str = "cc", where: str = "pl
     return targets
 
 
+#: FMI 3.0 binaries export the fmi3* functions only; on Linux by this version script (sources/)
+FMI3_VERSION_SCRIPT = "fmi3_exports.map"
+
+
+def _resolve3(platforms, cc: str, where: str, model_identifier: str) -> list:
+    """:func:`resolve` for FMI 3.0: one thin binary per ``<arch>-<os>`` folder."""
+    host = host_tuple()
+    names = parse_platforms(platforms, where, 3) or (host,)
+    script = f"-Wl,--version-script={FMI3_VERSION_SCRIPT}"
+    targets = []
+    for name in names:
+        arch, system = name.split("-", 1)
+        if name == host:
+            slices = (Slice(_host_arch(), (cc,), cc, (), (script,), exports="fmi3"),)
+        elif name == "x86_64-windows":
+            exe = shutil.which(MINGW)
+            if exe is None:
+                raise PlatformError(f"{where}: {name} needs the MinGW-w64 cross compiler {MINGW}, not found on "
+                                    f"PATH; {INSTALL['win64']}")
+            slices = (Slice("x86_64", (exe,), exe, (), ("-static-libgcc", "-Wl,--no-insert-timestamp"),
+                            pic=False, exports="fmi3"),)
+        elif system in ("darwin", "linux") and not (system == "linux" and arch == "x86_64"):
+            zig = _zig()
+            if zig is None:
+                raise PlatformError(f"{where}: {name} needs zig's C compiler, not found; {INSTALL['darwin64']}")
+            argv, exe = zig
+            if system == "darwin":  # the oldest macOS of each architecture, as for darwin64
+                triple = "x86_64-macos.10.13" if arch == "x86_64" else "aarch64-macos.11.0"
+                link = ("-Wl,-exported_symbols_list,{exports}", f"-Wl,-install_name,@rpath/{model_identifier}.dylib")
+                slices = (Slice(_macho_arch(arch), argv, exe, ("-target", triple, "-fvisibility=hidden"), link,
+                                exports="fmi3"),)
+            else:  # glibc 2.17 (2012) and later: every aarch64 Linux distribution in use
+                # -g0 and -s: zig's compiler writes DWARF, and links its compiler-rt with it (6x the library)
+                slices = (Slice("arm64", argv, exe, ("-target", "aarch64-linux-gnu.2.17", "-g0"), (script, "-s"),
+                                exports="fmi3"),)
+        else:
+            raise PlatformError(f"{where}: {name} binaries are built on {name} itself (this machine is {host})")
+        targets.append(Target(name, FMI3_SUFFIX[system], slices))
+    return targets
+
+
+def _macho_arch(arch: str) -> str:
+    return "arm64" if arch == "aarch64" else arch
+
+
 def _host_arch() -> str:
     import platform
 
@@ -174,7 +255,7 @@ def _host_arch() -> str:
 
 
 #: the exported-symbols list of the Mach-O link (ld64 syntax: a C name with its leading underscore)
-EXPORTS_LIST = "_fmi2*\n"
+EXPORTS_LIST = "_{prefix}*\n"
 
 # Mach-O CPU types (mach/machine.h) and the alignment lipo gives each slice (2^14: arm64's page)
 _CPU = {"x86_64": (0x01000007, 3), "arm64": (0x0100000C, 0)}
@@ -203,8 +284,8 @@ def link_flags(s: Slice, workdir: Path) -> list:
     out = []
     for f in s.ldflags:
         if "{exports}" in f:
-            lst = workdir / "fmi2_exports.txt"
-            lst.write_text(EXPORTS_LIST)
+            lst = workdir / f"{s.exports}_exports.txt"
+            lst.write_text(EXPORTS_LIST.format(prefix=s.exports))
             f = f.replace("{exports}", str(lst))
         out.append(f)
     return out

@@ -240,11 +240,11 @@ def parse_scene(data: dict, path: Path) -> SceneSpec:
         raise SceneError(f"{src}: [scene] description must be a string")
     from ..fmi.platforms import parse_platforms  # the names build_fmu(platforms=) and --platforms take
 
-    try:
-        platforms = parse_platforms(sc.get("platforms"), f"{src}: [scene]")
+    fmi_version = _fmi_version(sc.get("fmi_version", 2), sc.get("platforms"), src)
+    try:  # FMI 3.0 folders (x86_64-windows ...) when the FMUs are FMI 3.0
+        platforms = parse_platforms(sc.get("platforms"), f"{src}: [scene]", fmi_version)
     except ValueError as exc:
         raise SceneError(str(exc)) from None
-    fmi_version = _fmi_version(sc.get("fmi_version", 2), platforms, src)
 
     inst_tab = data.get("instances")
     if not isinstance(inst_tab, dict) or not inst_tab:
