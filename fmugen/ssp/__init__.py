@@ -4,7 +4,7 @@
   parameter bindings, units and default experiment as a standard archive that
   libcosim and FMPy run (:mod:`fmugen.ssp.export`);
 * :func:`load_system` (``fmugen cosim x.ssp``, ``fmugen.load_system``): any SSP of
-  FMI 2.0 FMUs as the master's :class:`~fmugen.cosim.system.CosimSystem`
+  FMI 2.0 or 3.0 FMUs as the master's :class:`~fmugen.cosim.system.CosimSystem`
   (:mod:`fmugen.ssp.loader`), read and validated as untrusted input by
   :mod:`fmugen.ssp.ssd`.
 """
