@@ -15,8 +15,9 @@ setup:
 run: setup
 	$(PYTHON) examples/thesis_system.py --out $(OUT)
 
+# one worker per core (pytest-xdist); a module's tests stay together in one worker (its fixtures built once)
 test: setup
-	$(PYTHON) -m pytest -q
+	$(PYTHON) -m pytest -q -n auto --dist loadfile
 
 # benchmarks (figures quoted in the issues' closing notes)
 bench: setup
