@@ -245,6 +245,7 @@ def test_bouncing_ball_me_fmi3_state_events_at_the_closed_form_bounce_times(ball
             r = m.run(step=0.01, estimate=False)
             assert r.ok, r.summary
             assert not any("event" in w for w in r.summary.warnings), r.summary.warnings
+            assert r.summary.events == len(exact) == r.summary.discontinuities  # the FMU's solver.n_events
             found.append((r, list(m.me_block.event_times)))
     (r2, t2), (r3, t3) = found
     assert t2 == t3 and largest_difference(r2, r3) == 0.0

@@ -236,8 +236,9 @@ class Master:
         self.columns = tuple(r.column for r in sysm.recorded)
         self.rec_idx = np.array([y_at[(r.unit, r.variable)] for r in sysm.recorded], dtype=np.intp)
         # FMUs that report their events (fmugen's hybrid FMUs count them in solver.n_events): a step in
-        # which one had an event may have made its outputs jump (fmugen/cosim/README.md "Events")
-        self.event_units = [u for u in self.units if u.kind == "cs" and "solver.n_events" in u.variables]
+        # which one had an event may have made its outputs jump (fmugen/cosim/README.md "Events"); ME units
+        # too, whose events the ME block handles (the FMU counts them in its event update)
+        self.event_units = [u for u in self.units if "solver.n_events" in u.variables]
         # the recorded signals' declared nominal values (else FMI's default, 1): the error estimate's floor
         # for a signal that stays near zero (a joint at rest), where its largest value is round-off
         self.rec_nominal = np.array([_nominal(self.units[index[r.unit]].variables.get(r.variable))
