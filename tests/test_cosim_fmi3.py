@@ -391,6 +391,15 @@ def test_refusals_in_one_line(rig3, tmp_path):
     with pytest.raises(CosimError) as e:
         run(replace(s, units=(s.units[0], replace(s.units[1], path=arr))), "jacobi", "hold")
     _one_line(e, "FMU 'joint'", "variable 'theta' is an array (1)", "scalar variables only")
+    with pytest.raises(CosimError) as e:
+        run(replace(s, units=(s.units[0], replace(s.units[1], path=arr, start_values={"theta": 0.1}))), "jacobi")
+    _one_line(e, "FMU 'joint'", "start value of 'theta': it is an array")
+    # a Boolean start value goes to fmi3SetBoolean (fmugen's runtime has no Booleans: it refuses the call)
+    flag = _edited(joint3, tmp_path / "flag.fmu", lambda t: t.replace("  </ModelVariables>", '    <Boolean name="flag" '
+                   'valueReference="999" causality="parameter" variability="fixed" start="false" />\n  </ModelVariables>'))
+    with pytest.raises(CosimError) as e:
+        run(replace(s, units=(s.units[0], replace(s.units[1], path=flag, start_values={"flag": True}))), "jacobi")
+    _one_line(e, "FMU 'joint'", "fmi3SetBoolean(flag = 1.0) returned fmi3Error")
     # the interface asked is not in the FMU
     no_me = _edited(joint3, tmp_path / "no_me.fmu", lambda t: "\n".join(
         ln for ln in t.splitlines() if "<ModelExchange " not in ln))
