@@ -333,6 +333,8 @@ def test_fmi3_binary_built_from_the_build_description(puma_fmus, tmp_path):
     (tmp_path / "cmake").mkdir()
     build_platform_binary(str(d.resolve()), build_dir=str(tmp_path / "cmake"))
     assert so.is_file()
+    # FMI2_Export defined empty: no dllexport on the runtime's fmi2* functions (a DLL then exports fmi3* alone)
+    assert [(d.name, d.value) for d in bc.sourceFileSets[0].preprocessorDefinitions] == [("FMI2_Export", "")]
     kw = dict(fmi_type="CoSimulation", stop_time=0.2, output_interval=0.01, start_values={"tau[2]": 1.5})
     ref = fmpy.simulate_fmu(str(p3), **kw)
     assert _same(ref, fmpy.simulate_fmu(str(d), **kw)) <= 1e-12

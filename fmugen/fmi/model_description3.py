@@ -223,13 +223,17 @@ def model_description3_xml(
 
 def build_description3_xml(model_identifier: str, source_files: Sequence[str]) -> str:
     """``sources/buildDescription.xml`` (FMI 3.0 sec. 2.5.1): the C files of ``sources/``, compiled
-    together into the binary.  What it cannot say: that only the fmi3* functions are to be exported
-    (``fmi3_exports.map``, sources/README.txt); a binary built without it exports the runtime's
-    fmi2* functions as well, which FMI 3.0 importers do not look for."""
+    together into the binary, with ``FMI2_Export`` defined empty, so that the runtime's fmi2* functions
+    (the binary's internals) are not marked for export (fmugen/fmi/build.py, ``fmi2_header_for_fmi3``):
+    a Windows DLL then exports the fmi3* functions alone.  What it cannot say: ELF and Mach-O export every
+    function of default visibility, so a binary built without ``-fvisibility=hidden`` or the version
+    script (sources/README.txt) exports the internals too, which FMI 3.0 importers do not look for."""
     root = ET.Element("fmiBuildDescription", fmiVersion=FMI3_VERSION)
     bc = ET.SubElement(root, "BuildConfiguration", modelIdentifier=model_identifier)
     fs = ET.SubElement(bc, "SourceFileSet", language="C99")
     for f in source_files:
         ET.SubElement(fs, "SourceFile", name=f)
+    ET.SubElement(fs, "PreprocessorDefinition", name="FMI2_Export", value="",
+                  description="empty: the fmi2* functions of the runtime stay internal")
     ET.indent(root, space="  ")
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
