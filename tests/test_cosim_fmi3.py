@@ -357,6 +357,14 @@ def test_an_fmi3_scene_runs_and_exports_to_an_ssp_that_runs(tmp_path):
     for col in r.columns:
         if col in runs[3].columns:
             assert np.array_equal(r[col], runs[3][col]), col
+    # a sweep over the archive sets its FMI 3.0 Float64 parameters (one worker thread, no cluster)
+    from fmugen.sweep import sweep
+
+    sw = sweep(out["path"], grid=["joint.J=1,3"], out=tmp_path / "sweep", workers=1, processes=False,
+               options={"stop": STOP}, progress=False, metrics=["final"])
+    assert [row["status"] for row in sw.rows] == ["ok", "ok"]
+    # the inertia reached the FMU: the actuator's torque differs between the points
+    assert abs(sw.rows[1]["actuator.tau:final"] - sw.rows[0]["actuator.tau:final"]) > 1e-3
 
 
 def _edited(src: Path, dst: Path, edit) -> Path:

@@ -373,3 +373,18 @@ def test_fmi3_model_exchange_misuse_and_logging(ball_fmus, tmp_path):
     assert fmu.getFloat64([vr["solver.event_indicator_1"]]) == [z[0]] and z[0] > 0  # h above the ground
     fmu.terminate()
     fmu.freeInstance()
+
+
+def test_linearize_fmu_of_fmi3_equals_fmi2(puma_fmus):
+    """fmugen.linearize_fmu on the FMI 3.0 FMU (fmi3GetDirectionalDerivative through fmpy's FMU3Model):
+    the A, B, C, D of the FMI 2.0 FMU, at a pose with a torque applied."""
+    from fmugen.control import linearize_fmu
+
+    p2, p3 = puma_fmus
+    x = {"q[2]": 0.3, "q[3]": -0.2, "qd[1]": 0.5}
+    u = {"tau[2]": 1.5}
+    s2, s3 = linearize_fmu(p2, x=x, u=u), linearize_fmu(p3, x=x, u=u)
+    assert s2.A.shape == s3.A.shape == (12, 12) and s3.B.shape[1] == 6
+    for m2, m3 in ((s2.A, s3.A), (s2.B, s3.B), (s2.C, s3.C), (s2.D, s3.D)):
+        assert np.max(np.abs(m3 - m2)) <= 1e-12 * max(1.0, np.max(np.abs(m2)))
+    assert np.max(np.abs(s3.A[6:, :6])) > 1.0  # gravity and inertia coupling: not a trivial matrix

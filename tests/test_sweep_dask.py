@@ -225,10 +225,11 @@ def test_the_error_metric_is_against_the_reference_of_the_scene_at_that_point(cl
     assert 100 * ref.error_of("joint.theta") < row["joint.theta:error"] < 1e-3
 
 
-def test_a_monolithic_scene_runs_its_one_fmu_and_matches_fmpy(client, tmp_path):
+@pytest.mark.parametrize("fmi_version", [2, 3])
+def test_a_monolithic_scene_runs_its_one_fmu_and_matches_fmpy(client, tmp_path, fmi_version):
     import fmpy
 
-    sets = {"scene.monolithic": True}
+    sets = {"scene.monolithic": True, "scene.fmi_version": fmi_version}
     r = sweep(SPLIT, grid=["joint.J=1,3"], sets=sets, out=tmp_path, client=client, metrics=["final"],
               save_runs=True, progress=False)
     assert [row["status"] for row in r.rows] == ["ok", "ok"]

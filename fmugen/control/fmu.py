@@ -60,7 +60,6 @@ def linearize_fmu(path, x=None, u=None, t: float = 0.0,
     """
     import control
     from fmpy import extract, read_model_description
-    from fmpy.fmi2 import FMU2Model
 
     if hasattr(x, "x") and hasattr(x, "u") and hasattr(x, "states"):  # an OperatingPoint
         op = x
@@ -77,7 +76,9 @@ def linearize_fmu(path, x=None, u=None, t: float = 0.0,
     state_vars = [d.derivative for d in der_vars]
     # one column per value: an FMI alias (a URDF joint's "<joint>.tau" for tau[i]) shares its value
     # reference with the variable it names again and comes after it; keep the first name
-    input_vars = _first_per_vr(v for v in md.modelVariables if v.causality == "input" and v.type == "Real")
+    fmi3 = str(md.fmiVersion).startswith("3")
+    real = "Float64" if fmi3 else "Real"  # FMI 3.0's name of the FMI 2.0 Real
+    input_vars = _first_per_vr(v for v in md.modelVariables if v.causality == "input" and v.type == real)
     state_vrs = {v.valueReference for v in state_vars}
     out_vars = _first_per_vr(o.variable for o in md.outputs)
     if outputs == "computed":
@@ -92,19 +93,30 @@ def linearize_fmu(path, x=None, u=None, t: float = 0.0,
 
     nx, nu = len(state_vars), len(input_vars)
     unzip = extract(str(path), tempfile.mkdtemp(prefix="fmugen_lin_"))
-    fmu = FMU2Model(guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.modelExchange.modelIdentifier,
-                    instanceName="linearize")
+    if fmi3:
+        from fmpy.fmi3 import FMU3Model as Model
+    else:
+        from fmpy.fmi2 import FMU2Model as Model
+    fmu = Model(guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.modelExchange.modelIdentifier,
+                instanceName="linearize")
+    set_real = fmu.setFloat64 if fmi3 else fmu.setReal
+    get_real = fmu.getFloat64 if fmi3 else fmu.getReal
     try:
         fmu.instantiate()
-        fmu.setupExperiment(startTime=t)
-        fmu.enterInitializationMode()
+        if fmi3:
+            fmu.enterInitializationMode(startTime=t)
+        else:
+            fmu.setupExperiment(startTime=t)
+            fmu.enterInitializationMode()
         if parameter_values:
-            fmu.setReal([by_name[n].valueReference for n in parameter_values],
-                        [float(v) for v in parameter_values.values()])
+            set_real([by_name[n].valueReference for n in parameter_values],
+                     [float(v) for v in parameter_values.values()])
         fmu.exitInitializationMode()
+        if fmi3:  # FMI 3.0 Model Exchange leaves initialisation in Event Mode
+            fmu.updateDiscreteStates()
         fmu.enterContinuousTimeMode()
         fmu.setTime(t)
-        x0 = np.array(fmu.getReal([v.valueReference for v in state_vars]), dtype=float)
+        x0 = np.array(get_real([v.valueReference for v in state_vars]), dtype=float)
         for i, v in enumerate(state_vars):
             x0[i] = xs.get(v.name, x0[i])
         if nx:
@@ -112,7 +124,7 @@ def linearize_fmu(path, x=None, u=None, t: float = 0.0,
 
             fmu.setContinuousStates((c_double * nx)(*x0), nx)
         if us:
-            fmu.setReal([by_name[n].valueReference for n in us], [float(v) for v in us.values()])
+            set_real([by_name[n].valueReference for n in us], [float(v) for v in us.values()])
         unknowns = [v.valueReference for v in der_vars + out_vars]
         knowns = [v.valueReference for v in state_vars + input_vars]
         J = np.zeros((len(unknowns), nx + nu))

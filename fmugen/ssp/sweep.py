@@ -36,7 +36,7 @@ class SspSweepPlan:
         self.targets = {}
         for name in self.names:
             comp, var, v = settable(system, name, str(self.scene_path), SweepError)
-            if v.type != "Real":
+            if v.type not in ("Real", "Float64"):  # FMI 2.0's Real, FMI 3.0's Float64
                 raise SweepError(f"{self.scene_path}: {name}: {comp}.{var} is {v.type}; a sweep sets Real values")
             self.targets[name] = (comp, var)
         self.system = system

@@ -118,7 +118,7 @@ class SweepPlan:
             why = f"its FMU variable {fmi} is not a continuous state"
         elif not is_state and (v.causality != "parameter" or v.variability not in ("fixed", "tunable")):
             why = f"its FMU variable {fmi} is a {v.variability} {v.causality}, not a parameter"
-        elif v.type != "Real":
+        elif v.type not in ("Real", "Float64"):  # FMI 2.0's Real, FMI 3.0's Float64
             why = f"its FMU variable {fmi} is {v.type}"
         if why:
             raise SweepError(f"{self.scene_path}: cannot sweep {name}: {why} of FMU {group!r}")

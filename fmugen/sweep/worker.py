@@ -120,7 +120,8 @@ def run_alone(system, step=None, stop=None, **_ignored):
     per process and failure messages are the master's.  Coupling options do not apply and are ignored.
     """
     from ..cosim.master import CosimResult, FailureReport, Summary
-    from ..cosim.units import STATUS, SlaveUnit, UnitFailure
+    from ..cosim.units import UnitFailure
+    from ..cosim.units3 import open_unit  # the FMU's own FMI version (a scene with fmi_version = 3)
 
     (spec,) = system.units
     t0 = float(system.start_time)
@@ -128,7 +129,7 @@ def run_alone(system, step=None, stop=None, **_ignored):
     H = float(system.step if step is None else step)
     summ = Summary(system.name, "single FMU", "none", False)
     w0 = time.perf_counter()
-    u = SlaveUnit(spec, t0, stop)
+    u = open_unit(spec, t0, stop)
     try:
         vrs = [u.variable(r.variable).valueReference for r in system.recorded]
         T, V = [t0], [u.get_reals(vrs)]
@@ -138,8 +139,9 @@ def run_alone(system, step=None, stop=None, **_ignored):
             st = u._doStep(u.c, t, h, 1)
             if st > 1:
                 summ.status = "failed"
-                summ.failure = FailureReport(t, "fmu-failure", f"FMU {u.name!r}: fmi2DoStep(t = {t:.9g}, H = {h:.4g}) "
-                                             f"returned {STATUS[st]}", unit=u.name, fmu_messages=u.messages())
+                call = "fmi3DoStep" if u.STATUS[0].startswith("fmi3") else "fmi2DoStep"
+                summ.failure = FailureReport(t, "fmu-failure", f"FMU {u.name!r}: {call}(t = {t:.9g}, H = {h:.4g}) "
+                                             f"returned {u.STATUS[st]}", unit=u.name, fmu_messages=u.messages())
                 break
             n += 1
             t = t0 + n * H if h == H else stop
