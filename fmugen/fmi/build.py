@@ -477,6 +477,7 @@ def build_fmu(
     budget_start: Optional[float] = None,
     platforms: Optional[Sequence[str]] = None,
     fmi_version: int = 2,
+    terminals: Optional[Sequence] = None,
 ) -> BuildResult:
     """Generate, compile and zip ``model`` into an FMI 2.0 FMU (FMI 3.0 with ``fmi_version=3``).
 
@@ -513,6 +514,11 @@ def build_fmu(
                          (c_runtime/fmi3/fmi3_functions.c) for this machine
                          (x86_64-linux) only, scalar variables; see
                          fmugen/fmi/README.md "FMI 3.0"
+        terminals        FMI 3.0 only: the :class:`fmugen.fmi.terminals.Terminal`
+                         list of terminalsAndIcons/terminalsAndIcons.xml (none:
+                         no file); None: a robot model's joints
+                         (:func:`~fmugen.fmi.terminals.joint_terminals`; a model
+                         without joints has none)
 
     Temporary files are removed on every way out, including SIGINT and
     SIGTERM (raised as :class:`BuildInterrupted` while the build runs); the
@@ -524,12 +530,15 @@ def build_fmu(
     """
     types = _fmi_types(fmi_type)
     _check_fmi_version(fmi_version, platforms)
+    if terminals and fmi_version != 3:
+        raise FmugenError("terminals: FMI 2.0 has no terminals (terminalsAndIcons.xml is FMI 3.0's); "
+                          "give fmi_version=3 or no terminals")
     t0 = time.perf_counter()
     budget = _Budget(budget_seconds, budget_memory, t0 if budget_start is None else budget_start)
     with _terminate_as_exception():
         return _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_sources,
                       model_identifier, default_experiment, budget, _Progress(progress, model.name), t0,
-                      runtime_start, platforms, fmi_version)
+                      runtime_start, platforms, fmi_version, terminals)
 
 
 #: FMI 3.0 files of the runtime (c_runtime/fmi3/), copied into sources/ beside the FMI 2.0 ones
@@ -578,7 +587,7 @@ def _check_fmi_version(fmi_version, platforms) -> None:
 def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_sources, model_identifier,
            default_experiment, budget: _Budget, progress: _Progress, t0: float,
            runtime_start: Optional[dict] = None, platforms: Optional[Sequence[str]] = None,
-           fmi_version: int = 2) -> BuildResult:
+           fmi_version: int = 2, terminals: Optional[Sequence] = None) -> BuildResult:
     _check_cancelled()
     progress.start("generate", f"{model.nx} states")
     model = _fold(model, fold_parameters)
@@ -604,9 +613,15 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
 
         xml = model_description3_xml(model, GUID_PLACEHOLDER, ident, types, default_experiment=default_experiment,
                                       runtime_start=runtime_start)
+        from .terminals import TERMINALS_PATH, check_terminals, joint_terminals, terminals_xml
+
+        # checked against the model before anything is compiled: every member an input or output of it
+        terminals = joint_terminals(model) if terminals is None else check_terminals(terminals, model)
+        extras = {TERMINALS_PATH: terminals_xml(terminals)} if terminals else {}
     else:
         xml = model_description_xml(model, GUID_PLACEHOLDER, ident, types, sources if keep_sources else (),
                                     default_experiment=default_experiment, runtime_start=runtime_start)
+        extras = {}  # files beside modelDescription.xml: FMI 3.0's terminalsAndIcons/
     guid = deterministic_guid(gen.source, xml)
     c_src, xml = gen.source.replace(GUID_PLACEHOLDER, guid), xml.replace(GUID_PLACEHOLDER, guid)
     t_gen = time.perf_counter() - t0
@@ -633,6 +648,9 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
             extra_cflags = [*extra_cflags, FMI3_HIDE_FMI2]
         (src / "model.c").write_text(c_src)
         (root / "modelDescription.xml").write_text(xml, encoding="utf-8")
+        for name, text in extras.items():
+            (root / name).parent.mkdir(parents=True, exist_ok=True)
+            (root / name).write_text(text, encoding="utf-8")
 
         t1 = time.perf_counter()
         libs, commands = [], {}
@@ -669,7 +687,7 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
 
         t2 = time.perf_counter()
         out.parent.mkdir(parents=True, exist_ok=True)  # only now: a failed compile leaves no empty folder
-        files = [root / "modelDescription.xml", *libs]
+        files = [root / "modelDescription.xml", *(root / name for name in extras), *libs]
         if keep_sources:
             files += sorted(src.iterdir())
         # a name of its own: never a user's file (an existing "x.fmu.part" stays as it was)
