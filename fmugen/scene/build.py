@@ -322,13 +322,17 @@ def build_scene(scene, out_dir, prune: Optional[bool] = None, progress=None, use
                 model = dataclasses.replace(model, description=(
                     f"{model.description} [scene {scene.name}: held-input Jacobi stability limit {lim} "
                     f"(linearised at rest); couple with the scene's connections]").strip())
+            terminals = None  # FMI 2.0 has none
+            if scene.spec.fmi_version == 3:
+                with derive_lock:  # ports() loads robot files: one thread at a time, as deriving
+                    terminals = group_terminals(scene, gname, model)
             try:
                 res = build_fmu(model, target, fmi_type="both" if g.fmi_type == "me" else g.fmi_type,
                                 model_identifier=gname,
                                 default_experiment={"startTime": scene.spec.start, "stopTime": scene.spec.stop,
                                                     "stepSize": default_step, "tolerance": tol},
                                 runtime_start=_runtime_start(scene, g), platforms=scene.spec.platforms,
-                                fmi_version=scene.spec.fmi_version)
+                                fmi_version=scene.spec.fmi_version, terminals=terminals)
             except ValueError as exc:
                 raise SceneError(f"{scene.src}: [fmus.{gname}]: {exc}") from None
             r = FmuReport(group=gname, path=out / target.name, members=tuple(g.members), states=model.nx,
@@ -382,6 +386,43 @@ def build_scene(scene, out_dir, prune: Optional[bool] = None, progress=None, use
     paths = {g: out / f"{g}.fmu" for g in plan}
     return BuiltScene(scene, out, reports, scene.cosim_system(paths), scene.system_inputs(prune), stale,
                       limit, default_step)
+
+
+def group_terminals(scene, group: str, model) -> list:
+    """The FMI 3.0 terminals of ``group``'s FMU ``model`` (fmugen/fmi/terminals.py): one per connector of its
+    members (fmugen/scene/connect.py ``ports``) with variables among the FMU's inputs and outputs, named as
+    the FMU names variables (:meth:`Scene.fmu_name`: ``flange`` alone, ``act.flange`` in a group of several).
+
+    A connector whose flow is connected to another member of the group is bonded inside the FMU and is no
+    terminal of it (a member that only reads a potential -- a sensor -- bonds nothing).  A robot joint's own
+    name (URDF joint, DH link) is the same connector as its ``joint[k]``: one terminal ``joint[k]``, the name
+    in its description."""
+    from ..fmi.terminals import FLOWS, connector_terminal, interface
+    from .connect import ports
+
+    members = scene.groups[group].members
+    io = interface(model)
+    inside = set()  # (instance, variable) connected to or from another member of the group
+    for si, sv, ti, tv, _ in scene.connections:
+        if si in members and ti in members:
+            inside |= {(si, sv), (ti, tv)}
+    out = []
+    for inst in members:
+        names = {}  # (type, mapping) -> the connector's names, joint[k] first (ports' order)
+        for cname, (ctype, mapping) in ports(scene, inst).items():
+            names.setdefault((ctype, tuple(mapping.items())), []).append(cname)
+        for (ctype, items), (cname, *aliases) in names.items():
+            mapping = dict(items)
+            bonded = [mapping[FLOWS[ctype]]] if FLOWS[ctype] in mapping else list(mapping.values())
+            if all((inst, v) in inside for v in bonded):
+                continue
+            also = f" (also named {', '.join(aliases)} in the scene)" if aliases else ""
+            t = connector_terminal(scene.fmu_name(inst, cname), ctype,
+                                   {k: scene.fmu_name(inst, v) for k, v in mapping.items()}, io,
+                                   description=f"{ctype} connector {cname} of {inst}{also}")
+            if t is not None:
+                out.append(t)
+    return out
 
 
 #: the DefaultExperiment step is at most this fraction of the held-input Jacobi limit (the
