@@ -299,10 +299,12 @@ def cmd_report(args) -> int:
     extra = []
     if not args.no_monolithic:
         # the same scene as one CS FMU, run as a one-unit system (no couplings) at the same steps
-        mono_path = out / "fmus" / "monolithic.fmu"
+        # of the scene's FMI version, as its groups' FMUs
+        version = scene.spec.fmi_version
+        mono_path = out / "fmus" / ("monolithic.fmu" if version == 2 else f"monolithic_fmi{version}.fmu")
         model = scene.monolithic_model()
         if not mono_path.is_file():
-            fmugen.build_fmu(model, mono_path, fmi_type="cs")
+            fmugen.build_fmu(model, mono_path, fmi_type="cs", fmi_version=version)
         tol = min(float(u.start_values.get("solver.rtol", 1e-10)) for u in system.units)
         starts = {v.name: float(x) for v, x in zip(model.states, problem.x0)}
         starts.update({"solver.method": 2, "solver.rtol": tol, "solver.atol": tol})
