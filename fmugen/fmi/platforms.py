@@ -177,25 +177,9 @@ def resolve(platforms: Optional[Sequence[str]], cc: str = "cc", where: str = "pl
         if name == host:
             slices = (Slice(_host_arch(), (cc,), cc, (), ()),)
         elif name == "win64":
-            exe = shutil.which(MINGW)
-            if exe is None:
-                raise PlatformError(f"{where}: win64 needs the MinGW-w64 cross compiler {MINGW}, not found on "
-                                    f"PATH; {INSTALL['win64']}")
-            # no timestamp in the PE header: the same inputs give the same DLL (and FMU)
-            slices = (Slice("x86_64", (exe,), exe, (), ("-static-libgcc", "-Wl,--no-insert-timestamp"),
-                            pic=False),)
+            slices = (_mingw_slice(name, where, "fmi2"),)
         elif name == "darwin64":
-            zig = _zig()
-            if zig is None:
-                raise PlatformError(f"{where}: darwin64 needs zig's C compiler (for the x86_64 and arm64 "
-                                    f"slices), not found; {INSTALL['darwin64']}")
-            argv, exe = zig
-            link = ("-Wl,-exported_symbols_list,{exports}",
-                    f"-Wl,-install_name,@rpath/{model_identifier}.dylib")
-            # the oldest macOS each slice runs on (zig's default: its newest SDK, macOS 15, which older
-            # dyld versions refuse): 10.13 on Intel, 11.0 (the first macOS on arm64) on Apple silicon
-            slices = tuple(Slice(arch, argv, exe, ("-target", triple, "-fvisibility=hidden"), link)
-                           for arch, triple in (("x86_64", "x86_64-macos.10.13"), ("arm64", "aarch64-macos.11.0")))
+            slices = tuple(_macos_slice(arch, name, where, model_identifier, "fmi2") for arch in ("x86_64", "arm64"))
         else:  # linux64 from another host: not offered (a Linux machine builds it)
             raise PlatformError(f"{where}: {name} binaries are built on {name} itself (this machine is {host})")
         targets.append(Target(name, SUFFIX[name], slices))
@@ -217,30 +201,47 @@ def _resolve3(platforms, cc: str, where: str, model_identifier: str) -> list:
         if name == host:
             slices = (Slice(_host_arch(), (cc,), cc, (), (script,), exports="fmi3"),)
         elif name == "x86_64-windows":
-            exe = shutil.which(MINGW)
-            if exe is None:
-                raise PlatformError(f"{where}: {name} needs the MinGW-w64 cross compiler {MINGW}, not found on "
-                                    f"PATH; {INSTALL['win64']}")
-            slices = (Slice("x86_64", (exe,), exe, (), ("-static-libgcc", "-Wl,--no-insert-timestamp"),
-                            pic=False, exports="fmi3"),)
-        elif system in ("darwin", "linux") and not (system == "linux" and arch == "x86_64"):
-            zig = _zig()
-            if zig is None:
-                raise PlatformError(f"{where}: {name} needs zig's C compiler, not found; {INSTALL['darwin64']}")
-            argv, exe = zig
-            if system == "darwin":  # the oldest macOS of each architecture, as for darwin64
-                triple = "x86_64-macos.10.13" if arch == "x86_64" else "aarch64-macos.11.0"
-                link = ("-Wl,-exported_symbols_list,{exports}", f"-Wl,-install_name,@rpath/{model_identifier}.dylib")
-                slices = (Slice(_macho_arch(arch), argv, exe, ("-target", triple, "-fvisibility=hidden"), link,
-                                exports="fmi3"),)
-            else:  # glibc 2.17 (2012) and later: every aarch64 Linux distribution in use
-                # -g0 and -s: zig's compiler writes DWARF, and links its compiler-rt with it (6x the library)
-                slices = (Slice("arm64", argv, exe, ("-target", "aarch64-linux-gnu.2.17", "-g0"), (script, "-s"),
-                                exports="fmi3"),)
+            slices = (_mingw_slice(name, where, "fmi3"),)
+        elif system == "darwin":
+            slices = (_macos_slice(_macho_arch(arch), name, where, model_identifier, "fmi3"),)
+        elif name == "aarch64-linux":  # glibc 2.17 (2012) and later: every aarch64 Linux distribution in use
+            argv, exe = _zig_or_refuse(name, where)
+            # -g0 and -s: zig's compiler writes DWARF, and links its compiler-rt with it (6x the library)
+            slices = (Slice("arm64", argv, exe, ("-target", "aarch64-linux-gnu.2.17", "-g0"), (script, "-s"),
+                            exports="fmi3"),)
         else:
             raise PlatformError(f"{where}: {name} binaries are built on {name} itself (this machine is {host})")
         targets.append(Target(name, FMI3_SUFFIX[system], slices))
     return targets
+
+
+def _mingw_slice(name: str, where: str, exports: str) -> Slice:
+    exe = shutil.which(MINGW)
+    if exe is None:
+        raise PlatformError(f"{where}: {name} needs the MinGW-w64 cross compiler {MINGW}, not found on PATH; "
+                            f"{INSTALL['win64']}")
+    # no timestamp in the PE header: the same inputs give the same DLL (and FMU)
+    return Slice("x86_64", (exe,), exe, (), ("-static-libgcc", "-Wl,--no-insert-timestamp"), pic=False,
+                 exports=exports)
+
+
+def _zig_or_refuse(name: str, where: str) -> tuple:
+    zig = _zig()
+    if zig is None:
+        raise PlatformError(f"{where}: {name} needs zig's C compiler (fmugen's cross compiler for macOS and "
+                            f"aarch64 Linux), not found; {INSTALL['darwin64']}")
+    return zig
+
+
+#: the oldest macOS each architecture runs fmugen's binaries on (zig's default is its newest SDK, macOS 15,
+#: which older dyld versions refuse): 10.13 on Intel, 11.0 (the first macOS on arm64) on Apple silicon
+MACOS_TARGET = {"x86_64": "x86_64-macos.10.13", "arm64": "aarch64-macos.11.0"}
+
+
+def _macos_slice(arch: str, name: str, where: str, model_identifier: str, exports: str) -> Slice:
+    argv, exe = _zig_or_refuse(name, where)
+    link = ("-Wl,-exported_symbols_list,{exports}", f"-Wl,-install_name,@rpath/{model_identifier}.dylib")
+    return Slice(arch, argv, exe, ("-target", MACOS_TARGET[arch], "-fvisibility=hidden"), link, exports=exports)
 
 
 def _macho_arch(arch: str) -> str:
