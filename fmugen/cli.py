@@ -208,6 +208,21 @@ def _bytes(text: str) -> float:
     return v
 
 
+def _component_terminals(path: Path, model) -> list:
+    """The FMI 3.0 terminals of a component file built alone: one per connector it declares, with those of
+    its variables the FMU has (as a scene names them for a group of one instance)."""
+    from .components.equations import read_cached
+    from .fmi.terminals import connector_terminal, interface
+
+    io = interface(model)
+    out = []
+    for cname, (ctype, mapping) in read_cached(str(path)).connectors.items():
+        t = connector_terminal(cname, ctype, mapping, io, description=f"{ctype} connector {cname}")
+        if t is not None:
+            out.append(t)
+    return out
+
+
 def _cmd_build(args) -> int:
     from .fmi.build import build_fmu
 
@@ -249,9 +264,11 @@ def _cmd_build(args) -> int:
         print(f" {t1 - t0:.1f} s", file=sys.stderr, flush=True)
     fold = None if args.fold == "none" else ("all" if args.fold == "all" else args.fold.split(","))
     out = output_file(args.output or f"{model.name}.fmu", "-o", inputs=[path])
+    # FMI 3.0 terminals: a robot's joints (build_fmu's default), a component file's declared connectors
+    terminals = _component_terminals(path, model) if fmi_version == 3 and _kind(path) == "component" else None
     result = build_fmu(model, out, fmi_type=args.fmi_type or "both", fold_parameters=fold, budget_start=t0,
                        budget_seconds=args.budget_seconds, budget_memory=memory, platforms=platforms,
-                       fmi_version=fmi_version)
+                       fmi_version=fmi_version, terminals=terminals)
     t2 = time.perf_counter()
     print(f"wrote {result.path}  (derive {t1 - t0:.2f} s, generate+compile+zip {t2 - t1:.2f} s)")
     if args.ops:

@@ -227,3 +227,16 @@ def test_terminal_kinds_cover_every_connector_type():
     assert set(TERMINAL_KINDS) == set(FLOWS) == set(TYPES)
     assert all(FLOWS[t] in TYPES[t]["vars"] for t in TYPES)
     assert all(k.startswith("org.fmugen.") for k in TERMINAL_KINDS.values())
+
+
+def test_a_component_file_built_alone_has_its_connectors_as_terminals(tmp_path):
+    """fmugen build of a component file with --fmi-version 3: its declared connector (the spring-damper's
+    translational flange: s, v given, the force F taken as an input) is the FMU's terminal."""
+    from fmugen.cli import main
+
+    out = tmp_path / "spring3.fmu"
+    assert main(["build", str(SPRING), "--fmi-version", "3", "-o", str(out)]) == 0
+    terminals, md = _terminals(out)
+    assert set(terminals) == {"flange"}
+    _check_members(terminals, md)
+    assert [(m[1], m[2]) for m in terminals["flange"][1]] == [("s", "signal"), ("v", "signal"), ("f", "inflow")]
