@@ -1,0 +1,584 @@
+"""Unrolled forward dynamics: Featherstone's articulated-body algorithm as straight-line C for one robot.
+
+The looped runtime (``c_runtime/chain_dynamics.c``) reads every placement, axis and inertia from
+tables at run time and works in base coordinates, so each body costs the full 6x6 spatial
+algebra.  For a given robot most of that algebra is known at generation time: placements are
+mostly signed permutations with one or two non-zero offsets, joint axes are coordinate axes,
+and a leaf's articulated inertia is a constant.  This module runs the three passes of the ABA
+(Featherstone, *Rigid Body Dynamics Algorithms*, 2008, table 7.1) in Python over a tiny
+expression type -- a value is a float constant or a named C scalar with a sign -- folding
+0 x, 1 x, -x, x + 0 and constant (op) constant as it goes, and writes one C statement per
+remaining sum of products.  Unused statements are dropped (liveness from the outputs), equal
+ones shared (the statement's text is its key).  No sympy: a 100-body tree is generated in
+well under a second.
+
+Representation (chosen to keep the operations few):
+
+* body frames: the general joint model of :mod:`fmugen.codegen.chain` (``F_i = F_parent P_i
+  J(k_i, q_i)``) re-expressed in a frame ``B_i = F_i Q_i`` whose z axis is the joint axis
+  (``Q_i e_z = k_i``; a signed permutation for a coordinate axis).  Then every joint is a
+  rotation about or a translation along z, its motion subspace S_i is a unit vector
+  (index 2 or 5), ``U_i = IA_i S_i`` is a column of IA_i and ``D_i`` one of its entries;
+  the constant inertias and placements are rotated once, at generation time;
+* spatial transforms are applied as stages -- translation by a constant offset, a constant
+  rotation, the joint's rotation Rz(q) (or translation q e_z) -- each in 3-vector form, so
+  a signed-permutation rotation costs nothing and an offset along one axis a few products;
+* articulated inertias are symmetric 6x6 (upper triangle computed, the lower mirrored), and
+  after the projection ``Ia = IA - U U^T / D`` the row and column of the joint's own
+  coordinate are exactly zero (``Ia S = U - U = 0``), so they are left out;
+* gravity is the base acceleration ``a_0 = -g`` (a constant that folds into the roots).
+
+The model is that of ``fmugen_chain_forward_dynamics``/``fmugen_chain_fd`` (fixed base, the
+numbers of :class:`fmugen.batch.Kernels`: ``revolute``, ``parents``, the ``n x NC`` body
+constants and gravity), rotor inertia (added to D_i), damping and smooth Coulomb friction
+(subtracted from tau_i) included; external wrenches and the end-effector position are not
+(the generated function is the forward dynamics alone).
+
+The generated function::
+
+    int NAME(const double *q, const double *qd, const double *tau, double *qdd);
+
+returns 0 (FMUGEN_OK), 1 (an articulated inertia D_i not positive) or 2 (a result not finite),
+as the runtime does.
+"""
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from typing import Optional, Sequence
+
+import numpy as np
+
+__all__ = ["Var", "Program", "UnrolledFD", "unrolled_fd", "body_frames"]
+
+NC = 29  # per-body constants (c_runtime/chain_dynamics.h), repeated to keep this module free of sympy
+_ROT, _POS, _AXIS, _MASS, _COM, _INERTIA, _ROTOR, _DAMPING, _FRICTION, _FRICTION_V = 0, 9, 12, 15, 16, 19, 25, 26, 27, 28
+
+
+# ------------------------------------------------------------ the expression type
+class Var:
+    """A named C scalar, possibly negated (the sign is folded into the statements that use it)."""
+
+    __slots__ = ("name", "neg")
+
+    def __init__(self, name: str, neg: bool = False):
+        self.name, self.neg = name, neg
+
+    def __neg__(self):
+        return Var(self.name, not self.neg)
+
+    def __repr__(self):
+        return ("-" if self.neg else "") + self.name
+
+
+def neg(x):
+    return -x
+
+
+def _fmt(c: float) -> str:
+    r = repr(float(c))
+    return r if ("e" in r or "." in r or "n" in r) else r + ".0"
+
+
+class Program:
+    """Straight-line code under construction: ``sop`` (sums of products), ``call`` and ``recip`` fold
+    constants and return a constant or a :class:`Var`; each non-trivial one is a statement."""
+
+    def __init__(self, prefix: str = "t"):
+        self.prefix = prefix
+        self.stmts = []  # (name, C text, names used, block); name None: a side effect, always kept
+        self.memo = {}
+        self.block = 0
+
+    def _emit(self, text: str, deps) -> Var:
+        name = self.memo.get(text)
+        if name is None:
+            name = f"{self.prefix}{len(self.stmts)}"
+            self.stmts.append((name, text, tuple(deps), self.block))
+            self.memo[text] = name
+        return Var(name)
+
+    def effect(self, text: str, uses):
+        """A statement kept for its effect (an output, a check); ``uses``: the values it reads."""
+        self.stmts.append((None, text, tuple(u.name for u in uses if isinstance(u, Var)), self.block))
+
+    def sop(self, products) -> object:
+        """sum over ``products`` (each a sequence of factors: floats and Vars) of the factors' product."""
+        const = 0.0
+        terms = {}
+        for prod in products:
+            coef, names = 1.0, []
+            for f in prod:
+                if isinstance(f, Var):
+                    if f.neg:
+                        coef = -coef
+                    names.append(f.name)
+                else:
+                    coef *= f
+                    if coef == 0.0:
+                        break
+            if coef == 0.0:
+                continue
+            if not names:
+                const += coef
+                continue
+            key = tuple(sorted(names))
+            terms[key] = terms.get(key, 0.0) + coef
+        items = sorted((k, c) for k, c in terms.items() if c != 0.0)
+        if not items:
+            return const
+        if len(items) == 1 and const == 0.0 and len(items[0][0]) == 1 and abs(items[0][1]) == 1.0:
+            return Var(items[0][0][0], items[0][1] < 0)
+        # canonical sign: the first term positive (so that a - b and b - a share one statement)
+        flip = items[0][1] < 0
+        if flip:
+            items = [(k, -c) for k, c in items]
+            const = -const
+        parts = []
+        for k, c in items:
+            body = "*".join(k)
+            a = abs(c)
+            t = body if a == 1.0 else f"{_fmt(a)}*{body}"
+            parts.append(("- " if c < 0 else "+ ") + t)
+        if const != 0.0:
+            parts.append(("- " if const < 0 else "+ ") + _fmt(abs(const)))
+        text = " ".join(parts)
+        text = text[2:] if text.startswith("+ ") else "-" + text[2:]
+        v = self._emit(text, {n for k, _ in items for n in k})
+        return -v if flip else v
+
+    def add(self, *xs):
+        return self.sop([(x,) for x in xs])
+
+    def mul(self, a, b):
+        return self.sop([(a, b)])
+
+    def call(self, fn: str, x):
+        """fn(x) for fn in sin, cos, tanh (folded for a constant)."""
+        if not isinstance(x, Var):
+            return getattr(math, fn)(x)
+        if x.neg and fn in ("sin", "tanh"):
+            return -self._emit(f"{fn}({x.name})", (x.name,))
+        if x.neg:
+            return self._emit(f"{fn}({x.name})", (x.name,))
+        return self._emit(f"{fn}({x.name})", (x.name,))
+
+    def recip(self, x):
+        if not isinstance(x, Var):
+            return 1.0 / x
+        v = self._emit(f"1.0 / {x.name}", (x.name,))
+        return -v if x.neg else v
+
+    def live(self) -> list:
+        """The statements the effects depend on, in order: (name, text, deps, block)."""
+        need = set()
+        keep = []
+        for st in reversed(self.stmts):
+            if st[0] is None or st[0] in need:
+                keep.append(st)
+                need.update(st[2])
+        return keep[::-1]
+
+
+def c_value(x) -> str:
+    if isinstance(x, Var):
+        return ("-" if x.neg else "") + x.name
+    return _fmt(x)
+
+
+# ------------------------------------------------------------ 3-vector and spatial helpers
+def cross(P, a, b):
+    return [P.sop([(a[1], b[2]), (-1.0, a[2], b[1])]),
+            P.sop([(a[2], b[0]), (-1.0, a[0], b[2])]),
+            P.sop([(a[0], b[1]), (-1.0, a[1], b[0])])]
+
+
+def matvec(P, E, x):
+    """E x (E 3x3 of floats or values)."""
+    return [P.sop([(E[r][k], x[k]) for k in range(3)]) for r in range(3)]
+
+
+def matTvec(P, E, x):
+    """E^T x."""
+    return [P.sop([(E[k][r], x[k]) for k in range(3)]) for r in range(3)]
+
+
+def rz(c, s):
+    return [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
+
+
+def congruence(P, E, X, sym: bool):
+    """E X E^T (3x3; ``sym``: X symmetric, only the upper triangle computed and mirrored)."""
+    T = [[P.sop([(E[i][k], X[k][j]) for k in range(3)]) for j in range(3)] for i in range(3)]
+    out = [[None] * 3 for _ in range(3)]
+    for i in range(3):
+        for j in range(i if sym else 0, 3):
+            out[i][j] = P.sop([(T[i][k], E[j][k]) for k in range(3)])
+            if sym:
+                out[j][i] = out[i][j]
+    return out
+
+
+def skew(r):
+    return [[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]]
+
+
+def blocks(M):
+    A = [[M[i][j] for j in range(3)] for i in range(3)]
+    B = [[M[i][j + 3] for j in range(3)] for i in range(3)]
+    C = [[M[i + 3][j + 3] for j in range(3)] for i in range(3)]
+    return A, B, C
+
+
+def from_blocks(A, B, C):
+    M = [[None] * 6 for _ in range(6)]
+    for i in range(3):
+        for j in range(3):
+            M[i][j], M[i][j + 3], M[j + 3][i], M[i + 3][j + 3] = A[i][j], B[i][j], B[i][j], C[i][j]
+    return M
+
+
+def sym_rotate(P, E, M):
+    """The spatial inertia M (6x6 symmetric) of a frame rotated by E (its axes in the new frame's
+    coordinates) in the new frame: blockwise E X E^T."""
+    A, B, C = blocks(M)
+    return from_blocks(congruence(P, E, A, True), congruence(P, E, B, False), congruence(P, E, C, True))
+
+
+def sym_translate(P, r, M):
+    """X^T M X for the motion transform X = [[1, 0], [-r x, 1]] of a frame whose origin is at r
+    (same axes): A' = A + Z^T + W, B' = B + [r]x C, C' = C with Z = [r]x B^T, W = [r]x B'^T
+    (only the entries the result needs; [r]x has at most 6 non-zeros)."""
+    if all(not isinstance(x, Var) and x == 0.0 for x in r):
+        return M
+    A, B, C = blocks(M)
+    rx = skew(r)
+    B2 = [[P.sop([(B[i][j],)] + [(rx[i][k], C[k][j]) for k in range(3)]) for j in range(3)] for i in range(3)]
+    A2 = [[None] * 3 for _ in range(3)]
+    for i in range(3):
+        for j in range(i, 3):
+            # Z[j][i] = sum_k rx[j][k] B[i][k];  W[i][j] = sum_k rx[i][k] B2[j][k]
+            A2[i][j] = A2[j][i] = P.sop([(A[i][j],)] + [(rx[j][k], B[i][k]) for k in range(3)]
+                                        + [(rx[i][k], B2[j][k]) for k in range(3)])
+    return from_blocks(A2, B2, C)
+
+
+def motion_rotate_T(P, E, m):
+    """m (parent coordinates) in the coordinates of a frame rotated by E: E^T m."""
+    return matTvec(P, E, m[:3]) + matTvec(P, E, m[3:])
+
+
+def motion_translate(P, r, m):
+    """m at the origin r: [w; v - r x w]."""
+    rw = cross(P, r, m[:3])
+    return m[:3] + [P.add(m[3 + k], -rw[k] if isinstance(rw[k], Var) else -rw[k]) for k in range(3)]
+
+
+def force_rotate(P, E, f):
+    return matvec(P, E, f[:3]) + matvec(P, E, f[3:])
+
+
+def force_translate(P, r, f):
+    """f of a frame at r, about the parent origin: [n + r x f; f]."""
+    rf = cross(P, r, f[3:])
+    return [P.add(f[k], rf[k]) for k in range(3)] + f[3:]
+
+
+# ------------------------------------------------------------ the robot's frames
+def _snap(x: float) -> float:
+    """Placement numbers within 1e-14 of 0 or +-1 are taken as exact (cos(pi/2) = 6e-17 in a URDF's
+    rpy): the model changes by rounding-level amounts and the products by them vanish."""
+    for v in (0.0, 1.0, -1.0):
+        if abs(x - v) < 1e-14:
+            return v
+    return float(x)
+
+
+def _axis_frame(k) -> np.ndarray:
+    """A rotation Q with Q e_z = k: a signed permutation when k is a coordinate axis."""
+    k = np.asarray(k, float)
+    k = k / np.linalg.norm(k)
+    big = int(np.argmax(np.abs(k)))
+    u = np.zeros(3)
+    u[(big + 1) % 3] = 1.0  # a coordinate axis not along k
+    u = u - k * (u @ k)
+    u /= np.linalg.norm(u)
+    v = np.cross(k, u)
+    Q = np.column_stack([u, v, k])
+    return np.vectorize(_snap)(Q)
+
+
+@dataclass
+class BodyFrame:
+    """One body in its joint-axis frame B_i: parent placement (Rc, pc) in B_parent, joint type,
+    the spatial inertia at B_i's origin (6x6, floats), rotor inertia, damping, friction."""
+    parent: int
+    revolute: bool
+    Rc: np.ndarray
+    pc: np.ndarray
+    inertia: list
+    rotor: float
+    damping: float
+    friction: float
+    friction_velocity: float
+
+
+def body_frames(revolute: Sequence[bool], parents: Sequence[int], constants) -> list:
+    """The bodies of the general joint model (``n x NC`` constants) in their joint-axis frames."""
+    lc = np.asarray(constants, float).reshape(len(revolute), NC)
+    Qs = []
+    out = []
+    for i, L in enumerate(lc):
+        par = int(parents[i])
+        R = np.vectorize(_snap)(L[_ROT:_ROT + 9].reshape(3, 3))
+        p = np.vectorize(_snap)(L[_POS:_POS + 3])
+        Q = _axis_frame(L[_AXIS:_AXIS + 3])
+        Qp = Qs[par] if par >= 0 else np.eye(3)
+        Qs.append(Q)
+        Rc = np.vectorize(_snap)(Qp.T @ R @ Q)
+        pc = np.vectorize(_snap)(Qp.T @ p)
+        m = float(L[_MASS])
+        c = Q.T @ L[_COM:_COM + 3]
+        J = L[_INERTIA:_INERTIA + 6]
+        Ic = np.array([[J[0], J[3], J[4]], [J[3], J[1], J[5]], [J[4], J[5], J[2]]])
+        Ic = Q.T @ Ic @ Q
+        Jo = Ic + m * ((c @ c) * np.eye(3) - np.outer(c, c))  # about B_i's origin
+        hx = m * np.array(skew(list(c)))
+        M = np.block([[Jo, hx], [hx.T, m * np.eye(3)]])
+        M = 0.5 * (M + M.T)
+        out.append(BodyFrame(par, bool(revolute[i]), Rc, pc, [[float(x) for x in row] for row in M],
+                             float(L[_ROTOR]), float(L[_DAMPING]), float(L[_FRICTION]), float(L[_FRICTION_V])))
+    return out
+
+
+# ------------------------------------------------------------ the three passes
+def _is_identity(R) -> bool:
+    return bool(np.all(R == np.eye(3)))
+
+
+def _aba(P: Program, bodies: list, gravity, q, qd, tau):
+    """qdd (list of values) by the articulated-body algorithm over values q, qd, tau."""
+    n = len(bodies)
+    j_of = [2 if b.revolute else 5 for b in bodies]
+    children = [[] for _ in range(n)]
+    for i, b in enumerate(bodies):
+        if b.parent >= 0:
+            children[b.parent].append(i)
+
+    # per body: the stages of the motion transform parent -> child, and their inverse for forces
+    # (block 0 of the code: the joints' sines and cosines)
+    P.block = 0
+    stages = []
+    for i, b in enumerate(bodies):
+        st = []
+        r_parent = list(b.pc)
+        r_rotated = list(b.Rc.T @ b.pc)
+        # translate where the offset has fewer non-zeros (before or after the constant rotation)
+        before = sum(x != 0.0 for x in r_parent) <= sum(x != 0.0 for x in np.vectorize(_snap)(r_rotated))
+        Rc = [[float(x) for x in row] for row in b.Rc]
+        if before:
+            st.append(("t", [float(x) for x in r_parent]))
+        if not _is_identity(b.Rc):
+            st.append(("r", Rc))
+        if not before:
+            st.append(("t", [_snap(x) for x in r_rotated]))
+        if b.revolute:
+            st.append(("r", rz(P.call("cos", q[i]), P.call("sin", q[i]))))
+        else:
+            st.append(("t", [0.0, 0.0, q[i]]))
+        stages.append([s for s in st if not (s[0] == "t" and all(not isinstance(x, Var) and x == 0.0
+                                                                 for x in s[1]))])
+
+    def to_child(i, m):
+        for kind, x in stages[i]:
+            m = motion_translate(P, x, m) if kind == "t" else motion_rotate_T(P, x, m)
+        return m
+
+    def force_to_parent(i, f):
+        for kind, x in reversed(stages[i]):
+            f = force_translate(P, x, f) if kind == "t" else force_rotate(P, x, f)
+        return f
+
+    def inertia_to_parent(i, M):
+        for kind, x in reversed(stages[i]):
+            M = sym_translate(P, x, M) if kind == "t" else sym_rotate(P, x, M)
+        return M
+
+    # pass 1: velocities v_i, velocity-product accelerations c_i = v_i x S_i qd_i, bias forces
+    v, c, pA = [None] * n, [None] * n, [None] * n
+    for i, b in enumerate(bodies):
+        P.block = 1 + i
+        j = j_of[i]
+        vi = to_child(i, v[b.parent]) if b.parent >= 0 else [0.0] * 6
+        vi = list(vi)
+        vi[j] = P.add(vi[j], qd[i])
+        w, vl = vi[:3], vi[3:]
+        # v x S qd with S = e_z (angular or linear): [w x ez; vl x ez] or [0; w x ez]
+        wz = [P.mul(w[1], qd[i]), P.mul(neg(w[0]) if isinstance(w[0], Var) else -w[0], qd[i]), 0.0]
+        if b.revolute:
+            c[i] = wz + [P.mul(vl[1], qd[i]), P.mul(neg(vl[0]) if isinstance(vl[0], Var) else -vl[0], qd[i]), 0.0]
+        else:
+            c[i] = [0.0, 0.0, 0.0] + wz
+        I = b.inertia
+        h = [P.sop([(I[r][k], vi[k]) for k in range(6)]) for r in range(6)]
+        nn = cross(P, w, h[:3])
+        vf = cross(P, vl, h[3:])
+        pA[i] = [P.add(nn[k], vf[k]) for k in range(3)] + cross(P, w, h[3:])
+        v[i] = vi
+
+    # pass 2: articulated inertias and bias forces, leaves to base; children's terms gathered per entry
+    IA_terms = [[[[(b.inertia[r][k],)] for k in range(6)] for r in range(6)] for b in bodies]
+    pA_terms = [[[(x,)] for x in pA[i]] for i in range(n)]
+    U, Dinv, u = [None] * n, [None] * n, [None] * n
+    for i in range(n - 1, -1, -1):
+        P.block = 2 * n - i
+        b, j = bodies[i], j_of[i]
+        IA = [[None] * 6 for _ in range(6)]
+        for r in range(6):
+            for k in range(r, 6):
+                IA[r][k] = IA[k][r] = P.sop(IA_terms[i][r][k])
+        pa = [P.sop(t) for t in pA_terms[i]]
+        U[i] = [IA[r][j] for r in range(6)]
+        D = P.add(U[i][j], b.rotor)
+        if isinstance(D, Var):
+            P.effect(f"if (!({c_value(D)} > 0.0)) return 1;", [D])
+        elif not D > 0.0:
+            raise ValueError(f"body {i}: articulated inertia {D} is not positive")
+        Dinv[i] = P.recip(D)
+        fric = P.mul(b.damping, qd[i])
+        if b.friction != 0.0:
+            fric = P.add(fric, P.mul(b.friction, P.call("tanh", P.mul(1.0 / b.friction_velocity, qd[i]))))
+        tf = P.sop([(tau[i],), (-1.0, fric)])  # tau - friction = S^T pa after the projection
+        u[i] = P.sop([(tf,), (-1.0, pa[j])])
+        if b.parent < 0:
+            continue
+        Ud = [P.mul(U[i][r], Dinv[i]) if r != j else 1.0 for r in range(6)]
+        Ia = [[0.0] * 6 for _ in range(6)]
+        for r in range(6):
+            for k in range(r, 6):
+                if r != j and k != j:
+                    Ia[r][k] = Ia[k][r] = P.sop([(IA[r][k],), (-1.0, U[i][r], Ud[k])])
+        uD = P.mul(u[i], Dinv[i])
+        ci = c[i]
+        pa2 = [P.sop([(pa[r],), (U[i][r], uD)] + [(Ia[r][k], ci[k]) for k in range(6)]) if r != j else tf
+               for r in range(6)]
+        Mp = inertia_to_parent(i, Ia)
+        fp = force_to_parent(i, pa2)
+        par = b.parent
+        for r in range(6):
+            for k in range(r, 6):
+                IA_terms[par][r][k].append((Mp[r][k],))
+            pA_terms[par][r].append((fp[r],))
+
+    # pass 3: accelerations, base to leaves (a_0 = -g: gravity as a base acceleration)
+    a0 = [0.0, 0.0, 0.0] + [-float(x) for x in gravity]
+    acc, qdd = [None] * n, [None] * n
+    for i, b in enumerate(bodies):
+        P.block = 2 * n + 1 + i
+        j = j_of[i]
+        ap = to_child(i, acc[b.parent] if b.parent >= 0 else a0)
+        a = [P.add(ap[k], c[i][k]) for k in range(6)]
+        Ua = P.sop([(U[i][k], a[k]) for k in range(6)])
+        qdd[i] = P.sop([(u[i], Dinv[i]), (-1.0, Ua, Dinv[i])])
+        P.effect(f"qdd[{i}] = {c_value(qdd[i])};", [qdd[i]])
+        a[j] = P.add(a[j], qdd[i])
+        acc[i] = a
+    return qdd
+
+
+@dataclass
+class UnrolledFD:
+    """The generated C: ``source`` (a self-contained C file: includes, the block functions, the entry
+    function ``name``), ``statements`` (sums of products and calls), ``blocks`` (functions)."""
+    name: str
+    n: int
+    source: str
+    statements: int
+    blocks: int
+
+    @property
+    def lines(self) -> int:
+        return self.source.count("\n")
+
+
+_TOKEN = re.compile(r"\bt\d+\b")
+
+
+def unrolled_fd(revolute: Sequence[bool], parents: Sequence[int], constants, gravity,
+                name: str = "fmugen_unrolled_fd", static: bool = False) -> UnrolledFD:
+    """Straight-line C of the forward dynamics of the tree (``constants``: n x NC, the numbers of
+    :class:`fmugen.batch.Kernels`); ``static``: the entry function is ``static`` (to be included in a file).
+
+    The code is cut into one function per body and pass (block; not inlined): a value used by a
+    later block goes through the work array ``w``, so each function has short live ranges.  One
+    function of thousands of statements makes gcc's register allocator spill at random and take
+    seconds (Atlas: 10 s at -O2, 136 kB of code); cut, it compiles in a fraction of that."""
+    n = len(revolute)
+    bodies = body_frames(revolute, parents, constants)
+    P = Program()
+    q = [Var(f"q[{i}]") for i in range(n)]
+    qd = [Var(f"qd[{i}]") for i in range(n)]
+    tau = [Var(f"tau[{i}]") for i in range(n)]
+    _aba(P, bodies, gravity, q, qd, tau)
+    stmts = P.live()
+    home = {st[0]: st[3] for st in stmts if st[0] is not None}
+    slot = {}
+    for name_, text, deps, blk in stmts:
+        for d in deps:
+            if d in home and home[d] != blk and d not in slot:
+                slot[d] = len(slot)
+
+    def text_in(t: str, blk: int) -> str:
+        return _TOKEN.sub(lambda m: f"w[{slot[m.group(0)]}]" if m.group(0) in slot and home[m.group(0)] != blk
+                          else m.group(0), t)
+
+    by_block = {}
+    for st in stmts:
+        by_block.setdefault(st[3], []).append(st)
+    fn = [f"{name}_b{b}" for b in sorted(by_block)]
+    lines = ["/* generated by fmugen.codegen.unrolled_aba: the articulated-body algorithm of one robot, its numbers",
+             f" * folded into the code ({n} bodies; block 0 the joints' sines and cosines, then per body pass 1",
+             " * (velocities, bias forces), pass 2 (articulated inertias, leaves first), pass 3 (accelerations)) */",
+             "#include <math.h>", "",
+             "#if defined(__GNUC__)",
+             "#define UNROLLED_BLOCK static __attribute__((noinline)) int",
+             "#else",
+             "#define UNROLLED_BLOCK static int",
+             "#endif",
+             ""]
+    for f, b in zip(fn, sorted(by_block)):
+        lines.append(f"UNROLLED_BLOCK {f}(const double *q, const double *qd, const double *tau, double *qdd, "
+                     "double *w)")
+        lines.append("{")
+        lines.append("    (void)q; (void)qd; (void)tau; (void)qdd; (void)w;")
+        for name_, text, deps, blk in by_block[b]:
+            t = text_in(text, b)
+            if name_ is None:
+                lines.append(f"    {t}")
+                continue
+            lines.append(f"    const double {name_} = {t};")
+            if name_ in slot:
+                lines.append(f"    w[{slot[name_]}] = {name_};")
+        lines.append("    return 0;")
+        lines.append("}")
+        lines.append("")
+    lines.append(f"{'static ' if static else ''}int {name}(const double *q, const double *qd, const double *tau, "
+                 "double *qdd)")
+    lines.append("{")
+    lines.append(f"    double w[{max(len(slot), 1)}];")
+    for f in fn:
+        lines.append(f"    if ({f}(q, qd, tau, qdd, w)) return 1;")
+    lines.append(f"    for (int i = 0; i < {n}; i++)")
+    lines.append("        if (!isfinite(qdd[i])) return 2;")
+    lines.append("    return 0;")
+    lines.append("}")
+    return UnrolledFD(name, n, "\n".join(lines) + "\n", len(stmts), len(fn))
+
+
+def evaluate_numeric(revolute, parents, constants, gravity, q, qd, tau) -> np.ndarray:
+    """The same passes on numbers (every value folds): a check of the algorithm without a compiler."""
+    bodies = body_frames(revolute, parents, constants)
+    P = Program()
+    qdd = _aba(P, bodies, gravity, [float(x) for x in q], [float(x) for x in qd], [float(x) for x in tau])
+    return np.array(qdd, float)
