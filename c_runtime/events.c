@@ -166,7 +166,7 @@ int fmugen_step_event(fmugen_ode *ode, double t0, const double *x0, const double
     /* x0 and f0 may live where the solver writes next: keep copies */
     memcpy(xs0, x0, (size_t)n * sizeof(double));
     memcpy(fs0, f0, (size_t)n * sizeof(double));
-    fmugen_inputs_at(inst, ode->t0, ode->u0, t1, u);
+    fmugen_ode_inputs(ode, t1, u);
     rc = fmugen_event_indicators(inst, t1, x1, u, zb);
     if (rc != FMUGEN_OK) {
         snprintf(msg, msgn, "event indicators could not be evaluated at t = %.17g: %s", t1,
@@ -214,7 +214,7 @@ int fmugen_step_event(fmugen_ode *ode, double t0, const double *x0, const double
         if (th > hi) th = hi;
         interpolant(n, h, th, xs0, fs0, x1, f1, r5, xm);
         const double tm = t0 + th * h;
-        fmugen_inputs_at(inst, ode->t0, ode->u0, tm, u);
+        fmugen_ode_inputs(ode, tm, u);
         rc = fmugen_event_indicators(inst, tm, xm, u, zm);
         if (rc != FMUGEN_OK) {
             snprintf(msg, msgn, "event indicators could not be evaluated at t = %.17g while locating an event: %s",

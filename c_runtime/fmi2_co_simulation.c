@@ -265,7 +265,7 @@ static int event_at(fmugen_instance *inst, const double *u, long long n_in_step,
 static int handle_event(fmugen_instance *inst, fmugen_ode *ode, long long n_in_step, char *msg, size_t n)
 {
     double *u = ode->u_work;
-    fmugen_inputs_at(inst, ode->t0, ode->u0, inst->s.time, u);
+    fmugen_ode_inputs(ode, inst->s.time, u);
     return event_at(inst, u, n_in_step, "fmi2DoStep", msg, n);
 }
 
@@ -419,7 +419,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
         }
         if (to_tick) { /* the sample instant: the clocks' event iteration, with the inputs there */
             inst->s.time = target;
-            fmugen_inputs_at(inst, tc, u0, target, u_work);
+            fmugen_ode_inputs(&ode, target, u_work);
             char why[300];
             if (fmugen_tick_iteration(inst, u_work, why, sizeof why) != FMUGEN_OK) {
                 snprintf(msg, sizeof msg, "at the sample instant t = %.17g: %s", target, why);
@@ -438,7 +438,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
     const int early = ext && rc == FMUGEN_SOLVER_OK && inst->s.time < t_end;
     /* inputs at the time reached, so that outputs and the next step see a
      * continuous input */
-    fmugen_inputs_at(inst, tc, u0, inst->s.time, inst->u);
+    fmugen_ode_inputs(&ode, inst->s.time, inst->u);
     /* the polynomial goes on from the new point: its slope there */
     const double s_end = inst->s.time - tc;
     for (int i = 0; i < m->nu; i++) {

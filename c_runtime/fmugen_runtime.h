@@ -118,6 +118,10 @@ typedef struct fmugen_cs_ext {
      * intermediate update.  1: the importer asked to return early (stop_at set), the solver stops here.
      * NULL: no callback. */
     int (*step_accepted)(struct fmugen_ode *ode);
+    /* The inputs at time t inside the running step (solver.h, fmugen_ode_inputs): FMI 3.0's intermediate
+     * update with intermediateVariableSetRequested, the importer setting them for t.  NULL: the
+     * extrapolation polynomial from the communication point (fmugen_inputs_at), as for FMI 2.0. */
+    void (*inputs_at)(struct fmugen_ode *ode, double t, double *out);
     double step_end;           /* tc + h of the running fmi2DoStep */
     double target;             /* where the running solver call ends (step_end, a sample instant, stop_at) */
     double stop_at;            /* the importer's earlyReturnTime in the running step; HUGE_VAL: none */

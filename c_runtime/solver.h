@@ -4,7 +4,8 @@
  * A solver advances the instance's state x from inst->s.time to t_end for
  *     dx/dt = f(t, x, u(t), p),   u(t) = u0 + du (t - t0),
  * (inputs held constant over a communication step, or extrapolated linearly
- * when fmi2SetRealInputDerivatives gave du).  It changes inst->s.time and
+ * when fmi2SetRealInputDerivatives gave du; for FMI 3.0, set by the importer
+ * in the intermediate update: fmugen_ode_inputs).  It changes inst->s.time and
  * inst->x only on accepted steps, so after a failure they hold the last good
  * point.  It returns FMUGEN_SOLVER_OK or a failure code and writes the reason
  * into msg.
@@ -38,6 +39,16 @@ typedef struct fmugen_ode {
 /* u(t) = u0 + du (t - t0) into out (nu) */
 FMUGEN_INTERNAL void fmugen_inputs_at(const fmugen_instance *inst, double t0, const double *u0, double t,
                                       double *out);
+/* u(t) into out (nu), for the right-hand side, the Jacobian, event indicators and the step's end: the
+ * polynomial of fmugen_inputs_at, or, for an FMI 3.0 instance whose importer sets its inputs in the
+ * intermediate update, the values it sets for t (fmugen_cs_ext.inputs_at).  Always the polynomial for FMI
+ * 2.0 (no cs_ext), so those steps are what they were before this existed. */
+static inline void fmugen_ode_inputs(fmugen_ode *ode, double t, double *out)
+{
+    const fmugen_cs_ext *e = ode->inst->cs_ext;
+    if (e != NULL && e->inputs_at != NULL) e->inputs_at(ode, t, out);
+    else fmugen_inputs_at(ode->inst, ode->t0, ode->u0, t, out);
+}
 /* dx = f(t, x, u(t), p); counts n_rhs.  Returns FMUGEN_OK, a model error or
  * FMUGEN_NOT_FINITE. */
 FMUGEN_INTERNAL int fmugen_ode_rhs(fmugen_ode *ode, double t, const double *x, double *dx);

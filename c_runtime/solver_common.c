@@ -22,7 +22,7 @@ int fmugen_ode_rhs(fmugen_ode *ode, double t, const double *x, double *dx)
 {
     fmugen_instance *inst = ode->inst;
     const fmugen_model_def *m = inst->model;
-    fmugen_inputs_at(inst, ode->t0, ode->u0, t, ode->u_work);
+    fmugen_ode_inputs(ode, t, ode->u_work);
     inst->s.n_rhs++;
     int rc = m->evaluate(inst->p, t, x, ode->u_work, dx, NULL);
     if (rc == FMUGEN_OK && !fmugen_all_finite(dx, m->nx)) rc = FMUGEN_NOT_FINITE;
@@ -37,7 +37,7 @@ int fmugen_ode_jacobian(fmugen_ode *ode, double t, const double *x, const double
     const int n = m->nx;
     inst->s.n_jac++;
     if (m->has_jacobian && m->jacobian) {
-        fmugen_inputs_at(inst, ode->t0, ode->u0, t, ode->u_work);
+        fmugen_ode_inputs(ode, t, ode->u_work);
         int rc = m->jacobian(inst->p, t, x, ode->u_work, J, NULL, NULL, NULL);
         if (rc == FMUGEN_OK && !fmugen_all_finite(J, n * n)) rc = FMUGEN_NOT_FINITE;
         if (rc != FMUGEN_OK) ode->model_code = rc;
