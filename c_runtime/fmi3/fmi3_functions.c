@@ -39,18 +39,27 @@
  *     hasEventMode is true for models with events only (modelDescription.xml);
  *     eventModeUsed is refused for the others, as the standard requires;
  *   - the intermediate update: after every accepted internal solver step the
- *     importer's callback, with intermediateVariableSetRequested false (inputs
- *     are not taken inside a step), intermediateVariableGetAllowed and
- *     intermediateStepFinished true, canReturnEarly = earlyReturnAllowed before
- *     the step's end; earlyReturnRequested ends the step at earlyReturnTime (at
- *     the callback's time when that has passed).  Inside the callback only
- *     getting is allowed: everything that changes the instance returns
- *     fmi3Error with a message (a nested fmi3DoStep, setting, Event Mode, FMU
- *     state, fmi3FreeInstance, fmi3Terminate ...).
+ *     importer's callback, with intermediateVariableSetRequested false,
+ *     intermediateVariableGetAllowed and intermediateStepFinished true,
+ *     canReturnEarly = earlyReturnAllowed before the step's end;
+ *     earlyReturnRequested ends the step at earlyReturnTime (at the callback's
+ *     time when that has passed).  Inside it only getting is allowed:
+ *     everything that changes the instance returns fmi3Error with a message (a
+ *     nested fmi3DoStep, setting, Event Mode, FMU state, fmi3FreeInstance,
+ *     fmi3Terminate ...);
+ *   - inputs set in the intermediate update (FMI 3.0's replacement for FMI
+ *     2.0's input derivatives): when requiredIntermediateVariables names inputs
+ *     (intermediateUpdate="true" in modelDescription.xml), the callback comes
+ *     with intermediateVariableSetRequested true wherever the solver needs u(t)
+ *     inside the step (intermediate_inputs: each distinct stage time, event
+ *     location, sample instant, the step's end), and fmi3SetFloat64 of those
+ *     inputs -- only that -- gives the solver u(t) there (fmugen_cs_ext.inputs_at).
+ *     An importer that sets the values of a polynomial gets what an FMI 2.0
+ *     FMU computes with that polynomial's input derivatives.
  *
  * Not supported yet (present, because the standard requires every symbol,
  * and returning fmi3Error with a logged message): Scheduled Execution,
- * clocks, setting inputs in the intermediate update, configuration mode,
+ * clocks, configuration mode,
  * adjoint derivatives, variable dependencies at run time, and variables of
  * types other than Float64 and Int32 (there are none).
  */
@@ -82,11 +91,22 @@ typedef struct fmi3_bridge {
     fmi3InstanceEnvironment env;
     fmugen_cs_ext ext;                              /* eventModeUsed, earlyReturnAllowed, the step hook */
     fmi3IntermediateUpdateCallback intermediate_update; /* NULL: none given */
-    int in_intermediate_update;                     /* inside that callback: Intermediate Update Mode */
+    int in_intermediate_update;                     /* inside that callback: IU_GET or IU_SET, else 0 */
+    /* inputs set in the intermediate update (requiredIntermediateVariables named some): */
+    unsigned char *iu_required;                     /* nu: input i was named, so the importer may set it */
+    double *iu_u;                                   /* nu: the inputs as last set (the last value set remains) */
+    double iu_time;                                 /* time of the last set request in the running step */
+    int iu_valid;                                   /* iu_u is the importer's for iu_time */
     int inputs_set_in_event_mode;                   /* an input was set in Co-Simulation Event Mode */
 } fmi3_bridge;
 
 #define BRIDGE(inst) ((fmi3_bridge *)(inst)->cb.componentEnvironment)
+
+/* Intermediate Update Mode, by what the callback allows: after an accepted internal step the importer may
+ * get values (intermediateVariableGetAllowed); where the solver needs the inputs inside a step it may set
+ * them (intermediateVariableSetRequested), nothing else (the solver's state there is a trial stage) */
+#define IU_GET 1
+#define IU_SET 2
 
 /* fmi2 names in the runtime's messages and what the FMI 3.0 importer called;
  * longest first where one name begins another; any other "fmi2" becomes
@@ -175,19 +195,93 @@ static fmi3Status st(fmi2Status s) { return s == fmi2Pending ? fmi3Error : (fmi3
     if (!fmugen_live(INST)) return fmi3Error
 
 /* Inside the intermediate-update callback (Intermediate Update Mode) the importer may only get values
- * (intermediateVariableGetAllowed; setting is never requested): anything that changes the instance --
- * above all a nested fmi3DoStep, or freeing it under the running step -- is refused. */
+ * after an accepted step (IU_GET), only set the inputs it named when setting is requested (IU_SET; see
+ * fmi3SetFloat64): anything else -- above all a nested fmi3DoStep, or freeing the instance under the
+ * running step -- is refused. */
 static int in_update(fmugen_instance *inst, const char *fn)
 {
-    if (!BRIDGE(inst)->in_intermediate_update) return 0;
-    fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
-               "%s: not allowed in Intermediate Update Mode (inside the intermediate-update callback at t = %.17g: "
-               "only getting values is allowed, intermediateVariableSetRequested is false)", fn, inst->s.time);
+    const int mode = BRIDGE(inst)->in_intermediate_update;
+    if (!mode) return 0;
+    if (mode == IU_SET)
+        fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                   "%s: not allowed in Intermediate Update Mode (inside the intermediate-update callback at t = "
+                   "%.17g: intermediateVariableSetRequested is true, intermediateVariableGetAllowed false: only "
+                   "setting the inputs named in requiredIntermediateVariables with fmi3SetFloat64 is allowed)",
+                   fn, BRIDGE(inst)->iu_time);
+    else
+        fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                   "%s: not allowed in Intermediate Update Mode (inside the intermediate-update callback at t = "
+                   "%.17g: only getting values is allowed, intermediateVariableSetRequested is false)", fn,
+                   inst->s.time);
     return 1;
 }
 #define NOT_IN_UPDATE_INST(inst, fn) \
     if (in_update((inst), (fn))) return fmi3Error
 #define NOT_IN_UPDATE(fn) NOT_IN_UPDATE_INST(INST, fn)
+
+/* fmugen_cs_ext.inputs_at: the inputs at t inside fmi3DoStep, set by the importer in the intermediate update
+ * (FMI 3.0's replacement for FMI 2.0's input derivatives).  The callback comes where the solver needs u(t):
+ * at every distinct time at which it evaluates the right-hand side (each Runge-Kutta stage, each Rosenbrock
+ * stage and the time difference of its Jacobian, a trial step that is rejected afterwards), at the event
+ * locator's times, at a sample instant and at the step's end -- not once per internal step at its start.
+ * Inputs taken once per internal step and held over it would be a zero-order hold inside the step, an
+ * error of O(h) in the inputs; taken at the stages, the solver integrates the ODE with the importer's
+ * u(t) itself, as FMI 2.0's fmi2SetRealInputDerivatives lets it do with the polynomial: an importer that
+ * sets the values of its extrapolation polynomial here gets the FMI 2.0 result to rounding, for every step
+ * size and every polynomial degree.  The stages of one time share one callback (a Runge-Kutta method's
+ * last stages, the first-same-as-last one, the finite-difference Jacobian): the importer's u is a function
+ * of time.  intermediateStepFinished is false (a trial stage; never earlier than the last accepted step,
+ * as the standard requires), intermediateVariableGetAllowed false (the state there is no solution point),
+ * canReturnEarly false.  Inputs the importer does not set keep the last value set (the standard's rule):
+ * at the step's start those set before fmi3DoStep, so an importer that sets nothing gets exactly the
+ * held inputs of an FMU without the callback. */
+static void intermediate_inputs(struct fmugen_ode *ode, double t, double *out)
+{
+    fmugen_instance *inst = ode->inst;
+    fmi3_bridge *b = BRIDGE(inst);
+    if (!b->iu_valid || t != b->iu_time) {
+        fmi3Boolean requested = fmi3False;
+        fmi3Float64 when = t;
+        b->iu_time = t;
+        b->in_intermediate_update = IU_SET;
+        b->intermediate_update(b->env, t, fmi3True, fmi3False, fmi3False, fmi3False, &requested, &when);
+        b->in_intermediate_update = 0;
+        b->iu_valid = 1; /* earlyReturnRequested is ignored: canReturnEarly was false */
+    }
+    memcpy(out, b->iu_u, (size_t)inst->model->nu * sizeof(double));
+}
+
+/* fmi3SetFloat64 inside a set request: inputs named in requiredIntermediateVariables only, finite; they go
+ * to the values the solver takes for iu_time (intermediate_inputs), not to the instance's inputs (which
+ * fmi2DoStep sets from them at the step's end) */
+static fmi3Status set_intermediate_inputs(fmugen_instance *inst, const fmi3ValueReference vr[], size_t n,
+                                          const fmi3Float64 values[])
+{
+    const char *fn = "fmi3SetFloat64";
+    const fmugen_model_def *m = inst->model;
+    fmi3_bridge *b = BRIDGE(inst);
+    char name[256];
+    for (size_t i = 0; i < n; i++) { /* all checked first: a refused call sets nothing */
+        const int input = vr[i] >= fmugen_vr_u(m) && vr[i] < fmugen_vr_y(m);
+        if (!input || !b->iu_required[vr[i] - fmugen_vr_u(m)]) {
+            fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                       "%s: %s (value reference %u) cannot be set in Intermediate Update Mode (t = %.17g): %s", fn,
+                       vr[i] < fmugen_vr_end(m) ? fmugen_real_name(inst, vr[i], name, sizeof name) : "<unknown>",
+                       vr[i], b->iu_time,
+                       input ? "it is not in requiredIntermediateVariables of fmi3InstantiateCoSimulation"
+                             : "only inputs (intermediateUpdate=\"true\") may be set there");
+            return fmi3Error;
+        }
+        if (!isfinite(values[i])) {
+            fmugen_log(inst, fmi2Error, FMUGEN_LOG_STATUS_ERROR,
+                       "%s: value %g for %s (value reference %u) at t = %.17g is not finite; rejected", fn,
+                       values[i], fmugen_real_name(inst, vr[i], name, sizeof name), vr[i], b->iu_time);
+            return fmi3Error;
+        }
+    }
+    for (size_t i = 0; i < n; i++) b->iu_u[vr[i] - fmugen_vr_u(m)] = values[i];
+    return fmi3OK;
+}
 
 /* fmugen_cs_ext.step_accepted: FMI 3.0's intermediate update after each accepted internal solver step
  * of fmi3DoStep (solver.h).  The importer may read every variable at the step's end (outputs computed
@@ -201,14 +295,15 @@ static int intermediate_update(struct fmugen_ode *ode)
     fmugen_cs_ext *e = &b->ext;
     const double t = inst->s.time;
     /* the solvers move x in place and hold the inputs in their own buffer: what fmi3GetFloat64 reads */
-    fmugen_inputs_at(inst, ode->t0, ode->u0, t, inst->u);
+    fmugen_ode_inputs(ode, t, inst->u);
     fmugen_invalidate(inst);
     const fmi3Boolean can = e->early_return_allowed && t < e->step_end ? fmi3True : fmi3False;
     fmi3Boolean requested = fmi3False;
     fmi3Float64 when = t;
-    b->in_intermediate_update = 1;
-    /* intermediateVariableSetRequested false: inputs are not taken inside a step; intermediateStepFinished
-     * true: the callback comes only after accepted steps, never for a trial */
+    b->in_intermediate_update = IU_GET;
+    /* intermediateVariableSetRequested false: inputs are taken where the solver needs them
+     * (intermediate_inputs), not here; intermediateStepFinished true: this call comes only after accepted
+     * steps, never for a trial */
     b->intermediate_update(b->env, t, fmi3False, fmi3True, fmi3True, can, &requested, &when);
     b->in_intermediate_update = 0;
     if (!requested) return 0;
@@ -253,7 +348,8 @@ static fmi3Instance instantiate(const char *fn, fmi2Type type, fmi3String instan
                                 fmi3String instantiationToken, fmi3String resourcePath, fmi3Boolean visible,
                                 fmi3Boolean loggingOn, fmi3InstanceEnvironment env, fmi3LogMessageCallback log,
                                 fmi3Boolean eventModeUsed, fmi3Boolean earlyReturnAllowed,
-                                fmi3IntermediateUpdateCallback intermediateUpdate)
+                                fmi3IntermediateUpdateCallback intermediateUpdate,
+                                const fmi3ValueReference required[], size_t nRequired)
 {
     if (!log) return NULL; /* nobody to tell why */
     fmi3_bridge *b = calloc(1, sizeof *b);
@@ -286,6 +382,36 @@ static fmi3Instance instantiate(const char *fn, fmi2Type type, fmi3String instan
     b->ext.stop_at = HUGE_VAL;
     b->intermediate_update = intermediateUpdate;
     b->ext.step_accepted = intermediateUpdate ? intermediate_update : NULL;
+    /* inputs in requiredIntermediateVariables: the importer intends to set them in the intermediate update,
+     * so the solver asks for them (intermediate_inputs); without one named, the callback never requests
+     * setting, and the inputs are held over the step as without the callback */
+    const fmugen_model_def *m = inst->model;
+    int n_set = 0;
+    if (intermediateUpdate && m->nu > 0 && required && nRequired > 0) {
+        b->iu_required = calloc((size_t)m->nu, 1);
+        b->iu_u = calloc((size_t)m->nu, sizeof(double));
+        if (!b->iu_required || !b->iu_u) {
+            early_log(log, env, "%s: out of memory", fn);
+            fmi2FreeInstance(inst);
+            free(b->iu_required);
+            free(b->iu_u);
+            free(b);
+            return NULL;
+        }
+        for (size_t i = 0; i < nRequired; i++)
+            if (required[i] >= fmugen_vr_u(m) && required[i] < fmugen_vr_y(m)) {
+                n_set += !b->iu_required[required[i] - fmugen_vr_u(m)];
+                b->iu_required[required[i] - fmugen_vr_u(m)] = 1;
+            }
+    }
+    if (n_set > 0) {
+        b->ext.inputs_at = intermediate_inputs;
+    } else {
+        free(b->iu_required);
+        free(b->iu_u);
+        b->iu_required = NULL;
+        b->iu_u = NULL;
+    }
     /* none of the three asked for: no extension, fmi2DoStep exactly as for FMI 2.0 */
     if (b->ext.event_mode_used || b->ext.early_return_allowed || intermediateUpdate) inst->cs_ext = &b->ext;
     return inst;
@@ -298,7 +424,7 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
 {
     return instantiate("fmi3InstantiateModelExchange", fmi2ModelExchange, instanceName, instantiationToken,
                        resourcePath, visible, loggingOn, instanceEnvironment, logMessage, fmi3False, fmi3False,
-                       NULL);
+                       NULL, NULL, 0);
 }
 
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
@@ -310,13 +436,13 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
                                          fmi3LogMessageCallback logMessage,
                                          fmi3IntermediateUpdateCallback intermediateUpdate)
 {
-    /* every output and state may be read in the intermediate update (intermediateUpdate = "true" on
-     * them in modelDescription.xml), none set: the list needs no checking against the FMU's */
-    (void)requiredIntermediateVariables;
-    (void)nRequiredIntermediateVariables;
+    /* every variable may be read in the intermediate update after an accepted step, every input set when
+     * setting is requested (intermediateUpdate = "true" on the outputs and inputs in modelDescription.xml):
+     * the inputs named are those the solver asks for; other value references need no checking */
     return instantiate("fmi3InstantiateCoSimulation", fmi2CoSimulation, instanceName, instantiationToken,
                        resourcePath, visible, loggingOn, instanceEnvironment, logMessage, eventModeUsed,
-                       earlyReturnAllowed, intermediateUpdate);
+                       earlyReturnAllowed, intermediateUpdate, requiredIntermediateVariables,
+                       nRequiredIntermediateVariables);
 }
 
 fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
@@ -338,8 +464,10 @@ void fmi3FreeInstance(fmi3Instance instance)
 {
     if (!fmugen_live(INST)) return; /* NULL or already freed: see fmi2FreeInstance */
     if (in_update(INST, "fmi3FreeInstance")) return; /* the step that called the callback still runs on it */
-    void *b = INST->cb.componentEnvironment;
+    fmi3_bridge *b = BRIDGE(INST);
     fmi2FreeInstance(instance);
+    free(b->iu_required);
+    free(b->iu_u);
     free(b);
 }
 
@@ -439,6 +567,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
 {
     LIVE_OR_ERROR;
     const char *fn = "fmi3GetFloat64";
+    if (BRIDGE(INST)->in_intermediate_update == IU_SET && in_update(INST, fn)) return fmi3Error;
     if (!fmugen_check_state(INST, MASK_GET, fn)) return fmi3Error;
     fmugen_instance *inst = INST;
     const fmugen_model_def *m = inst->model;
@@ -486,6 +615,10 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
 {
     LIVE_OR_ERROR;
     const char *fn = "fmi3SetFloat64";
+    if (BRIDGE(INST)->in_intermediate_update == IU_SET) { /* intermediateVariableSetRequested: inputs only */
+        if (bad_arrays(INST, fn, nValueReferences, valueReferences, nValues, values)) return fmi3Error;
+        return set_intermediate_inputs(INST, valueReferences, nValueReferences, values);
+    }
     NOT_IN_UPDATE(fn);
     fmugen_instance *inst = INST;
     const fmugen_model_def *m = inst->model;
@@ -542,6 +675,7 @@ fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference valueRef
 {
     LIVE_OR_ERROR;
     const char *fn = "fmi3GetInt32";
+    if (BRIDGE(INST)->in_intermediate_update == IU_SET && in_update(INST, fn)) return fmi3Error;
     if (!fmugen_check_state(INST, MASK_GET, fn)) return fmi3Error;
     if (bad_arrays(INST, fn, nValueReferences, valueReferences, nValues, values)) return fmi3Error;
     fmi2ValueReference *vr = int_refs(INST, fn, valueReferences, nValueReferences);
@@ -1047,6 +1181,11 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
                    "%s: the last fmi3DoStep returned eventHandlingNeeded = true at t = %.17g: call "
                    "fmi3EnterEventMode and fmi3UpdateDiscreteStates before the next step", fn, INST->s.time);
         return fmi3Error;
+    }
+    fmi3_bridge *b = BRIDGE(INST);
+    if (b->ext.inputs_at) { /* the inputs set before the step are those until the importer sets others */
+        memcpy(b->iu_u, INST->u, (size_t)INST->model->nu * sizeof(double));
+        b->iu_valid = 0;
     }
     fmi2Status s = fmi2DoStep(instance, currentCommunicationPoint, communicationStepSize,
                               noSetFMUStatePriorToCurrentPoint ? fmi2True : fmi2False);
