@@ -153,6 +153,10 @@ def model_description3_xml(
              variability=v.variability, initial=v.initial)
         if "cs" in fmi_types and v.causality == "output":
             _set(el, intermediateUpdate=True)  # readable in the intermediate-update callback
+        if "cs" in fmi_types and v.causality == "input" and v.variability == "continuous":
+            # settable in the intermediate update: where the solver needs u(t) inside a step, the importer
+            # sets it (intermediateVariableSetRequested; FMI 3.0's replacement for input derivatives)
+            _set(el, intermediateUpdate=True)
         if v.type == "Real":
             deriv = None if v.derivative is None else by_index[v.derivative]  # the state (FMI 2.0 index)
             _set(el, unit=v.unit, min=v.min, max=v.max, nominal=v.nominal, start=v.start,
