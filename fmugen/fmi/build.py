@@ -679,7 +679,8 @@ def _build(model, output_path, types, fold_parameters, cc, extra_cflags, keep_so
                 f"only the fmi3* functions ({FMI3_HIDE_FMI2} keeps the runtime's fmi2* functions unexported),\n"
                 f"e.g. on Linux:\n\n    "
                 f"{shlex.join(['cc', *CFLAGS, FMI3_HIDE_FMI2, '-I.', '-Wl,--version-script=' + FMI3_RUNTIME[1], '-o', ident + '.so', *sources, '-lm'])}"
-                f"\n\nand place it in binaries/<architecture>-<system>/ (x86_64-linux, x86_64-windows,\n"
+                f"\n\n" + sources_readme(ident, sources, (*CFLAGS, FMI3_HIDE_FMI2)) +
+                f"\nand place it in binaries/<architecture>-<system>/ (x86_64-linux, x86_64-windows,\n"
                 f"x86_64-darwin, aarch64-darwin, aarch64-linux).\n")
             from .model_description3 import build_description3_xml
 

@@ -297,7 +297,8 @@ def sources_readme(ident: str, sources: Sequence[str], cflags: Sequence[str]) ->
     files = " ".join(sources)
     win = " ".join(f for f in cflags if f != "-fPIC")
     unix = " ".join(cflags)  # with -shared: a dynamic library on macOS too
+    msvc = "".join(f" /D{f[2:]}" for f in cflags if f.startswith("-D"))  # FMI 3.0's FMI2_Export= too
     return (f"On Windows with MinGW-w64 (the C runtime linked in, so that the DLL needs no MinGW DLLs):\n\n"
             f"    x86_64-w64-mingw32-gcc {win} -static-libgcc -I. -o {ident}.dll {files} -lm\n\n"
-            f"(or MSVC: cl /O2 /LD /Fe{ident}.dll *.c).  On macOS, both architectures in one file:\n\n"
+            f"(or MSVC: cl /O2 /LD{msvc} /Fe{ident}.dll *.c).  On macOS, both architectures in one file:\n\n"
             f"    cc {unix} -fvisibility=hidden -arch x86_64 -arch arm64 -I. -o {ident}.dylib {files}\n")
