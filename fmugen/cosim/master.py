@@ -512,8 +512,10 @@ class Master:
             summ.warnings.append(f"no coupling error estimate: FMU {u.name!r} declares {flag}=\"false\", and the "
                                  f"estimate reruns windows of macro steps from saved FMU states with H/2")
         summ.warnings.extend(self.me_block.warnings() if self.me_block is not None else ())
-        # FMI 3.0 has no input derivatives: what such an FMU does instead of the extrapolant, said once
-        held = [u.name for u in self.units if u.kind == "cs" and u.n_in and getattr(u, "VERSION", "2.0") != "2.0"]
+        # FMI 3.0 has no input derivatives: an FMU that takes its inputs in the intermediate update gets the
+        # extrapolant there (units3.Slave3Unit, can_interpolate); what one without does instead, said once
+        held = [u.name for u in self.units if u.kind == "cs" and u.n_in and getattr(u, "VERSION", "2.0") != "2.0"
+                and not u.can_interpolate]
         if held and not self.hold_only:
             summ.warnings.append(f"FMU {', '.join(map(repr, held))}: FMI 3.0 has no input derivatives (no "
                                  f"canInterpolateInputs): its inputs are held at the midpoint of the "
