@@ -3,8 +3,11 @@
 fmugen's FMI 3.0 FMUs run the FMI 2.0 runtime (c_runtime/fmi3), so a system of them must give what the
 same system of FMI 2.0 FMUs gives, bit for bit: the split actuator-chain rig of the other cosim tests
 (tests/cosim_rigs.py) built both ways, under every scheme, mixed, in the ME block, with rollback and
-Newton.  FMI 3.0 has no input derivatives, so where the scheme passes slopes the FMI 2.0 twin is run
-told it cannot interpolate either (``held_fmi2``): then both hold their inputs at the same midpoint.
+Newton.  FMI 3.0 has no input derivatives: the master sets an fmugen FMI 3.0 FMU's inputs in the
+intermediate update to the values of the polynomial it passes an FMI 2.0 FMU as input derivatives
+(tests/test_fmi3_input_interpolation.py), so both interpolate alike.  An FMI 3.0 FMU whose inputs are
+not intermediateUpdate="true" holds them at the extrapolant's midpoint, as its FMI 2.0 twin told it
+cannot interpolate (``held_fmi2``) does.
 The bouncing ball (state events) in the ME block against its closed-form bounce times; an SSP archive
 of FMI 3.0 FMUs; refusals in one line.
 """
@@ -113,16 +116,21 @@ def test_units_are_the_fmus_version(rig3):
         chain, joint = m.units
         assert type(chain) is units3.Slave3Unit and type(joint) is units.SlaveUnit
         assert chain.md.fmiVersion == "3.0" and chain.md.guid.startswith("{")  # the instantiation token
-        assert not chain.can_interpolate and chain.can_save_state and chain.max_output_derivative_order == 1
+        # interpolates: its inputs are set in the intermediate update (providesIntermediateUpdate, inputs
+        # intermediateUpdate="true")
+        assert chain.can_interpolate and chain.can_save_state and chain.max_output_derivative_order == 1
+        assert sorted(chain.intermediate_inputs) == sorted(v.valueReference for v in chain.md.modelVariables
+                                                           if v.causality == "input")
         assert chain.variables["solver.method"].type == "Int32"
 
 
 SCHEMES = [("jacobi", "hold"), ("gauss-seidel", "hold"), ("newton", "linear"), ("jacobi", "linear"),
-           ("gauss-seidel", "linear"), ("iterative", "linear")]
+           ("gauss-seidel", "linear"), ("iterative", "linear"), ("jacobi", "quadratic"), ("newton", "quadratic"),
+           ("iterative", "cubic")]
 
 
 @pytest.mark.parametrize("scheme,extrapolation", SCHEMES)
-def test_fmi3_system_equals_fmi2_under_each_scheme(rig3, held_fmi2, scheme, extrapolation):
+def test_fmi3_system_equals_fmi2_under_each_scheme(rig3, scheme, extrapolation):
     s2 = split_system("stiff", "smooth", stop=STOP)
     r2 = run(s2, scheme, extrapolation, step=1e-3)
     r3 = run(twin(s2, rig3), scheme, extrapolation, step=1e-3)
@@ -130,18 +138,21 @@ def test_fmi3_system_equals_fmi2_under_each_scheme(rig3, held_fmi2, scheme, extr
     assert largest_difference(r2, r3) <= 1e-12  # 0.0: the same runtime
     assert work(r2) == work(r3)
     assert abs(r3["joint.theta"][-1]) > 1e-4  # it moved
-    said = [w for w in r3.summary.warnings if "FMI 3.0 has no input derivatives" in w]
-    assert len(said) == (extrapolation != "hold"), r3.summary.warnings  # held inputs lose nothing
+    assert not [w for w in r3.summary.warnings if "FMI 3.0 has no input derivatives" in w], r3.summary.warnings
 
 
-def test_fmi3_without_input_derivatives_is_the_fmi2_fmu_that_cannot_interpolate(rig3):
-    """Without held_fmi2 the FMI 2.0 FMUs interpolate their inputs (fmi2SetRealInputDerivatives) and the
-    FMI 3.0 ones cannot: the runs differ, by a coupling error (not a failure)."""
+def test_fmi3_without_intermediate_inputs_is_the_fmi2_fmu_that_cannot_interpolate(rig3, held_fmi2, monkeypatch):
+    """An FMI 3.0 FMU whose inputs cannot be set in the intermediate update (a third-party one without
+    intermediateUpdate="true" inputs) holds them at the extrapolant's midpoint, said in Summary.warnings:
+    bit for bit the FMI 2.0 twin told it cannot interpolate."""
+    monkeypatch.setattr(units3, "_intermediate_inputs", lambda unzip: [])
     s2 = split_system("stiff", "smooth", stop=STOP)
-    r2, r3 = run(s2, "gauss-seidel", "linear", step=1e-3), run(twin(s2, rig3), "gauss-seidel", "linear", step=1e-3)
-    assert r2.ok and r3.ok
-    dtheta = float(np.max(np.abs(r2["joint.theta"] - r3["joint.theta"])))
-    assert 0 < dtheta < 1e-3 * float(np.max(np.abs(r2["joint.theta"])))
+    for scheme, ext in (("gauss-seidel", "linear"), ("jacobi", "linear"), ("newton", "linear")):
+        r2, r3 = run(s2, scheme, ext, step=1e-3), run(twin(s2, rig3), scheme, ext, step=1e-3)
+        assert r2.ok and r3.ok
+        assert largest_difference(r2, r3) <= 1e-12 and work(r2) == work(r3)
+        said = [w for w in r3.summary.warnings if "FMI 3.0 has no input derivatives" in w]
+        assert len(said) == 1 and "held at the midpoint" in said[0], r3.summary.warnings
 
 
 def test_dense_output_slopes_from_fmi3_get_output_derivatives(rig3):
@@ -154,7 +165,7 @@ def test_dense_output_slopes_from_fmi3_get_output_derivatives(rig3):
 
 
 @pytest.mark.parametrize("fmi3_units", [("chain",), ("joint",)])
-def test_mixed_fmi2_fmi3_system_equals_all_fmi2(rig3, held_fmi2, fmi3_units):
+def test_mixed_fmi2_fmi3_system_equals_all_fmi2(rig3, fmi3_units):
     s2 = split_system("stiff", "smooth", stop=STOP)
     for scheme, ext in (("gauss-seidel", "hold"), ("newton", "linear")):
         r2, rm = run(s2, scheme, ext, step=1e-3), run(twin(s2, rig3, fmi3_units), scheme, ext, step=1e-3)
@@ -162,18 +173,19 @@ def test_mixed_fmi2_fmi3_system_equals_all_fmi2(rig3, held_fmi2, fmi3_units):
         assert largest_difference(r2, rm) <= 1e-12 and work(r2) == work(rm), (scheme, fmi3_units)
 
 
-def test_rollback_and_adaptive_steps_on_fmi3(rig3, held_fmi2):
+def test_rollback_and_adaptive_steps_on_fmi3(rig3):
     """Adaptive macro steps roll FMI 3.0 FMUs back (fmi3GetFMUState / fmi3SetFMUState), also under Newton
     (whose interface Jacobian re-steps rolled-back FMUs): the same steps and results as FMI 2.0."""
     s2 = split_system("stiff", "smooth", stop=STOP)
+    # newton/linear at tol 1e-4: with interpolated inputs 1e-3 needs no rollback (held at the midpoint it did)
     for kw in (dict(scheme="gauss-seidel", extrapolation="hold", step=5e-3, tol=1e-2),
-               dict(scheme="newton", extrapolation="linear", step=5e-3, tol=1e-3)):
+               dict(scheme="newton", extrapolation="linear", step=5e-3, tol=1e-4)):
         r2, r3 = run(s2, adaptive=True, **kw), run(twin(s2, rig3), adaptive=True, **kw)
         assert r3.summary.failure is None and r3.summary.rollbacks >= 2, r3.summary
         assert largest_difference(r2, r3) <= 1e-12 and work(r2) == work(r3), kw
 
 
-def test_newton_with_directional_derivatives_of_an_fmi3_fmu(amp3, held_fmi2):
+def test_newton_with_directional_derivatives_of_an_fmi3_fmu(amp3):
     """The amplifier FMU has no states: Newton's columns for it are fmi3GetDirectionalDerivative's (unknowns,
     knowns, seed and sensitivity with their sizes), equal to fmi2GetDirectionalDerivative's."""
     s2 = amp_split_system(stop=STOP)
@@ -414,10 +426,15 @@ def test_refusals_in_one_line(rig3, tmp_path):
     with pytest.raises(CosimError) as e:
         run(replace(s, units=(s.units[0], replace(me(s.units[1]), path=no_me))), "jacobi", "hold")
     _one_line(e, "FMU 'joint'", "has no Model-Exchange interface")
-    # Hermite inputs need input derivatives, which FMI 3.0 does not have
+    # Hermite inputs need input derivatives, which FMI 3.0 does not have: refused for an FMU whose inputs
+    # cannot be set in the intermediate update either
+    held = _edited(joint3, tmp_path / "held.fmu", lambda t: t.replace(
+        'causality="input" variability="continuous" intermediateUpdate="true"',
+        'causality="input" variability="continuous"'))
     with pytest.raises(CosimError) as e:
-        run(twin(s, rig3), "newton", "quadratic", step=1e-3)
-    _one_line(e, "cannot interpolate inputs (FMI 3.0 has no input derivatives")
+        run(replace(twin(s, rig3), units=(replace(s.units[0], path=rig3 / "chain.fmu"),
+                                          replace(s.units[1], path=held))), "newton", "quadratic", step=1e-3)
+    _one_line(e, "FMU 'joint'", "cannot interpolate inputs (FMI 3.0 has no input derivatives")
     # a coupling needs a Float64 (FMI 2.0: Real) variable
     with pytest.raises(CosimError) as e:
         Master(replace(twin(s, rig3), recorded=(Recorded("n", "chain", "solver.n_steps", ""),)), "jacobi", "hold")
