@@ -264,6 +264,57 @@ def sym_translate(P, r, M):
     return from_blocks(A2, B2, C)
 
 
+def _rot2(P, c, s, x, y):
+    """R2 (x, y) with R2 = [[c, -s], [s, c]]."""
+    return P.sop([(c, x), (-1.0, s, y)]), P.sop([(s, x), (c, y)])
+
+
+def _sym2(P, h, a, b, d):
+    """R2 [[a, b], [b, d]] R2^T by the double angle: with hc = cos(2q)/2, hs = sin(2q)/2 and
+    m = a - d, a' = (a + d)/2 + hc m - 2 hs b, d' = (a + d)/2 - (hc m - 2 hs b), b' = hs m + 2 hc b
+    (5 products where the two-sided product takes 12)."""
+    hc, hs = h
+    half = P.sop([(0.5, a), (0.5, d)])
+    m = P.sop([(a,), (-1.0, d)])
+    u = P.sop([(hc, m), (-2.0, hs, b)])
+    return P.add(half, u), P.sop([(half,), (-1.0, u)]), P.sop([(hs, m), (2.0, hc, b)])
+
+
+def _gen2(P, h, a, b, e, d):
+    """R2 [[a, b], [e, d]] R2^T: the symmetric part by the double angle, the antisymmetric part
+    (b - e)/2 unchanged by a rotation.  Returns a', b', e', d'."""
+    hc, hs = h
+    half = P.sop([(0.5, a), (0.5, d)])
+    m = P.sop([(a,), (-1.0, d)])
+    sig = P.add(b, e)
+    k = P.sop([(0.5, b), (-0.5, e)])
+    u = P.sop([(hc, m), (-1.0, hs, sig)])
+    bs = P.sop([(hs, m), (hc, sig)])
+    return P.add(half, u), P.add(bs, k), P.sop([(bs,), (-1.0, k)]), P.sop([(half,), (-1.0, u)])
+
+
+def _rz3(P, c, s, h, X, sym: bool):
+    """E X E^T for E = Rz (3x3 X; ``sym``: X symmetric)."""
+    out = [[None] * 3 for _ in range(3)]
+    if sym:
+        a, d, b = _sym2(P, h, X[0][0], X[0][1], X[1][1])
+        out[0][0], out[1][1], out[0][1], out[1][0] = a, d, b, b
+        out[0][2], out[1][2] = _rot2(P, c, s, X[0][2], X[1][2])
+        out[2][0], out[2][1] = out[0][2], out[1][2]
+    else:
+        out[0][0], out[0][1], out[1][0], out[1][1] = _gen2(P, h, X[0][0], X[0][1], X[1][0], X[1][1])
+        out[0][2], out[1][2] = _rot2(P, c, s, X[0][2], X[1][2])
+        out[2][0], out[2][1] = _rot2(P, c, s, X[2][0], X[2][1])
+    out[2][2] = X[2][2]
+    return out
+
+
+def sym_rotate_z(P, c, s, h, M):
+    """sym_rotate for E = Rz(q) (c, s its cosine and sine, h the halved double-angle pair)."""
+    A, B, C = blocks(M)
+    return from_blocks(_rz3(P, c, s, h, A, True), _rz3(P, c, s, h, B, False), _rz3(P, c, s, h, C, True))
+
+
 def motion_rotate_T(P, E, m):
     """m (parent coordinates) in the coordinates of a frame rotated by E: E^T m."""
     return matTvec(P, E, m[:3]) + matTvec(P, E, m[3:])
@@ -324,22 +375,65 @@ class BodyFrame:
     friction_velocity: float
 
 
-def body_frames(revolute: Sequence[bool], parents: Sequence[int], constants) -> list:
-    """The bodies of the general joint model (``n x NC`` constants) in their joint-axis frames."""
-    lc = np.asarray(constants, float).reshape(len(revolute), NC)
-    Qs = []
+def _nnz(x) -> int:
+    return sum(1 for v in x if v != 0.0)
+
+
+def body_frames(revolute: Sequence[bool], parents: Sequence[int], constants, shift: bool = True) -> list:
+    """The bodies of the general joint model (``n x NC`` constants) in their joint-axis frames.
+
+    ``shift``: each frame's origin may slide along its joint axis (a rotation about z and a
+    translation along z commute with the joint's motion), by the distance d_i that leaves the
+    fewest non-zero offsets -- its own placement's and its children's along z (zeroing an
+    offset component saves a quarter to a third of a translation's products)."""
+    n = len(revolute)
+    lc = np.asarray(constants, float).reshape(n, NC)
+    Qs, d = [], [0.0] * n
+    snap = np.vectorize(_snap)
+    for L in lc:
+        Qs.append(_axis_frame(L[_AXIS:_AXIS + 3]))
+    children = [[] for _ in range(n)]
+    for i in range(n):
+        if parents[i] >= 0:
+            children[int(parents[i])].append(i)
     out = []
     for i, L in enumerate(lc):
         par = int(parents[i])
-        R = np.vectorize(_snap)(L[_ROT:_ROT + 9].reshape(3, 3))
-        p = np.vectorize(_snap)(L[_POS:_POS + 3])
-        Q = _axis_frame(L[_AXIS:_AXIS + 3])
+        R = snap(L[_ROT:_ROT + 9].reshape(3, 3))
+        p = snap(L[_POS:_POS + 3])
+        Q = Qs[i]
         Qp = Qs[par] if par >= 0 else np.eye(3)
-        Qs.append(Q)
-        Rc = np.vectorize(_snap)(Qp.T @ R @ Q)
-        pc = np.vectorize(_snap)(Qp.T @ p)
+        Rc = snap(Qp.T @ R @ Q)
+        base = Qp.T @ p
+        if par >= 0:
+            base[2] -= d[par]  # the parent's origin moved along its z
+        base = snap(base)
+        if shift:
+            kz = Rc[:, 2]  # this joint's axis in the parent's frame
+            kids = [snap(Q.T @ snap(lc[c][_POS:_POS + 3]))[2] for c in children[i]]
+            cand = {0.0}
+            cand.update(-base[k] / kz[k] for k in range(3) if kz[k] != 0.0)
+            cand.update(kids)
+
+            def placed(dd):
+                x = base + kz * dd
+                # a component the shift was chosen to cancel is left with rounding: exactly zero
+                return np.array([0.0 if (kz[k] != 0.0 and abs(x[k]) <= 1e-14 * abs(base[k])) else x[k]
+                                 for k in range(3)])
+
+            def cost(dd):
+                x = placed(dd)
+                own = min(_nnz(x), _nnz(snap(Rc.T @ x)))
+                return own + sum(1 for z in kids if z - dd != 0.0), abs(dd)
+
+            # far shifts cost accuracy (the inertia about a distant origin cancels): 0.25 m at most
+            d[i] = min(sorted(x for x in cand if abs(x) <= 0.25), key=cost)
+            pc = snap(placed(d[i]))
+        else:
+            pc = base
         m = float(L[_MASS])
         c = Q.T @ L[_COM:_COM + 3]
+        c[2] -= d[i]
         J = L[_INERTIA:_INERTIA + 6]
         Ic = np.array([[J[0], J[3], J[4]], [J[3], J[1], J[5]], [J[4], J[5], J[2]]])
         Ic = Q.T @ Ic @ Q
@@ -384,25 +478,33 @@ def _aba(P: Program, bodies: list, gravity, q, qd, tau):
         if not before:
             st.append(("t", [_snap(x) for x in r_rotated]))
         if b.revolute:
-            st.append(("r", rz(P.call("cos", q[i]), P.call("sin", q[i]))))
+            co, si = P.call("cos", q[i]), P.call("sin", q[i])
+            ss, sc = P.mul(si, si), P.mul(si, co)
+            st.append(("z", rz(co, si), (co, si, (P.sop([(0.5,), (-1.0, ss)]), sc))))
         else:
             st.append(("t", [0.0, 0.0, q[i]]))
         stages.append([s for s in st if not (s[0] == "t" and all(not isinstance(x, Var) and x == 0.0
                                                                  for x in s[1]))])
 
     def to_child(i, m):
-        for kind, x in stages[i]:
+        for kind, x, *_ in stages[i]:
             m = motion_translate(P, x, m) if kind == "t" else motion_rotate_T(P, x, m)
         return m
 
     def force_to_parent(i, f):
-        for kind, x in reversed(stages[i]):
+        for kind, x, *_ in reversed(stages[i]):
             f = force_translate(P, x, f) if kind == "t" else force_rotate(P, x, f)
         return f
 
     def inertia_to_parent(i, M):
-        for kind, x in reversed(stages[i]):
-            M = sym_translate(P, x, M) if kind == "t" else sym_rotate(P, x, M)
+        for kind, x, *z in reversed(stages[i]):
+            if kind == "t":
+                M = sym_translate(P, x, M)
+            elif kind == "z":
+                co, si, h = z[0]
+                M = sym_rotate_z(P, co, si, h, M)
+            else:
+                M = sym_rotate(P, x, M)
         return M
 
     # pass 1: velocities v_i, velocity-product accelerations c_i = v_i x S_i qd_i, bias forces
@@ -502,11 +604,40 @@ class UnrolledFD:
         return self.source.count("\n")
 
 
+#: sine and cosine of a joint angle, inline: Cody-Waite reduction by pi/2 (fdlibm's two-part pi/2,
+#: exact k pi/2_1 for |k| < 2^20) and fdlibm's kernel polynomials on [-pi/4, pi/4] (errors below
+#: 1e-16 absolute); libm beyond |x| = 1e5 and for NaN or infinity.  glibc's sincos takes about 100
+#: instructions, this about 40 -- a tenth of the forward dynamics of a 30-body tree.
+SINCOS_C = r"""static inline void unrolled_sincos(double x, double *s, double *c)
+{
+    if (!(fabs(x) < 1e5)) {
+        *s = sin(x);
+        *c = cos(x);
+        return;
+    }
+    const double k = (x * 6.36619772367581382433e-01 + 6755399441055744.0) - 6755399441055744.0;
+    const double r = (x - k * 1.57079632673412561417e+00) - k * 6.07710050650619224932e-11;
+    const double z = r * r;
+    const double sr = r + r * z * (-1.66666666666666324348e-01 + z * (8.33333333332248946124e-03
+        + z * (-1.98412698298579493134e-04 + z * (2.75573137070700676789e-06
+        + z * (-2.50507602534068634195e-08 + z * 1.58969099521155010221e-10)))));
+    const double cr = 1.0 - (0.5 * z - z * z * (4.16666666666666019037e-02 + z * (-1.38888888888741095749e-03
+        + z * (2.48015872894767294178e-05 + z * (-2.75573143513906633035e-07
+        + z * (2.08757232129817482790e-09 + z * -1.13596475577881948265e-11))))));
+    const int n = (int)k;
+    const double v[2] = {sr, cr};
+    /* quadrant n mod 4: (sin, cos) = (sr, cr), (cr, -sr), (-sr, -cr), (-cr, sr) */
+    *s = (n & 2 ? -1.0 : 1.0) * v[n & 1];
+    *c = ((n + 1) & 2 ? -1.0 : 1.0) * v[(n & 1) ^ 1];
+}
+#define UNROLLED_SINCOS(x, s, c) unrolled_sincos(x, s, c)
+"""
+
 _TOKEN = re.compile(r"\bt\d+\b")
 
 
 def unrolled_fd(revolute: Sequence[bool], parents: Sequence[int], constants, gravity,
-                name: str = "fmugen_unrolled_fd", static: bool = False) -> UnrolledFD:
+                name: str = "fmugen_unrolled_fd", static: bool = False, block_statements: int = 200) -> UnrolledFD:
     """Straight-line C of the forward dynamics of the tree (``constants``: n x NC, the numbers of
     :class:`fmugen.batch.Kernels`); ``static``: the entry function is ``static`` (to be included in a file).
 
@@ -523,24 +654,43 @@ def unrolled_fd(revolute: Sequence[bool], parents: Sequence[int], constants, gra
     _aba(P, bodies, gravity, q, qd, tau)
     stmts = P.live()
     home = {st[0]: st[3] for st in stmts if st[0] is not None}
-    slot = {}
-    for name_, text, deps, blk in stmts:
-        for d in deps:
-            if d in home and home[d] != blk and d not in slot:
-                slot[d] = len(slot)
 
     def text_in(t: str, blk: int) -> str:
         return _TOKEN.sub(lambda m: f"w[{slot[m.group(0)]}]" if m.group(0) in slot and home[m.group(0)] != blk
                           else m.group(0), t)
 
+    # consecutive blocks merged up to about ``block_statements`` statements: a call per body and pass
+    # costs more than it saves on a small robot
+    sizes = {}
+    for st in stmts:
+        sizes[st[3]] = sizes.get(st[3], 0) + 1
+    group, g, acc = {}, 0, 0
+    for b in sorted(sizes):
+        if acc and acc + sizes[b] > block_statements:
+            g, acc = g + 1, 0
+        group[b] = g
+        acc += sizes[b]
+    home = {k: group[v] for k, v in home.items()}
+    stmts = [(a, t, d, group[b]) for a, t, d, b in stmts]
+    slot = {}
+    for name_, text, deps, blk in stmts:
+        for d in deps:
+            if d in home and home[d] != blk and d not in slot:
+                slot[d] = len(slot)
     by_block = {}
     for st in stmts:
         by_block.setdefault(st[3], []).append(st)
+    # sin and cos of one angle in one block: one sincos call
+    trig = {}
+    for name_, text, _, blk in stmts:
+        if name_ and text[:4] in ("sin(", "cos("):
+            trig.setdefault((blk, text[4:-1]), {})[text[:3]] = name_
     fn = [f"{name}_b{b}" for b in sorted(by_block)]
     lines = ["/* generated by fmugen.codegen.unrolled_aba: the articulated-body algorithm of one robot, its numbers",
              f" * folded into the code ({n} bodies; block 0 the joints' sines and cosines, then per body pass 1",
              " * (velocities, bias forces), pass 2 (articulated inertias, leaves first), pass 3 (accelerations)) */",
              "#include <math.h>", "",
+             SINCOS_C,
              "#if defined(__GNUC__)",
              "#define UNROLLED_BLOCK static __attribute__((noinline)) int",
              "#else",
@@ -552,10 +702,23 @@ def unrolled_fd(revolute: Sequence[bool], parents: Sequence[int], constants, gra
                      "double *w)")
         lines.append("{")
         lines.append("    (void)q; (void)qd; (void)tau; (void)qdd; (void)w;")
+        paired = set()
         for name_, text, deps, blk in by_block[b]:
             t = text_in(text, b)
             if name_ is None:
                 lines.append(f"    {t}")
+                continue
+            if name_ in paired:
+                continue
+            pair = trig.get((b, text[4:-1])) if text[:4] in ("sin(", "cos(") else None
+            if pair is not None and len(pair) == 2:
+                s_name, c_name = pair["sin"], pair["cos"]
+                lines.append(f"    double {s_name}, {c_name};")
+                lines.append(f"    UNROLLED_SINCOS({text[4:-1]}, &{s_name}, &{c_name});")
+                paired.update((s_name, c_name))
+                for nm in (s_name, c_name):
+                    if nm in slot:
+                        lines.append(f"    w[{slot[nm]}] = {nm};")
                 continue
             lines.append(f"    const double {name_} = {t};")
             if name_ in slot:
