@@ -11,7 +11,8 @@ interpolated inputs as its FMI 2.0 twin (fmi2SetRealInputDerivatives):
   against the monolithic reference is 1.7e-5 .. 1.1e-6 rad (gauss-seidel) and 8.7e-5 .. 5.4e-6 rad (jacobi)
   for H = 4, 2, 1 ms, falling with order 2.0 as the macro step halves;
 * the FMU alone through fmpy's FMU3Slave with a ctypes callback setting a known ramp equals the FMI 2.0 FMU
-  with fmi2SetRealInputDerivatives of the same ramp (to 1e-12: the same values at the same solver stages);
+  with fmi2SetRealInputDerivatives of the same ramp (to 1e-12; measured 0.0: the same values at the same
+  solver stages), while holding the ramp's start over each step is 0.36 rad/s off;
 * misuse in the callback returns fmi3Error with a message.
 """
 from __future__ import annotations
