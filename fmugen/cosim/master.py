@@ -690,6 +690,15 @@ class Master:
                     pass
             self._shadow_states = self._shadow_work = None
         summ.wall_time = _time.perf_counter() - wall0
+        # an FMI 3.0 FMU that declares inputs settable in the intermediate update but never asked for them held
+        # its inputs at U_n over each step (not even the midpoint): the master could not know beforehand
+        silent = [u.name for u in self.units if getattr(u, "intermediate_inputs", None) and u.n_in
+                  and not u.intermediate_requests]
+        if silent and summ.macro_steps and not self.hold_only:
+            summ.warnings.append(f"FMU {', '.join(map(repr, silent))}: declares inputs with "
+                                 f"intermediateUpdate=\"true\" but never requested them in the intermediate update "
+                                 f"(intermediateVariableSetRequested): its inputs were held at their values at t_n "
+                                 f"over each macro step, not interpolated")
         summ.simulated_time = t - t0
         summ.fmu_calls = calls + sum(getattr(u, "n_calls", 0) for u in self.units)
         summ.do_steps = self._do_steps + sum(getattr(u, "do_steps", 0) for u in self.units)

@@ -231,6 +231,7 @@ class Slave3Unit(_FMI3, SlaveUnit):
         self.intermediate_inputs = _intermediate_inputs(self._unzip) if cs.providesIntermediateUpdate else []
         self.can_interpolate = bool(self.intermediate_inputs)
         self.intermediate_sets = 0  # fmi3SetFloat64 calls in the callback (the price of interpolated inputs)
+        self.intermediate_requests = 0  # callbacks with intermediateVariableSetRequested (0: the FMU never asks)
         self.can_save_state = bool(cs.canGetAndSetFMUstate)
         self.variable_step = bool(cs.canHandleVariableCommunicationStepSize)
         self.max_output_derivative_order = int(cs.maxOutputDerivativeOrder or 0)
@@ -379,7 +380,10 @@ class Slave3Unit(_FMI3, SlaveUnit):
         at every stage time of the FMU's solver, so it is kept short: one Python call per request."""
 
         def callback(env, t, set_requested, get_allowed, step_finished, can_return_early, requested, when):
-            if set_requested and self._setter is not None:
+            if not set_requested:
+                return
+            self.intermediate_requests += 1
+            if self._setter is not None:
                 try:
                     self._setter(t)
                 except Exception as e:  # noqa: BLE001 -- reported by doStep
