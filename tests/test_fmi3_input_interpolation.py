@@ -106,6 +106,30 @@ def test_fmi3_without_setting_is_held_and_worse(split, monkeypatch):
     assert _error(held, ref) > 1.25 * _error(good, ref), (_error(held, ref), _error(good, ref))
 
 
+def test_an_fmu_that_never_requests_its_inputs_is_said(split, monkeypatch):
+    """An FMU declaring intermediateUpdate inputs whose callback never requests setting (here: fmugen's, told
+    no input in requiredIntermediateVariables) held its inputs at U_n: the run says so in Summary.warnings."""
+    import fmugen.cosim.units3 as units3
+
+    instantiate = units3.Slave3Unit._instantiate
+
+    def without_required(self, path):
+        keep, self.intermediate_inputs = self.intermediate_inputs, []
+        try:
+            instantiate(self, path)
+        finally:
+            self.intermediate_inputs = keep
+
+    (s3, _), ref = split[3], split["ref"]
+    good = run(s3, "gauss-seidel", "linear", step=STEPS[0])
+    monkeypatch.setattr(units3.Slave3Unit, "_instantiate", without_required)
+    silent = run(s3, "gauss-seidel", "linear", step=STEPS[0])
+    said = [w for w in silent.summary.warnings if "never requested them" in w]
+    assert silent.ok and len(said) == 1 and "'chain', 'joint'" in said[0], silent.summary.warnings
+    assert not [w for w in good.summary.warnings if "never requested" in w]
+    assert _error(silent, ref) > 1.25 * _error(good, ref)
+
+
 # ---- the FMU alone: a ctypes callback setting a known ramp -----------------------------------------------
 
 TAU0, TAU1 = 150.0, -900.0  # the ramp tau(t) = TAU0 + TAU1 (t - t_n) of each step, restarted at every point
