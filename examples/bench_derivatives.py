@@ -28,6 +28,12 @@ those of the inverse-dynamics model (dtau/du = [∂tau/∂q, ∂tau/∂qd, M]), 
 matrix model (fmugen.codegen.benchmarks); there is no straight-line M^-1.  ``--no-straight`` skips it
 (deriving and compiling the straight-line Jacobians takes a minute).
 
+``--unrolled`` adds a table of the per-robot unrolled forward dynamics (:mod:`fmugen.codegen.unrolled_aba`:
+the articulated-body algorithm as straight-line C with the robot's numbers folded, one file per robot,
+compiled with -O2): its C lines, generation and compile seconds, µs per call beside the looped
+``fmugen_chain_fd`` and Pinocchio's ``aba`` timed in alternation, and its error against ``aba``;
+``--unrolled-only`` prints that table alone.
+
 GRiD's figures (Plancher et al., "GRiD: GPU-Accelerated Rigid Body Dynamics with Analytical Gradients",
 ICRA 2022; the GRiDBenchmarks README) are µs per call on another machine -- an i7-10700K at 3.8 GHz
 (CPU: Pinocchio) and an RTX 3080 (GPU: GRiD) -- printed as context, not as a comparison of this run.
@@ -290,6 +296,66 @@ def straight_line(name: str, path: Path, states: int, repeat: int) -> dict:
     return out
 
 
+def unrolled(name: str, path: Path, states: int, repeat: int, so) -> dict:
+    """The per-robot unrolled forward dynamics (fmugen.codegen.unrolled_aba: the ABA as straight-line C with
+    the robot's numbers folded) beside the looped runtime's and Pinocchio's ``aba``: checked at ``states``
+    random states, timed in alternation (``repeat`` rounds, the same budget per timing as measure())."""
+    import pinocchio as pin
+    from fmugen.batch import Kernels
+    from fmugen.codegen.benchmarks import pinocchio_urdf_map, to_pinocchio
+    from fmugen.codegen.chain import chain_work_doubles
+    from fmugen.codegen.unrolled_aba import CompiledUnrolledFD, from_kernels
+    from fmugen.robot.urdf import load_urdf
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        robot = load_urdf(path)
+    zero = {p.name: 0.0 for p in robot.parameters if p.name.startswith(("b_", "fc_"))}
+    kernels = Kernels.from_robot(robot, values=zero)
+    n = kernels.n
+    t0 = time.perf_counter()
+    gen = from_kernels(kernels)
+    generate = time.perf_counter() - t0
+    cm = CompiledUnrolledFD(gen)
+    try:
+        model = pin.buildModelFromUrdf(str(path))
+        data = model.createData()
+        mp = pinocchio_urdf_map(model, robot)
+        iv = [m[1] for m in mp]
+        rng = np.random.default_rng(0)
+        q, qd, x = rng.uniform(-1, 1, (states, n)), rng.uniform(-1, 1, (states, n)), rng.uniform(-3, 3, (states, n))
+        got = cm.fd(q, qd, x)
+        err = 0.0
+        for k in range(states):
+            qp, vp = to_pinocchio(model, mp, q[k], qd[k])
+            xp = to_pinocchio(model, mp, None, x[k])
+            err = max(err, rel(got[k], pin.aba(model, data, qp, vp, xp)[iv]))
+        keep = [kernels.joint_array, kernels.constants, kernels.globals] + \
+            [np.ascontiguousarray(a, float) for a in (q[-1], qd[-1], x[-1], np.zeros(n), np.zeros(n + 3 * n * n),
+                                                      np.zeros(chain_work_doubles(n, "jacobian")))]
+        ptrs = [a.ctypes.data for a in keep]
+        qp, vp = to_pinocchio(model, mp, q[-1], qd[-1])
+        xp = to_pinocchio(model, mp, None, x[-1])
+        pargs = (model, data, qp, vp, xp)
+        budget = 0.02
+        ku = max(20, int(budget / max(cm.time_per_call(q[-1], qd[-1], x[-1], 20), 1e-9)))
+        kl = max(20, int(budget / max(so.time_calls(3, 20, n, *ptrs), 1e-9)))
+        kp = max(20, int(budget / max(per_call(pin.aba, pargs, 20), 1e-9)))
+        tu, tl, tp = [], [], []
+        for _ in range(repeat):
+            tu.append(cm.time_per_call(q[-1], qd[-1], x[-1], ku))
+            tl.append(so.time_calls(3, kl, n, *ptrs))
+            tp.append(pinocchio_time(pin.aba, pargs, kp))
+    finally:
+        cm.close()
+        kernels.close()
+    tu, tl, tp = np.array(tu), np.array(tl), np.array(tp)
+    return {"n": n, "err": err, "lines": gen.lines, "statements": gen.statements, "generate": generate,
+            "compile": cm.compile_seconds, "unrolled": statistics.median(tu), "looped": statistics.median(tl),
+            "pinocchio": statistics.median(tp), "ratio": statistics.median(tu / tp),
+            "looped_ratio": statistics.median(tl / tp)}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--grid", type=Path, help="folder with GRiDBenchmarks' iiwa.urdf, hyq.urdf, atlas.urdf "
@@ -300,7 +366,14 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=5, help="timing rounds (medians)")
     ap.add_argument("--no-straight", action="store_true",
                     help="skip the straight-line code of the robots of 6 DoF and fewer")
+    ap.add_argument("--unrolled", action="store_true",
+                    help="also time the per-robot unrolled forward dynamics (fmugen.codegen.unrolled_aba) "
+                         "against the looped runtime and Pinocchio's aba")
+    ap.add_argument("--unrolled-only", action="store_true",
+                    help="only the unrolled forward dynamics' table (implies --unrolled --no-straight)")
     args = ap.parse_args(argv)
+    if args.unrolled_only:
+        args.unrolled = args.no_straight = True
     try:
         import pinocchio as pin
         erd = robots_dir()
@@ -324,11 +397,30 @@ def main(argv=None) -> int:
     results, ok = {}, True
     with tempfile.TemporaryDirectory(prefix="fmugen_bench_derivatives_") as tmp:
         so = timer(Path(tmp))
-        for name in names:
+        for name in names if not args.unrolled_only else ():
             t0 = time.perf_counter()
             results[name] = r = measure(name, paths[name], args.states, args.repeat, so)
             ok = ok and all(e < 1e-9 for e in r["err"].values())
             print(f"({name}: {r['n']} DoF, {time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
+        unrolled_results = {}
+        for name in names if args.unrolled else ():
+            unrolled_results[name] = u = unrolled(name, paths[name], args.states, args.repeat, so)
+            ok = ok and u["err"] < 1e-9
+            print(f"({name}: unrolled, {u['n']} DoF)", file=sys.stderr, flush=True)
+    if unrolled_results:
+        print("| Robot | DoF | C lines | generate s | gcc -O2 s | unrolled FD µs | looped FD µs | aba µs | "
+              "unrolled / aba | looped / aba | max rel. error |")
+        print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+        for name, u in unrolled_results.items():
+            print(f"| {name} | {u['n']} | {u['lines']} | {u['generate']:.2f} | {u['compile']:.2f} | "
+                  f"{u['unrolled'] * 1e6:.2f} | {u['looped'] * 1e6:.2f} | {u['pinocchio'] * 1e6:.2f} | "
+                  f"{u['ratio']:.3f} | {u['looped_ratio']:.3f} | {u['err']:.1e} |")
+        print("\nunrolled: fmugen.codegen.unrolled_aba, the robot's ABA as straight-line C (numbers folded), compiled "
+              "alone with -O2 (the gcc column: its wall time) and called in a C loop; looped: fmugen_chain_fd; "
+              "ratios: medians of the per-round ratios to Pinocchio's aba (Python's call overhead subtracted).\n")
+    if args.unrolled_only:
+        print(f"check against Pinocchio (relative, 1e-9): {'ok' if ok else 'FAILED'}")
+        return 0 if ok else 1
     print("| Robot | DoF | Algorithm | fmugen µs | Pinocchio µs | ratio | max rel. error | GRiD CPU µs | "
           "GRiD GPU µs |")
     print("|---|---:|---|---:|---:|---:|---:|---:|---:|")

@@ -46,11 +46,12 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
-from typing import Optional, Sequence
+from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
-__all__ = ["Var", "Program", "UnrolledFD", "unrolled_fd", "body_frames"]
+__all__ = ["Var", "Program", "UnrolledFD", "unrolled_fd", "from_kernels", "body_frames", "evaluate_numeric",
+           "CompiledUnrolledFD"]
 
 NC = 29  # per-body constants (c_runtime/chain_dynamics.h), repeated to keep this module free of sympy
 _ROT, _POS, _AXIS, _MASS, _COM, _INERTIA, _ROTOR, _DAMPING, _FRICTION, _FRICTION_V = 0, 9, 12, 15, 16, 19, 25, 26, 27, 28
@@ -451,8 +452,11 @@ def _is_identity(R) -> bool:
     return bool(np.all(R == np.eye(3)))
 
 
-def _aba(P: Program, bodies: list, gravity, q, qd, tau):
-    """qdd (list of values) by the articulated-body algorithm over values q, qd, tau."""
+def _aba(P: Program, bodies: list, gravity, q, qd, tau, locked=frozenset()):
+    """qdd (list of values) by the articulated-body algorithm over values q, qd, tau.
+
+    ``locked``: bodies whose joints are held (q_i a constant, qd_i = qdd_i = 0): each is welded to its
+    parent -- its articulated inertia and bias force pass to the parent whole, no projection."""
     n = len(bodies)
     j_of = [2 if b.revolute else 5 for b in bodies]
     children = [[] for _ in range(n)]
@@ -542,7 +546,10 @@ def _aba(P: Program, bodies: list, gravity, q, qd, tau):
                 IA[r][k] = IA[k][r] = P.sop(IA_terms[i][r][k])
         pa = [P.sop(t) for t in pA_terms[i]]
         U[i] = [IA[r][j] for r in range(6)]
-        D = P.add(U[i][j], b.rotor)
+        if i in locked:
+            D = 1.0
+        else:
+            D = P.add(U[i][j], b.rotor)
         if isinstance(D, Var):
             P.effect(f"if (!({c_value(D)} > 0.0)) return 1;", [D])
         elif not D > 0.0:
@@ -555,16 +562,27 @@ def _aba(P: Program, bodies: list, gravity, q, qd, tau):
         u[i] = P.sop([(tf,), (-1.0, pa[j])])
         if b.parent < 0:
             continue
-        Ud = [P.mul(U[i][r], Dinv[i]) if r != j else 1.0 for r in range(6)]
+        if i in locked:  # welded: c_i = 0 (qd_i = 0), IA_i and pA_i go to the parent as they are
+            fp = force_to_parent(i, pa)
+            Mp = inertia_to_parent(i, IA)
+            for r in range(6):
+                for k in range(r, 6):
+                    IA_terms[b.parent][r][k].append((Mp[r][k],))
+                pA_terms[b.parent][r].append((fp[r],))
+            continue
+        # without rotor inertia (D = U_j) the joint's row and column of Ia vanish and S^T pa = tau - friction;
+        # with it, Ia S = U rotor / D: computed in full
+        exact = b.rotor == 0.0
+        Ud = [P.mul(U[i][r], Dinv[i]) if (r != j or not exact) else 1.0 for r in range(6)]
         Ia = [[0.0] * 6 for _ in range(6)]
         for r in range(6):
             for k in range(r, 6):
-                if r != j and k != j:
+                if not exact or (r != j and k != j):
                     Ia[r][k] = Ia[k][r] = P.sop([(IA[r][k],), (-1.0, U[i][r], Ud[k])])
         uD = P.mul(u[i], Dinv[i])
         ci = c[i]
-        pa2 = [P.sop([(pa[r],), (U[i][r], uD)] + [(Ia[r][k], ci[k]) for k in range(6)]) if r != j else tf
-               for r in range(6)]
+        pa2 = [P.sop([(pa[r],), (U[i][r], uD)] + [(Ia[r][k], ci[k]) for k in range(6)]) if (r != j or not exact)
+               else tf for r in range(6)]
         Mp = inertia_to_parent(i, Ia)
         fp = force_to_parent(i, pa2)
         par = b.parent
@@ -581,6 +599,11 @@ def _aba(P: Program, bodies: list, gravity, q, qd, tau):
         j = j_of[i]
         ap = to_child(i, acc[b.parent] if b.parent >= 0 else a0)
         a = [P.add(ap[k], c[i][k]) for k in range(6)]
+        if i in locked:
+            qdd[i] = 0.0
+            P.effect(f"qdd[{i}] = 0.0;", [])
+            acc[i] = a
+            continue
         Ua = P.sop([(U[i][k], a[k]) for k in range(6)])
         qdd[i] = P.sop([(u[i], Dinv[i]), (-1.0, Ua, Dinv[i])])
         P.effect(f"qdd[{i}] = {c_value(qdd[i])};", [qdd[i]])
@@ -637,21 +660,26 @@ _TOKEN = re.compile(r"\bt\d+\b")
 
 
 def unrolled_fd(revolute: Sequence[bool], parents: Sequence[int], constants, gravity,
-                name: str = "fmugen_unrolled_fd", static: bool = False, block_statements: int = 200) -> UnrolledFD:
+                name: str = "fmugen_unrolled_fd", static: bool = False, block_statements: int = 200,
+                locked: Optional[Mapping[int, float]] = None) -> UnrolledFD:
     """Straight-line C of the forward dynamics of the tree (``constants``: n x NC, the numbers of
-    :class:`fmugen.batch.Kernels`); ``static``: the entry function is ``static`` (to be included in a file).
+    :class:`fmugen.batch.Kernels`); ``static``: the entry function is ``static`` (to be included in a file);
+    ``locked``: {body (0-based): position} of joints held still (their q, qd are not read, qdd = 0).
 
     The code is cut into one function per body and pass (block; not inlined): a value used by a
     later block goes through the work array ``w``, so each function has short live ranges.  One
     function of thousands of statements makes gcc's register allocator spill at random and take
     seconds (Atlas: 10 s at -O2, 136 kB of code); cut, it compiles in a fraction of that."""
     n = len(revolute)
+    locked = {int(k): float(v) for k, v in (locked or {}).items()}
+    if any(not 0 <= k < n for k in locked):
+        raise ValueError(f"locked joints {sorted(locked)}: bodies are numbered 0..{n - 1}")
     bodies = body_frames(revolute, parents, constants)
     P = Program()
-    q = [Var(f"q[{i}]") for i in range(n)]
-    qd = [Var(f"qd[{i}]") for i in range(n)]
+    q = [locked[i] if i in locked else Var(f"q[{i}]") for i in range(n)]
+    qd = [0.0 if i in locked else Var(f"qd[{i}]") for i in range(n)]
     tau = [Var(f"tau[{i}]") for i in range(n)]
-    _aba(P, bodies, gravity, q, qd, tau)
+    _aba(P, bodies, gravity, q, qd, tau, frozenset(locked))
     stmts = P.live()
     home = {st[0]: st[3] for st in stmts if st[0] is not None}
 
@@ -739,9 +767,118 @@ def unrolled_fd(revolute: Sequence[bool], parents: Sequence[int], constants, gra
     return UnrolledFD(name, n, "\n".join(lines) + "\n", len(stmts), len(fn))
 
 
-def evaluate_numeric(revolute, parents, constants, gravity, q, qd, tau) -> np.ndarray:
+def evaluate_numeric(revolute, parents, constants, gravity, q, qd, tau, locked=None) -> np.ndarray:
     """The same passes on numbers (every value folds): a check of the algorithm without a compiler."""
     bodies = body_frames(revolute, parents, constants)
     P = Program()
-    qdd = _aba(P, bodies, gravity, [float(x) for x in q], [float(x) for x in qd], [float(x) for x in tau])
+    locked = {int(k): float(v) for k, v in (locked or {}).items()}
+    q = [locked.get(i, float(x)) for i, x in enumerate(q)]
+    qd = [0.0 if i in locked else float(x) for i, x in enumerate(qd)]
+    qdd = _aba(P, bodies, gravity, q, qd, [float(x) for x in tau], frozenset(locked))
     return np.array(qdd, float)
+
+
+def from_kernels(kernels, locked: Optional[Mapping[int, float]] = None, **kw) -> UnrolledFD:
+    """:func:`unrolled_fd` of a :class:`fmugen.batch.Kernels` (its revolute flags, parents, body constants
+    and gravity)."""
+    return unrolled_fd(kernels.revolute, kernels.parents, kernels.constants, np.asarray(kernels.globals)[:3],
+                       locked=locked, **kw)
+
+
+# ------------------------------------------------------------ the C harness (tests, benchmarks)
+_HARNESS = r"""
+#define _POSIX_C_SOURCE 199309L
+#include <time.h>
+int %(name)s(const double *q, const double *qd, const double *tau, double *qdd);
+/* rows of states: the status of the first row that fails, 0 when all succeed */
+int unrolled_rows(int rows, int n, const double *q, const double *qd, const double *tau, double *qdd)
+{
+    for (int r = 0; r < rows; r++) {
+        int s = %(name)s(q + n * r, qd + n * r, tau + n * r, qdd + n * r);
+        if (s) return s;
+    }
+    return 0;
+}
+/* CPU seconds per call over k calls at one state */
+double unrolled_time(int k, const double *q, const double *qd, const double *tau, double *qdd)
+{
+    struct timespec a, b;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &a);
+    for (int i = 0; i < k; i++) %(name)s(q, qd, tau, qdd);
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &b);
+    return ((b.tv_sec - a.tv_sec) + 1e-9 * (b.tv_nsec - a.tv_nsec)) / k;
+}
+"""
+
+
+class CompiledUnrolledFD:
+    """An :class:`UnrolledFD` compiled (``cc -std=c99 -O2``, the FMU build's optimisation) into a shared
+    library in a temporary folder: ``fd(q, qd, tau)`` (rows of states), ``time_per_call``;
+    ``compile_seconds`` is the wall time of compiling the generated file alone."""
+
+    def __init__(self, fd: UnrolledFD, cc: str = "cc", flags: Sequence[str] = ("-O2",)):
+        import ctypes
+        import shutil
+        import subprocess
+        import tempfile
+        import time
+        from pathlib import Path
+
+        self.n = fd.n
+        self._dir = Path(tempfile.mkdtemp(prefix="fmugen_unrolled_"))
+        self._rm = shutil.rmtree
+        src, har = self._dir / "fd.c", self._dir / "harness.c"
+        src.write_text(fd.source)
+        har.write_text(_HARNESS % {"name": fd.name})
+        t = time.perf_counter()
+        r = subprocess.run([cc, "-std=c99", *flags, "-fPIC", "-c", "-o", str(self._dir / "fd.o"), str(src)],
+                           capture_output=True, text=True)
+        self.compile_seconds = time.perf_counter() - t
+        if r.returncode == 0:
+            r = subprocess.run([cc, "-std=c99", *flags, "-fPIC", "-shared", "-o", str(self._dir / "fd.so"), str(har),
+                                str(self._dir / "fd.o"), "-lm"], capture_output=True, text=True)
+        if r.returncode != 0:
+            raise RuntimeError(f"cannot compile the unrolled forward dynamics:\n{r.stderr}")
+        self._lib = ctypes.CDLL(str(self._dir / "fd.so"))
+        vp = ctypes.c_void_p
+        self._lib.unrolled_rows.argtypes = [ctypes.c_int, ctypes.c_int, vp, vp, vp, vp]
+        self._lib.unrolled_rows.restype = ctypes.c_int
+        self._lib.unrolled_time.argtypes = [ctypes.c_int, vp, vp, vp, vp]
+        self._lib.unrolled_time.restype = ctypes.c_double
+
+    def _arrays(self, q, qd, tau):
+        arrs = [np.ascontiguousarray(np.atleast_2d(np.asarray(a, dtype=float))) for a in (q, qd, tau)]
+        if any(a.shape != arrs[0].shape or a.shape[1] != self.n for a in arrs):
+            raise ValueError(f"q, qd, tau: rows of {self.n} numbers of one shape")
+        return arrs
+
+    def fd(self, q, qd, tau) -> np.ndarray:
+        """qdd of every row of states (one row: a vector)."""
+        one = np.ndim(q) == 1
+        q, qd, tau = self._arrays(q, qd, tau)
+        out = np.zeros_like(q)
+        s = self._lib.unrolled_rows(q.shape[0], self.n, q.ctypes.data, qd.ctypes.data, tau.ctypes.data,
+                                    out.ctypes.data)
+        if s == 1:
+            raise np.linalg.LinAlgError("an articulated inertia is not positive")
+        if s:
+            raise FloatingPointError("forward dynamics: a result is NaN or infinite")
+        return out[0] if one else out
+
+    def time_per_call(self, q, qd, tau, k: int) -> float:
+        """CPU seconds per call over k calls from a C loop at one state."""
+        q, qd, tau = self._arrays(q, qd, tau)
+        out = np.zeros(self.n)
+        return self._lib.unrolled_time(int(k), q.ctypes.data, qd.ctypes.data, tau.ctypes.data, out.ctypes.data)
+
+    def close(self):
+        if self._dir is not None:
+            self._lib = None
+            self._rm(self._dir, True)
+            self._dir = None
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
