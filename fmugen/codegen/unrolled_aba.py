@@ -240,10 +240,46 @@ def from_blocks(A, B, C):
     return M
 
 
+def _near_permutation(E):
+    """(Pi, D) with E = Pi + D, Pi a signed permutation and every |D| < 1e-6 (a URDF's rpy of a truncated
+    pi/2: cos(1.5707963) = -4.4e-8), or None."""
+    Ea = np.array(E, dtype=float)
+    Pi = np.round(Ea)
+    if not (np.all(np.isin(Pi, (-1.0, 0.0, 1.0))) and np.all(np.sum(Pi != 0, axis=0) == 1)
+            and np.all(np.sum(Pi != 0, axis=1) == 1)):
+        return None
+    D = Ea - Pi
+    if not np.any(D) or np.max(np.abs(D)) >= 1e-6:
+        return None
+    return Pi.tolist(), D.tolist()
+
+
+def _congruence_first_order(P, Pi, D, X, sym: bool):
+    """E X E^T for E = Pi + D to first order in D: Pi X Pi^T + D X Pi^T + Pi X D^T (the dropped
+    D X D^T is below 1e-12 of X).  Products by Pi are renamings; each entry of D costs one product
+    per column instead of the two-sided product's two."""
+    XP = [[P.sop([(X[k][l], Pi[j][l]) for l in range(3)]) for j in range(3)] for k in range(3)]  # X Pi^T
+    PX = [[P.sop([(Pi[i][l], X[l][k]) for l in range(3)]) for k in range(3)] for i in range(3)]  # Pi X
+    out = [[None] * 3 for _ in range(3)]
+    for i in range(3):
+        for j in range(i if sym else 0, 3):
+            y = P.sop([(Pi[i][k], XP[k][j]) for k in range(3)])
+            out[i][j] = P.sop([(y,)] + [(D[i][k], XP[k][j]) for k in range(3)]
+                              + [(PX[i][k], D[j][k]) for k in range(3)])
+            if sym:
+                out[j][i] = out[i][j]
+    return out
+
+
 def sym_rotate(P, E, M):
     """The spatial inertia M (6x6 symmetric) of a frame rotated by E (its axes in the new frame's
     coordinates) in the new frame: blockwise E X E^T."""
     A, B, C = blocks(M)
+    near = _near_permutation(E)
+    if near is not None:
+        Pi, D = near
+        return from_blocks(_congruence_first_order(P, Pi, D, A, True), _congruence_first_order(P, Pi, D, B, False),
+                           _congruence_first_order(P, Pi, D, C, True))
     return from_blocks(congruence(P, E, A, True), congruence(P, E, B, False), congruence(P, E, C, True))
 
 
@@ -374,6 +410,9 @@ class BodyFrame:
     damping: float
     friction: float
     friction_velocity: float
+    mass: float = 0.0
+    com: tuple = (0.0, 0.0, 0.0)  # B_i coordinates
+    inertia_com: tuple = ((0.0,) * 3,) * 3  # about the COM, B_i axes
 
 
 def _nnz(x) -> int:
@@ -443,7 +482,8 @@ def body_frames(revolute: Sequence[bool], parents: Sequence[int], constants, shi
         M = np.block([[Jo, hx], [hx.T, m * np.eye(3)]])
         M = 0.5 * (M + M.T)
         out.append(BodyFrame(par, bool(revolute[i]), Rc, pc, [[float(x) for x in row] for row in M],
-                             float(L[_ROTOR]), float(L[_DAMPING]), float(L[_FRICTION]), float(L[_FRICTION_V])))
+                             float(L[_ROTOR]), float(L[_DAMPING]), float(L[_FRICTION]), float(L[_FRICTION_V]),
+                             m, tuple(float(x) for x in c), tuple(tuple(float(x) for x in row) for row in Ic)))
     return out
 
 
@@ -526,11 +566,19 @@ def _aba(P: Program, bodies: list, gravity, q, qd, tau, locked=frozenset()):
             c[i] = wz + [P.mul(vl[1], qd[i]), P.mul(neg(vl[0]) if isinstance(vl[0], Var) else -vl[0], qd[i]), 0.0]
         else:
             c[i] = [0.0, 0.0, 0.0] + wz
-        I = b.inertia
-        h = [P.sop([(I[r][k], vi[k]) for k in range(6)]) for r in range(6)]
-        nn = cross(P, w, h[:3])
-        vf = cross(P, vl, h[3:])
-        pA[i] = [P.add(nn[k], vf[k]) for k in range(3)] + cross(P, w, h[3:])
+        # bias force v x* I v at the centre of mass: with p = m (v_O + w x c) (momentum),
+        # f = [w x I_c w + c x f_lin ; f_lin], f_lin = w x p -- 36 products where I v then v x* (I v) take 42
+        Ic, cm, m = b.inertia_com, list(b.com), b.mass
+        Icw = [P.sop([(Ic[r][k], w[k]) for k in range(3)]) for r in range(3)]
+        ang = cross(P, w, Icw)
+        if m != 0.0:
+            wc = cross(P, w, [m * x for x in cm])
+            p = [P.sop([(m, vl[k]), (wc[k],)]) for k in range(3)]
+            flin = cross(P, w, p)
+            cf = cross(P, cm, flin)
+            pA[i] = [P.add(ang[k], cf[k]) for k in range(3)] + flin
+        else:
+            pA[i] = ang + [0.0, 0.0, 0.0]
         v[i] = vi
 
     # pass 2: articulated inertias and bias forces, leaves to base; children's terms gathered per entry
