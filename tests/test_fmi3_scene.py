@@ -123,22 +123,21 @@ def test_cli_builds_a_scene_as_fmi3_and_refuses_what_it_cannot(tmp_path, capsys)
 
 def test_report_of_an_fmi3_scene_runs_fmi3_fmus_and_its_monolithic_fmu_is_fmi3(tmp_path):
     """fmugen report on the scene with fmi_version = 3: the groups' FMUs and the monolithic reference FMU
-    are FMI 3.0, and the rows equal those of the FMI 2.0 report (the same runtime, bit for bit).  Held inputs:
-    FMI 3.0 Co-Simulation has no input derivatives, so extrapolated inputs reach an FMI 3.0 FMU only as
-    values (tests/test_cosim_fmi3.py)."""
+    are FMI 3.0, and the rows equal those of the FMI 2.0 report (the same runtime, bit for bit; extrapolated
+    inputs reach the FMI 3.0 FMUs through the intermediate update, tests/test_fmi3_input_interpolation.py)."""
     import csv
 
     rows = {}
     for version in (2, 3):
         out = tmp_path / f"report{version}"
         assert cli_main(["report", str(SPLIT), "--set", f"scene.fmi_version={version}", "--steps", "0.002",
-                         "--schemes", "gauss-seidel/hold", "--repeats", "1", "--stop", "0.2",
+                         "--schemes", "gauss-seidel/linear", "--repeats", "1", "--stop", "0.2",
                          "--out", str(out)]) == 0
         with open(out / "report.csv") as fh:
             rows[version] = list(csv.DictReader(fh))
         fmus = sorted((out / "fmus").glob("*.fmu"))
         assert {fmpy.read_model_description(str(f)).fmiVersion for f in fmus} == {f"{version}.0"}, fmus
-    assert [r["label"] for r in rows[3]] == ["gauss-seidel/hold", "monolithic FMU"]
+    assert [r["label"] for r in rows[3]] == ["gauss-seidel/linear", "monolithic FMU"]
     assert all(r["status"] == "ok" for r in rows[3])
     for r2, r3 in zip(rows[2], rows[3]):
         assert r3["err_linf"] == r2["err_linf"], (r2["label"], r2["err_linf"], r3["err_linf"])
