@@ -182,6 +182,21 @@ def fmugen_run(ssd: Ssd) -> Optional[dict]:
     return out
 
 
+def _unreadable(fmu: Path, version: str, exc: Exception) -> str:
+    """Why fmpy could not read the FMU's description, naming the element: the first complaint of the FMI
+    schema of its version (fmpy's parser alone says e.g. only 'ScalarVariable', the element it missed, for
+    an FMI 2.0 description labelled 3.0); the parser's exception where the schema finds nothing."""
+    try:
+        from fmpy.validation import validate_fmu
+
+        problems = validate_fmu(str(fmu))
+    except Exception:  # the schema check itself failed: the parser's complaint is all there is
+        problems = []
+    if problems:
+        return f"modelDescription.xml does not follow the FMI {version} schema: {' '.join(str(problems[0]).split())[:240]}"
+    return f"{type(exc).__name__}: {' '.join(str(exc).split())[:200]}"
+
+
 def _fmi(fmu: Path, name: str, where: str):
     import zipfile
     import zlib
@@ -203,7 +218,7 @@ def _fmi(fmu: Path, name: str, where: str):
     try:
         md = read_fmi_description(fmu)  # FMI 3.0's Float64/Int32 under SSP 1.0's names Real/Integer
     except Exception as exc:  # fmpy raises many kinds on a broken FMU
-        raise InputFileError(f"{cw}: cannot read its FMU: {' '.join(str(exc).split())[:200]}") from None
+        raise InputFileError(f"{cw}: cannot read its FMU: {_unreadable(fmu, version, exc)}") from None
     if md.fmiVersion not in ("2.0", "3.0"):
         raise InputFileError(f"{cw}: FMI {md.fmiVersion} is not supported (FMI 2.0 and 3.0)")
     if md.coSimulation is None and md.modelExchange is None:
