@@ -281,11 +281,14 @@ class _Unit:
         self.check(self.fmu._functions["fmi2GetInteger"](self.c, (c_uint * 1)(v.valueReference), 1, out), "fmi2GetInteger")
         return out[0]
 
+    #: fmpy's raw terminate function of the unit's FMI version (units3 names FMI 3.0's)
+    TERMINATE = "fmi2Terminate"
+
     def close(self) -> None:
         if getattr(self, "c", None) is None:
             return
         try:
-            self.fmu.fmi2Terminate(self.c)
+            getattr(self.fmu, self.TERMINATE)(self.c)
         except Exception:  # terminate after an error state may be refused; free anyway
             pass
         try:

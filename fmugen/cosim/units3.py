@@ -204,18 +204,7 @@ class _FMI3:
                    "fmi3GetInt32")
         return out[0]
 
-    def close(self) -> None:
-        if getattr(self, "c", None) is None:
-            return
-        try:
-            self.fmu.fmi3Terminate(self.c)
-        except Exception:  # terminate after an error state may be refused; free anyway
-            pass
-        try:
-            self.fmu.freeInstance()
-        except Exception:
-            pass
-        self.c = None
+    TERMINATE = "fmi3Terminate"  # _Unit.close calls it
 
 
 class Slave3Unit(_FMI3, SlaveUnit):
