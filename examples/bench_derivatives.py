@@ -102,6 +102,19 @@ double time_calls(int kind, int k, int n, const int *jt, const double *lc, const
 """
 
 
+
+def _last_state(kernels, model, mp, q, qd, x, n):
+    """The timing loops' arguments at the last state: fmugen's arrays (kept alive) and their pointers,
+    and the same state in Pinocchio's coordinates."""
+    from fmugen.codegen.benchmarks import to_pinocchio
+    from fmugen.codegen.chain import chain_work_doubles
+
+    keep = [kernels.joint_array, kernels.constants, kernels.globals] + \
+        [np.ascontiguousarray(a, float) for a in (q[-1], qd[-1], x[-1], np.zeros(n), np.zeros(n + 3 * n * n),
+                                                  np.zeros(chain_work_doubles(n, "jacobian")))]
+    qp, vp = to_pinocchio(model, mp, q[-1], qd[-1])
+    return keep, [a.ctypes.data for a in keep], qp, vp, to_pinocchio(model, mp, None, x[-1])
+
 def runtime_version() -> str:
     """The git blob hash of the runtime file measured (the runtime changes faster than the benchmarks are run)."""
     import hashlib
@@ -184,12 +197,7 @@ def measure(name: str, path: Path, states: int, repeat: int, so) -> dict:
     kernels.close()
 
     # 2. timing at the last state, in alternation
-    keep = [kernels.joint_array, kernels.constants, kernels.globals] + \
-        [np.ascontiguousarray(a, float) for a in (q[-1], qd[-1], x[-1], np.zeros(n), np.zeros(n + 3 * n * n),
-                                                  np.zeros(chain_work_doubles(n, "jacobian")))]
-    ptrs = [a.ctypes.data for a in keep]
-    qp, vp = to_pinocchio(model, mp, q[-1], qd[-1])
-    xp = to_pinocchio(model, mp, None, x[-1])
+    keep, ptrs, qp, vp, xp = _last_state(kernels, model, mp, q, qd, x, n)
     pargs = {"ID": (model, data, qp, vp, xp), "M": (model, data, qp), "Minv": (model, data, qp),
              "FD": (model, data, qp, vp, xp), "∇ID": (model, data, qp, vp, xp), "∇FD": (model, data, qp, vp, xp)}
     budget = 0.02  # CPU seconds per timing: long against the clock's resolution, short against the load's drift
@@ -330,12 +338,7 @@ def unrolled(name: str, path: Path, states: int, repeat: int, so) -> dict:
             qp, vp = to_pinocchio(model, mp, q[k], qd[k])
             xp = to_pinocchio(model, mp, None, x[k])
             err = max(err, rel(got[k], pin.aba(model, data, qp, vp, xp)[iv]))
-        keep = [kernels.joint_array, kernels.constants, kernels.globals] + \
-            [np.ascontiguousarray(a, float) for a in (q[-1], qd[-1], x[-1], np.zeros(n), np.zeros(n + 3 * n * n),
-                                                      np.zeros(chain_work_doubles(n, "jacobian")))]
-        ptrs = [a.ctypes.data for a in keep]
-        qp, vp = to_pinocchio(model, mp, q[-1], qd[-1])
-        xp = to_pinocchio(model, mp, None, x[-1])
+        keep, ptrs, qp, vp, xp = _last_state(kernels, model, mp, q, qd, x, n)
         pargs = (model, data, qp, vp, xp)
         budget = 0.02
         ku = max(20, int(budget / max(cm.time_per_call(q[-1], qd[-1], x[-1], 20), 1e-9)))
