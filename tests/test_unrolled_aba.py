@@ -5,44 +5,16 @@ folding and the inline sine and cosine."""
 from __future__ import annotations
 
 import ctypes
-import importlib.metadata
 import subprocess
-import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from erd_robots import ROBOTS
+from erd_robots import rel as _rel
+from erd_robots import robot as _robot
 from fmugen.codegen.unrolled_aba import (SINCOS_C, CompiledUnrolledFD, Program, Var, evaluate_numeric,
                                          from_kernels, unrolled_fd)
-
-ROBOTS = {"ur5": "ur_description/urdf/ur5_robot.urdf", "panda": "panda_description/urdf/panda.urdf",
-          "hyq": "hyq_description/robots/hyq_no_sensors.urdf", "talos": "talos_data/robots/talos_full_v2.urdf"}
-
-
-def _robot(name):
-    pin = pytest.importorskip("pinocchio")
-    from fmugen.batch import Kernels
-    from fmugen.codegen.benchmarks import pinocchio_urdf_map
-    from fmugen.robot.urdf import load_urdf
-
-    try:
-        root = Path(importlib.metadata.distribution("example-robot-data").locate_file(
-            "cmeel.prefix/share/example-robot-data/robots"))
-    except importlib.metadata.PackageNotFoundError:
-        pytest.skip("example-robot-data is not installed (pip install -e '.[test]')")
-    path = root / ROBOTS[name]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # mimic joints read as independent joints, as Pinocchio does
-        robot = load_urdf(path)
-    zero = {p.name: 0.0 for p in robot.parameters if p.name.startswith(("b_", "fc_"))}  # Pinocchio has none
-    kernels = Kernels.from_robot(robot, values=zero)
-    model = pin.buildModelFromUrdf(str(path))
-    return pin, robot, kernels, model, pinocchio_urdf_map(model, robot)
-
-
-def _rel(a, b):
-    return float(np.max(np.abs(np.asarray(a) - b)) / max(np.max(np.abs(b)), 1e-300))
 
 
 def test_folding():

@@ -1,0 +1,484 @@
+"""Unrolled derivatives of the forward dynamics: ∂qdd/∂(q, qd, tau) as straight-line C for one robot.
+
+The Jacobian is the one of the looped runtime (``fmugen_chain_fd_jacobian`` in
+``c_runtime/chain_dynamics.c``; Carpentier & Mansard, "Analytical derivatives of rigid body dynamics
+algorithms", RSS 2018):
+
+    [∂qdd/∂q, ∂qdd/∂qd, ∂qdd/∂tau] = M^-1 [-∂ID/∂q, -∂ID/∂qd, 1]   at qdd = FD(q, qd, tau),
+
+with ∂ID from the analytical derivatives of recursive Newton-Euler in world coordinates -- an entry
+(i, j) is nonzero only when one of the joints lies on the other's path to the base, and it is one dot
+product of 6-vectors away from the subtree sums -- and M^-1 from the tree factorisation M = L^T L
+without fill-in (Featherstone, IJRR 2005).  Here those passes run in Python over the folding
+expression type of :mod:`fmugen.codegen.unrolled_aba` and are written out as one C statement per
+remaining sum of products, the robot's numbers folded in:
+
+* qdd comes from the unrolled articulated-body algorithm of that module, in the same program (the
+  joints' sines and cosines, the friction's tanh shared);
+* the world poses are products by the joint-axis frames' constant placements (mostly signed
+  permutations: free), the first bodies' poses fold to constants;
+* every subtree sum (composite inertia, the velocity term K, momenta and forces) and every entry of
+  L, L^-1, M^-1 and of the products is one sum of products over its terms, so the zeros of the tree's
+  sparsity are never written: the code holds exactly the nonzero pattern of this robot.
+
+The model is the runtime's: rotor inertia, damping and smooth Coulomb friction included; external
+wrenches and the end-effector position are not (refused by the FMU build where a scene needs them).
+
+The generated function::
+
+    int NAME(const double *q, const double *qd, const double *tau, double *qdd, double *J);
+
+writes qdd (n) and J (n x 3n, row-major: [∂qdd/∂q, ∂qdd/∂qd, M^-1]) and returns 0, 1 (an articulated
+inertia or a pivot of M not positive) or 2 (qdd not finite).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from .unrolled_aba import Program, Var, _aba, body_frames, c_value, congruence, cross, emit_c
+
+__all__ = ["UnrolledJacobian", "unrolled_jacobian", "from_kernels", "evaluate_numeric",
+           "CompiledUnrolledJacobian"]
+
+_EYE = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+
+
+# ------------------------------------------------------------ spatial algebra as lists of product terms
+def _cross_terms(a, b):
+    return [[(a[1], b[2]), (-1.0, a[2], b[1])], [(a[2], b[0]), (-1.0, a[0], b[2])],
+            [(a[0], b[1]), (-1.0, a[1], b[0])]]
+
+
+def _crm_terms(m, y):
+    """m x y (motion cross motion): [w x yw ; w x yv + v x yw]."""
+    a, b, c = _cross_terms(m[:3], y[:3]), _cross_terms(m[:3], y[3:]), _cross_terms(m[3:], y[:3])
+    return a + [b[k] + c[k] for k in range(3)]
+
+
+def _crf_terms(m, f):
+    """m x* f (motion cross force): [w x n + v x f ; w x f]."""
+    a, b, c = _cross_terms(m[:3], f[:3]), _cross_terms(m[3:], f[3:]), _cross_terms(m[:3], f[3:])
+    return [a[k] + b[k] for k in range(3)] + c
+
+
+def _scaled(terms, s):
+    return [[(s, *t) for t in row] for row in terms]
+
+
+def _si6(I):
+    """The 6x6 of a ten-number spatial inertia at the world origin (m, h = m c, J about the origin:
+    xx yy zz xy xz yz): [[J, [h]x], [[h]x^T, m 1]]."""
+    m, h, J = I[0], I[1:4], I[4:10]
+    Jm = [[J[0], J[3], J[4]], [J[3], J[1], J[5]], [J[4], J[5], J[2]]]
+    hx = [[0.0, -h[2], h[1]], [h[2], 0.0, -h[0]], [-h[1], h[0], 0.0]]
+    out = [[0.0] * 6 for _ in range(6)]
+    for r in range(3):
+        for k in range(3):
+            out[r][k] = Jm[r][k]
+            out[r][k + 3] = hx[r][k]
+            out[k + 3][r] = hx[r][k]
+        out[r + 3][r + 3] = m
+    return out
+
+
+def _apply_terms(A, x):
+    return [[(A[r][k], x[k]) for k in range(6)] for r in range(6)]
+
+
+def _sqrt(P: Program, x):
+    if not isinstance(x, Var):
+        return math.sqrt(x) if x > 0.0 else float("nan")
+    return P._emit(f"sqrt({'-' if x.neg else ''}{x.name})", (x.name,))
+
+
+# ------------------------------------------------------------ the passes
+def _paths(bodies):
+    """path[i]: i and its ancestors, i first; subtree[i]: the bodies below i and i."""
+    n = len(bodies)
+    path = []
+    for i, b in enumerate(bodies):
+        path.append([i] + (path[b.parent] if b.parent >= 0 else []))
+    subtree = [[] for _ in range(n)]
+    for i in range(n):
+        for j in path[i]:
+            subtree[j].append(i)
+    return path, subtree
+
+
+def _friction_slope_terms(P: Program, b, qd):
+    """d(passive force)/dqd of one joint as product terms: damping b and the smooth Coulomb friction's
+    slope F_c (1 - tanh^2(qd / v_c)) / v_c (its tanh the one of the ABA: one statement)."""
+    terms = [(b.damping,)]
+    if b.friction != 0.0:
+        t = P.call("tanh", P.mul(1.0 / b.friction_velocity, qd))
+        k = b.friction / b.friction_velocity
+        terms += [(k,), (-k, t, t)]
+    return terms
+
+
+def _rnea_derivatives(P: Program, bodies: list, gravity, q, qd, qdd, block0: int):
+    """Recursive Newton-Euler at (q, qd, qdd) and its analytical derivatives: (nq, nd, Mlow, tauF) with
+    nq[i, j], nd[i, j] = -∂ID_i/∂q_j, -∂ID_i/∂qd_j for every related pair (one joint on the other's path),
+    Mlow[i, j] = M[i][j] for j on i's path (rotor inertia on the diagonal) and tauF[i] = S_i . F_i (ID_i
+    without rotor inertia and friction).  Blocks block0 .. block0 + 4n."""
+    n = len(bodies)
+    path, subtree = _paths(bodies)
+    children = [[] for _ in range(n)]
+    for i, b in enumerate(bodies):
+        if b.parent >= 0:
+            children[b.parent].append(i)
+
+    # world kinematics: R_i = R_parent Rc_i Rz(q_i), p_i, S_i, the body inertias at the world origin
+    R, p, S, I = [None] * n, [None] * n, [None] * n, [None] * n
+    for i, b in enumerate(bodies):
+        P.block = block0 + i
+        Rp, pp = (R[b.parent], p[b.parent]) if b.parent >= 0 else (_EYE, [0.0, 0.0, 0.0])
+        Rc = [[float(x) for x in row] for row in b.Rc]
+        Rq = [[P.sop([(Rp[r][k], Rc[k][c]) for k in range(3)]) for c in range(3)] for r in range(3)]
+        pi = [P.sop([(pp[r],)] + [(Rp[r][k], float(b.pc[k])) for k in range(3)]) for r in range(3)]
+        z = [Rq[r][2] for r in range(3)]
+        if b.revolute:
+            co, si = P.call("cos", q[i]), P.call("sin", q[i])
+            Ri = [[P.sop([(co, Rq[r][0]), (si, Rq[r][1])]), P.sop([(co, Rq[r][1]), (-1.0, si, Rq[r][0])]), Rq[r][2]]
+                  for r in range(3)]
+            S[i] = z + cross(P, pi, z)
+        else:
+            Ri = Rq
+            pi = [P.sop([(pi[r],), (z[r], q[i])]) for r in range(3)]
+            S[i] = [0.0, 0.0, 0.0] + z
+        m, cl = b.mass, b.com
+        c = [P.sop([(pi[r],)] + [(Ri[r][k], cl[k]) for k in range(3)]) for r in range(3)]
+        Jw = congruence(P, Ri, [list(row) for row in b.inertia_com], True)
+        I[i] = [m] + [P.mul(m, c[k]) for k in range(3)] + [
+            P.sop([(Jw[0][0],), (m, c[1], c[1]), (m, c[2], c[2])]),
+            P.sop([(Jw[1][1],), (m, c[0], c[0]), (m, c[2], c[2])]),
+            P.sop([(Jw[2][2],), (m, c[0], c[0]), (m, c[1], c[1])]),
+            P.sop([(Jw[0][1],), (-m, c[0], c[1])]),
+            P.sop([(Jw[0][2],), (-m, c[0], c[2])]),
+            P.sop([(Jw[1][2],), (-m, c[1], c[2])])]
+        R[i], p[i] = Ri, pi
+
+    # recursive Newton-Euler at qdd, forward: v, a, momenta h = I v, forces f = I a + v x* h, and per
+    # joint dv_j = S_j x v_parent, w_j = S_j x a_parent - dv_j x v_parent (u_j = -2 dv_j)
+    a0 = [0.0, 0.0, 0.0] + [-float(x) for x in gravity]
+    v, a, h, f, dv, w = ([None] * n for _ in range(6))
+    I6 = [_si6(I[i]) for i in range(n)]
+    for i, b in enumerate(bodies):
+        P.block = block0 + n + i
+        vp, ap = (v[b.parent], a[b.parent]) if b.parent >= 0 else ([0.0] * 6, a0)
+        Si = S[i]
+        dv[i] = [P.sop(t) for t in _crm_terms(Si, vp)]
+        w[i] = [P.sop(t1 + [(-1.0, *x) for x in t2]) for t1, t2 in zip(_crm_terms(Si, ap), _crm_terms(dv[i], vp))]
+        v[i] = [P.sop([(vp[k],), (Si[k], qd[i])]) for k in range(6)]
+        # a_i = a_parent + S_i qdd_i + (v_i x S_i) qd_i, and v_i x S_i = v_parent x S_i = -dv_i
+        a[i] = [P.sop([(ap[k],), (Si[k], qdd[i]), (-1.0, dv[i][k], qd[i])]) for k in range(6)]
+        h[i] = [P.sop(t) for t in _apply_terms(I6[i], v[i])]
+        f[i] = [P.sop(t1 + t2) for t1, t2 in zip(_apply_terms(I6[i], a[i]), _crf_terms(v[i], h[i]))]
+
+    # backward: the subtree sums IC (ten numbers), K, HC, F, each entry one sum over the body's own terms
+    # and its children's sums; then al_i = [IC S_i ; K S_i + gamma_i], P_i, Q_i (the entries of dID) and
+    # M's lower triangle.  K = -sum (A + A^T), A = I crm(v), is the velocity term of d(I a + v x* I v):
+    # with I = [[J, [h]x], [[h]x^T, m 1]] its lower right block vanishes, the upper right one is
+    # [u]x for u = h x w - m v_O ([h]x[w]x - [w]x[h]x = [h x w]x) and the upper left one is the
+    # symmetric -(J W + (J W)^T + v_O h^T + h v_O^T - 2 (h . v_O) 1): nine numbers, not 36, and
+    #   K x = [Ks x_w - u x x_v ; u x x_w]
+    IC, Ks, Ku, HC, F = [None] * n, [None] * n, [None] * n, [None] * n, [None] * n
+    al, Pv, Qv = [None] * n, [None] * n, [None] * n
+    Mlow = {}
+
+    def k_apply(i, x):
+        a, b = _cross_terms(Ku[i], x[3:]), _cross_terms(Ku[i], x[:3])
+        return [P.sop([(Ks[i][r][k], x[k]) for k in range(3)] + [(-1.0, *t) for t in a[r]]) for r in range(3)] + \
+               [P.sop(b[r]) for r in range(3)]
+
+    for i in range(n - 1, -1, -1):
+        P.block = block0 + 3 * n - i
+        b, Si, kids = bodies[i], S[i], children[i]
+        IC[i] = [P.sop([(I[i][k],)] + [(IC[c][k],) for c in kids]) for k in range(10)]
+        wi, vo = v[i][:3], v[i][3:]
+        m, hm, Jm = I[i][0], I[i][1:4], [row[:3] for row in I6[i][:3]]
+        W = [[0.0, -wi[2], wi[1]], [wi[2], 0.0, -wi[0]], [-wi[1], wi[0], 0.0]]
+        Ksi = [[None] * 3 for _ in range(3)]
+        for r in range(3):
+            for c in range(r, 3):
+                terms = [(Ks[ch][r][c],) for ch in kids]
+                terms += [(-1.0, Jm[r][k], W[k][c]) for k in range(3)] + [(-1.0, Jm[c][k], W[k][r]) for k in range(3)]
+                terms += [(-1.0, vo[r], hm[c]), (-1.0, hm[r], vo[c])]
+                if r == c:
+                    terms += [(2.0, hm[k], vo[k]) for k in range(3)]
+                Ksi[r][c] = Ksi[c][r] = P.sop(terms)
+        Ks[i] = Ksi
+        hw = _cross_terms(hm, wi)
+        Ku[i] = [P.sop(hw[k] + [(-m, vo[k])] + [(Ku[ch][k],) for ch in kids]) for k in range(3)]
+        HC[i] = [P.sop([(h[i][k],)] + [(HC[c][k],) for c in kids]) for k in range(6)]
+        F[i] = [P.sop([(f[i][k],)] + [(F[c][k],) for c in kids]) for k in range(6)]
+        IC6 = _si6(IC[i])
+        KS, Kdv = k_apply(i, Si), k_apply(i, dv[i])
+        g1, g2, g3 = _cross_terms(HC[i][:3], Si[:3]), _cross_terms(HC[i][3:], Si[3:]), _cross_terms(HC[i][3:], Si[:3])
+        al[i] = [P.sop(t) for t in _apply_terms(IC6, Si)] + \
+                [P.sop([(KS[k],)] + g1[k] + g2[k]) for k in range(3)] + [P.sop([(KS[3 + k],)] + g3[k]) for k in range(3)]
+        # P_i = IC u_i + K S_i + S_i x* HC with u_i = -2 dv_i;  Q_i = S_i x* F - (IC w_i + K dv_i + dv_i x* HC)
+        Pv[i] = [P.sop(_scaled(_apply_terms(IC6, dv[i]), -2.0)[r] + [(KS[r],)] + _crf_terms(Si, HC[i])[r])
+                 for r in range(6)]
+        Qv[i] = [P.sop(_crf_terms(Si, F[i])[r] + _scaled(_apply_terms(IC6, w[i]), -1.0)[r]
+                       + [(-1.0, Kdv[r])] + _scaled(_crf_terms(dv[i], HC[i]), -1.0)[r])
+                 for r in range(6)]
+        for j in path[i]:
+            Mlow[i, j] = P.sop([(al[i][k], S[j][k]) for k in range(6)] + ([(b.rotor,)] if j == i else []))
+
+    # -dID: entries (i, j) for j on the path of i (row i: al_i) and (j, i) for j strictly above i (column i: P, Q)
+    nq, nd = {}, {}
+    for i, b in enumerate(bodies):
+        P.block = block0 + 3 * n + 1 + i
+        for j in path[i]:
+            nq[i, j] = P.sop([(al[i][k], w[j][k]) for k in range(6)] + [(al[i][6 + k], dv[j][k]) for k in range(6)])
+            terms = [(2.0, al[i][k], dv[j][k]) for k in range(6)] + [(-1.0, al[i][6 + k], S[j][k]) for k in range(6)]
+            if j == i:
+                terms += [(-1.0, *t) for t in _friction_slope_terms(P, b, qd[i])]
+            nd[i, j] = P.sop(terms)
+            if j != i:
+                nq[j, i] = P.sop([(-1.0, S[j][k], Qv[i][k]) for k in range(6)])
+                nd[j, i] = P.sop([(-1.0, S[j][k], Pv[i][k]) for k in range(6)])
+
+    tauF = [P.sop([(S[i][k], F[i][k]) for k in range(6)]) for i in range(n)]
+    return nq, nd, Mlow, tauF
+
+
+def _fd_jacobian(P: Program, bodies: list, gravity, q, qd, tau):
+    """qdd (n values) and J (n x 3n values) = [∂qdd/∂q, ∂qdd/∂qd, M^-1]."""
+    n = len(bodies)
+    qdd = _aba(P, bodies, gravity, q, qd, tau)
+    block0 = 3 * n + 2  # the blocks after those of the ABA
+    nq, nd, Mlow, _ = _rnea_derivatives(P, bodies, gravity, q, qd, qdd, block0)
+    path, subtree = _paths(bodies)
+
+    # M = L^T L without fill-in, leaves first: L[k][j] (j on k's path) from M[k][j] minus the terms of
+    # k's descendants, each entry one sum; then X = L^-1 (nonzero on the paths) and M^-1 = X X^T
+    L, pend = {}, {key: [] for key in Mlow}
+    for k in range(n - 1, -1, -1):
+        P.block = block0 + 4 * n + 1 + (n - 1 - k)
+        dkk = P.sop([(Mlow[k, k],)] + pend[k, k])
+        if isinstance(dkk, Var):
+            P.effect(f"if (!({c_value(dkk)} > 0.0)) return 1;", [dkk])
+        elif not dkk > 0.0:
+            raise ValueError(f"body {k}: the mass matrix is not positive definite")
+        d = _sqrt(P, dkk)
+        inv = P.recip(d)
+        L[k, k] = d
+        for j in path[k][1:]:
+            L[k, j] = P.sop([(Mlow[k, j], inv)] + [(*t, inv) for t in pend[k, j]])
+        for i in path[k][1:]:
+            for j in path[i]:
+                pend[i, j].append((-1.0, L[k, i], L[k, j]))
+    X = {}
+    for i in range(n):
+        P.block = block0 + 5 * n + 1 + i
+        X[i, i] = P.recip(L[i, i])
+        for kk in path[i][1:]:
+            upto = path[i][1:path[i].index(kk) + 1]  # from the parent of i up to k
+            X[i, kk] = P.sop([(-1.0, L[i, j], X[j, kk], X[i, i]) for j in upto])
+    Minv = {}
+    for ai in range(n):
+        P.block = block0 + 6 * n + 1 + ai
+        pa = set(path[ai])
+        for bi in range(ai + 1):
+            common = [k for k in path[bi] if k in pa]
+            val = P.sop([(X[ai, k], X[bi, k]) for k in common]) if common else 0.0
+            Minv[ai, bi] = Minv[bi, ai] = val
+
+    # the columns: J_q[r][c] = sum_i M^-1[r][i] (-dID_q)[i][c] over the i related to c
+    related = [sorted(set(path[c]) | set(subtree[c])) for c in range(n)]
+    J = [[0.0] * (3 * n) for _ in range(n)]
+    for r in range(n):
+        P.block = block0 + 7 * n + 1 + r
+        for c in range(n):
+            J[r][c] = P.sop([(Minv[r, i], nq[i, c]) for i in related[c]])
+            J[r][n + c] = P.sop([(Minv[r, i], nd[i, c]) for i in related[c]])
+            J[r][2 * n + c] = Minv[r, c]
+    return qdd, J
+
+
+def _id_jacobian(P: Program, bodies: list, gravity, q, qd, qdd):
+    """tau (n values) and J (n x 3n values) = [∂tau/∂q, ∂tau/∂qd, M]."""
+    n = len(bodies)
+    nq, nd, Mlow, tauF = _rnea_derivatives(P, bodies, gravity, q, qd, qdd, 0)
+    P.block = 4 * n + 1
+    tau = []
+    for i, b in enumerate(bodies):
+        terms = [(tauF[i],), (b.rotor, qdd[i]), (b.damping, qd[i])]
+        if b.friction != 0.0:
+            terms.append((b.friction, P.call("tanh", P.mul(1.0 / b.friction_velocity, qd[i]))))
+        tau.append(P.sop(terms))
+    J = [[0.0] * (3 * n) for _ in range(n)]
+    for (i, j), x in nq.items():
+        J[i][j] = -x
+    for (i, j), x in nd.items():
+        J[i][n + j] = -x
+    for (i, j), x in Mlow.items():
+        J[i][2 * n + j] = J[j][2 * n + i] = x
+    return tau, J
+
+
+#: the two generated functions: (pass function, its argument names, what it writes, the header's words)
+_KINDS = {"fd": (_fd_jacobian, ("q", "qd", "tau"), "qdd", "the forward dynamics of one robot and its Jacobian "
+                 "[dqdd/dq, dqdd/dqd, M^-1]"),
+          "id": (_id_jacobian, ("q", "qd", "qdd"), "tau", "the inverse dynamics of one robot and its Jacobian "
+                 "[dtau/dq, dtau/dqd, M]")}
+
+
+@dataclass
+class UnrolledJacobian:
+    """The generated C (see :class:`fmugen.codegen.unrolled_aba.UnrolledFD`); ``kind``: "fd" or "id"."""
+    name: str
+    n: int
+    kind: str
+    source: str
+    statements: int
+    blocks: int
+
+    @property
+    def lines(self) -> int:
+        return self.source.count("\n")
+
+
+def unrolled_jacobian(revolute: Sequence[bool], parents: Sequence[int], constants, gravity, kind: str = "fd",
+                      name: str = "", static: bool = False, block_statements: int = 200) -> UnrolledJacobian:
+    """Straight-line C of the forward (``kind="fd"``) or inverse (``"id"``) dynamics and its Jacobian
+    (``constants``: n x NC, the numbers of :class:`fmugen.batch.Kernels`)::
+
+        int NAME(const double *q, const double *qd, const double *tau, double *qdd, double *J);   fd
+        int NAME(const double *q, const double *qd, const double *qdd, double *tau, double *J);   id
+
+    J is n x 3n, row-major.  Returns 0, 1 (an articulated inertia or a pivot of M not positive; fd) or 2
+    (the result not finite)."""
+    if kind not in _KINDS:
+        raise ValueError(f"kind {kind!r}: 'fd' or 'id'")
+    passes, ins, out, words = _KINDS[kind]
+    name = name or f"fmugen_unrolled_{kind}_jacobian"
+    n = len(revolute)
+    bodies = body_frames(revolute, parents, constants)
+    P = Program()
+    args = [[Var(f"{a}[{i}]") for i in range(n)] for a in ins]
+    res, J = passes(P, bodies, gravity, *args)
+    P.block = 11 * n + 3  # after the passes' last block (blocks follow the order of emission)
+    if kind == "id":
+        for i in range(n):
+            P.effect(f"tau[{i}] = {c_value(res[i])};", [res[i]])
+    for r in range(n):
+        for c in range(3 * n):
+            P.effect(f"J[{3 * n * r + c}] = {c_value(J[r][c])};", [J[r][c]])
+    header = [f"/* generated by fmugen.codegen.unrolled_derivatives: {words} ({n} bodies),",
+              " * the robot's numbers folded into the code */"]
+    params = tuple(f"const double *{a}" for a in ins) + (f"double *{out}", "double *J")
+    source, count, nblocks = emit_c(P, name, params, header,
+                                    [f"for (int i = 0; i < {n}; i++)", f"    if (!isfinite({out}[i])) return 2;"],
+                                    static=static, block_statements=block_statements)
+    return UnrolledJacobian(name, n, kind, source, count, nblocks)
+
+
+def evaluate_numeric(revolute, parents, constants, gravity, q, qd, u, kind: str = "fd"):
+    """The same passes on numbers (every value folds): (qdd, J) for ``u = tau`` (fd) or (tau, J) for
+    ``u = qdd`` (id), without a compiler."""
+    bodies = body_frames(revolute, parents, constants)
+    res, J = _KINDS[kind][0](Program(), bodies, gravity, [float(x) for x in q], [float(x) for x in qd],
+                             [float(x) for x in u])
+    return np.array(res, float), np.array(J, float)
+
+
+def from_kernels(kernels, kind: str = "fd", **kw) -> UnrolledJacobian:
+    """:func:`unrolled_jacobian` of a :class:`fmugen.batch.Kernels`."""
+    return unrolled_jacobian(kernels.revolute, kernels.parents, kernels.constants, np.asarray(kernels.globals)[:3],
+                             kind, **kw)
+
+
+# ------------------------------------------------------------ the C harness (tests, benchmarks)
+_HARNESS = r"""
+#define _POSIX_C_SOURCE 199309L
+#include <time.h>
+int %(name)s(const double *q, const double *qd, const double *u, double *y, double *J);
+/* rows of states: the status of the first row that fails, 0 when all succeed */
+int unrolled_rows(int rows, int n, const double *q, const double *qd, const double *u, double *y, double *J)
+{
+    for (int r = 0; r < rows; r++) {
+        int s = %(name)s(q + n * r, qd + n * r, u + n * r, y + n * r, J + 3 * n * n * r);
+        if (s) return s;
+    }
+    return 0;
+}
+/* CPU seconds per call over k calls at one state */
+double unrolled_time(int k, const double *q, const double *qd, const double *u, double *y, double *J)
+{
+    struct timespec a, b;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &a);
+    for (int i = 0; i < k; i++) %(name)s(q, qd, u, y, J);
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &b);
+    return ((b.tv_sec - a.tv_sec) + 1e-9 * (b.tv_nsec - a.tv_nsec)) / k;
+}
+"""
+
+
+class CompiledUnrolledJacobian:
+    """An :class:`UnrolledJacobian` compiled into a shared library in a temporary folder (as
+    :class:`fmugen.codegen.unrolled_aba.CompiledUnrolledFD`).  ``derivatives(q, qd, u)`` returns, in the
+    order of :meth:`fmugen.batch.Kernels.fd_derivatives` and ``id_derivatives``, (qdd, ∂qdd/∂q, ∂qdd/∂qd,
+    M^-1) for u = tau (fd) or (tau, ∂tau/∂q, ∂tau/∂qd, M) for u = qdd (id)."""
+
+    def __init__(self, gen: UnrolledJacobian, cc: str = "cc", flags: Sequence[str] = ("-O2",)):
+        import ctypes
+        import shutil
+
+        from .unrolled_aba import compile_shared
+
+        self.n, self.kind = gen.n, gen.kind
+        self._rm = shutil.rmtree
+        self._dir, self._lib, self.compile_seconds = compile_shared(gen.source, _HARNESS % {"name": gen.name}, cc,
+                                                                    flags, "the unrolled Jacobian")
+        vp = ctypes.c_void_p
+        self._lib.unrolled_rows.argtypes = [ctypes.c_int, ctypes.c_int, vp, vp, vp, vp, vp]
+        self._lib.unrolled_rows.restype = ctypes.c_int
+        self._lib.unrolled_time.argtypes = [ctypes.c_int, vp, vp, vp, vp, vp]
+        self._lib.unrolled_time.restype = ctypes.c_double
+
+    def _arrays(self, q, qd, u):
+        arrs = [np.ascontiguousarray(np.atleast_2d(np.asarray(a, dtype=float))) for a in (q, qd, u)]
+        if any(a.shape != arrs[0].shape or a.shape[1] != self.n for a in arrs):
+            raise ValueError(f"q, qd, {'tau' if self.kind == 'fd' else 'qdd'}: rows of {self.n} numbers of one shape")
+        return arrs
+
+    def derivatives(self, q, qd, u) -> tuple:
+        """(result, ∂/∂q, ∂/∂qd, third block) of every row of states (one row: without the leading axis)."""
+        one = np.ndim(q) == 1
+        q, qd, u = self._arrays(q, qd, u)
+        rows, n = q.shape
+        y, J = np.zeros_like(q), np.zeros((rows, n, 3 * n))
+        s = self._lib.unrolled_rows(rows, n, q.ctypes.data, qd.ctypes.data, u.ctypes.data, y.ctypes.data,
+                                    J.ctypes.data)
+        if s == 1:
+            raise np.linalg.LinAlgError("an articulated inertia or a pivot of the mass matrix is not positive")
+        if s:
+            raise FloatingPointError(f"{self.kind.upper()}: a result is NaN or infinite")
+        out = (y, J[:, :, :n], J[:, :, n:2 * n], J[:, :, 2 * n:])
+        return tuple(x[0] for x in out) if one else out
+
+    def time_per_call(self, q, qd, u, k: int) -> float:
+        """CPU seconds per call over k calls from a C loop at one state."""
+        q, qd, u = self._arrays(q, qd, u)
+        y, J = np.zeros(self.n), np.zeros(3 * self.n * self.n)
+        return self._lib.unrolled_time(int(k), q.ctypes.data, qd.ctypes.data, u.ctypes.data, y.ctypes.data,
+                                       J.ctypes.data)
+
+    def close(self):
+        if self._dir is not None:
+            self._lib = None
+            self._rm(self._dir, True)
+            self._dir = None
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
