@@ -28,11 +28,12 @@ those of the inverse-dynamics model (dtau/du = [∂tau/∂q, ∂tau/∂qd, M]), 
 matrix model (fmugen.codegen.benchmarks); there is no straight-line M^-1.  ``--no-straight`` skips it
 (deriving and compiling the straight-line Jacobians takes a minute).
 
-``--unrolled`` adds a table of the per-robot unrolled forward dynamics (:mod:`fmugen.codegen.unrolled_aba`:
-the articulated-body algorithm as straight-line C with the robot's numbers folded, one file per robot,
-compiled with -O2): its C lines, generation and compile seconds, µs per call beside the looped
-``fmugen_chain_fd`` and Pinocchio's ``aba`` timed in alternation, and its error against ``aba``;
-``--unrolled-only`` prints that table alone.
+``--unrolled`` adds a table of the per-robot unrolled code -- the forward dynamics
+(:mod:`fmugen.codegen.unrolled_aba`: the articulated-body algorithm) and the Jacobians of the inverse and
+forward dynamics (:mod:`fmugen.codegen.unrolled_derivatives`) as straight-line C with the robot's numbers
+folded, one file each, compiled with -O2: C lines, generation and compile seconds, µs per call beside the
+looped runtime's and Pinocchio's (``aba``, ``computeRNEADerivatives``, ``computeABADerivatives``) timed in
+alternation, and the error against Pinocchio; ``--unrolled-only`` prints that table alone.
 
 GRiD's figures (Plancher et al., "GRiD: GPU-Accelerated Rigid Body Dynamics with Analytical Gradients",
 ICRA 2022; the GRiDBenchmarks README) are µs per call on another machine -- an i7-10700K at 3.8 GHz
@@ -305,13 +306,15 @@ def straight_line(name: str, path: Path, states: int, repeat: int) -> dict:
 
 
 def unrolled(name: str, path: Path, states: int, repeat: int, so) -> dict:
-    """The per-robot unrolled forward dynamics (fmugen.codegen.unrolled_aba: the ABA as straight-line C with
-    the robot's numbers folded) beside the looped runtime's and Pinocchio's ``aba``: checked at ``states``
-    random states, timed in alternation (``repeat`` rounds, the same budget per timing as measure())."""
+    """The per-robot unrolled code beside the looped runtime and Pinocchio: the forward dynamics
+    (fmugen.codegen.unrolled_aba, against ``aba``) and the Jacobians of the inverse and forward dynamics
+    (fmugen.codegen.unrolled_derivatives, against ``computeRNEADerivatives`` and ``computeABADerivatives``),
+    each checked at ``states`` random states and timed in alternation (``repeat`` rounds, the same budget
+    per timing as measure())."""
     import pinocchio as pin
     from fmugen.batch import Kernels
+    from fmugen.codegen import unrolled_derivatives
     from fmugen.codegen.benchmarks import pinocchio_urdf_map, to_pinocchio
-    from fmugen.codegen.chain import chain_work_doubles
     from fmugen.codegen.unrolled_aba import CompiledUnrolledFD, from_kernels
     from fmugen.robot.urdf import load_urdf
 
@@ -321,42 +324,65 @@ def unrolled(name: str, path: Path, states: int, repeat: int, so) -> dict:
     zero = {p.name: 0.0 for p in robot.parameters if p.name.startswith(("b_", "fc_"))}
     kernels = Kernels.from_robot(robot, values=zero)
     n = kernels.n
-    t0 = time.perf_counter()
-    gen = from_kernels(kernels)
-    generate = time.perf_counter() - t0
-    cm = CompiledUnrolledFD(gen)
+    gens, generate, compiled = {}, {}, {}
     try:
+        for a in ("FD", "∇ID", "∇FD"):
+            t0 = time.perf_counter()
+            gens[a] = from_kernels(kernels) if a == "FD" else \
+                unrolled_derivatives.from_kernels(kernels, "id" if a == "∇ID" else "fd")
+            generate[a] = time.perf_counter() - t0
+            compiled[a] = CompiledUnrolledFD(gens[a]) if a == "FD" else \
+                unrolled_derivatives.CompiledUnrolledJacobian(gens[a])
         model = pin.buildModelFromUrdf(str(path))
         data = model.createData()
         mp = pinocchio_urdf_map(model, robot)
         iv = [m[1] for m in mp]
+        ix = np.ix_(iv, iv)
         rng = np.random.default_rng(0)
         q, qd, x = rng.uniform(-1, 1, (states, n)), rng.uniform(-1, 1, (states, n)), rng.uniform(-3, 3, (states, n))
-        got = cm.fd(q, qd, x)
-        err = 0.0
+        got = {"FD": compiled["FD"].fd(q, qd, x), "∇ID": compiled["∇ID"].derivatives(q, qd, x),
+               "∇FD": compiled["∇FD"].derivatives(q, qd, x)}
+        err = dict.fromkeys(got, 0.0)
         for k in range(states):
             qp, vp = to_pinocchio(model, mp, q[k], qd[k])
             xp = to_pinocchio(model, mp, None, x[k])
-            err = max(err, rel(got[k], pin.aba(model, data, qp, vp, xp)[iv]))
+            err["FD"] = max(err["FD"], rel(got["FD"][k], pin.aba(model, data, qp, vp, xp)[iv]))
+            pin.computeRNEADerivatives(model, data, qp, vp, xp)
+            g = got["∇ID"]
+            err["∇ID"] = max(err["∇ID"], rel(g[0][k], data.tau[iv]), rel(g[1][k], data.dtau_dq[ix]),
+                             rel(g[2][k], data.dtau_dv[ix]), rel(g[3][k], sym(data.M)[ix]))
+            pin.computeABADerivatives(model, data, qp, vp, xp)
+            g = got["∇FD"]
+            err["∇FD"] = max(err["∇FD"], rel(g[0][k], data.ddq[iv]), rel(g[1][k], data.ddq_dq[ix]),
+                             rel(g[2][k], data.ddq_dv[ix]), rel(g[3][k], sym(data.Minv)[ix]))
         keep, ptrs, qp, vp, xp = _last_state(kernels, model, mp, q, qd, x, n)
         pargs = (model, data, qp, vp, xp)
         budget = 0.02
-        ku = max(20, int(budget / max(cm.time_per_call(q[-1], qd[-1], x[-1], 20), 1e-9)))
-        kl = max(20, int(budget / max(so.time_calls(3, 20, n, *ptrs), 1e-9)))
-        kp = max(20, int(budget / max(per_call(pin.aba, pargs, 20), 1e-9)))
-        tu, tl, tp = [], [], []
+        kind = {"FD": 3, "∇ID": 4, "∇FD": 5}  # the timer's algorithm numbers (looped)
+        t = {a: ([], [], []) for a in got}
+        ks = {}
+        for a in got:
+            fn = getattr(pin, PINOCCHIO[a])
+            ks[a] = [max(20, int(budget / max(f(20), 1e-9))) for f in (
+                lambda k: compiled[a].time_per_call(q[-1], qd[-1], x[-1], k),
+                lambda k: so.time_calls(kind[a], k, n, *ptrs), lambda k: per_call(fn, pargs, k))]
         for _ in range(repeat):
-            tu.append(cm.time_per_call(q[-1], qd[-1], x[-1], ku))
-            tl.append(so.time_calls(3, kl, n, *ptrs))
-            tp.append(pinocchio_time(pin.aba, pargs, kp))
+            for a in got:
+                ku, kl, kp = ks[a]
+                t[a][0].append(compiled[a].time_per_call(q[-1], qd[-1], x[-1], ku))
+                t[a][1].append(so.time_calls(kind[a], kl, n, *ptrs))
+                t[a][2].append(pinocchio_time(getattr(pin, PINOCCHIO[a]), pargs, kp))
     finally:
-        cm.close()
+        for c in compiled.values():
+            c.close()
         kernels.close()
-    tu, tl, tp = np.array(tu), np.array(tl), np.array(tp)
-    return {"n": n, "err": err, "lines": gen.lines, "statements": gen.statements, "generate": generate,
-            "compile": cm.compile_seconds, "unrolled": statistics.median(tu), "looped": statistics.median(tl),
-            "pinocchio": statistics.median(tp), "ratio": statistics.median(tu / tp),
-            "looped_ratio": statistics.median(tl / tp)}
+    out = {"n": n}
+    for a in got:
+        tu, tl, tp = (np.array(x) for x in t[a])
+        out[a] = {"err": err[a], "lines": gens[a].lines, "generate": generate[a], "compile": compiled[a].compile_seconds,
+                  "unrolled": statistics.median(tu), "looped": statistics.median(tl), "pinocchio": statistics.median(tp),
+                  "ratio": statistics.median(tu / tp), "looped_ratio": statistics.median(tl / tp)}
+    return out
 
 
 def main(argv=None) -> int:
@@ -370,10 +396,10 @@ def main(argv=None) -> int:
     ap.add_argument("--no-straight", action="store_true",
                     help="skip the straight-line code of the robots of 6 DoF and fewer")
     ap.add_argument("--unrolled", action="store_true",
-                    help="also time the per-robot unrolled forward dynamics (fmugen.codegen.unrolled_aba) "
-                         "against the looped runtime and Pinocchio's aba")
+                    help="also time the per-robot unrolled FD, ∇ID and ∇FD (fmugen.codegen.unrolled_aba, "
+                         "unrolled_derivatives) against the looped runtime and Pinocchio")
     ap.add_argument("--unrolled-only", action="store_true",
-                    help="only the unrolled forward dynamics' table (implies --unrolled --no-straight)")
+                    help="only the unrolled code's table (implies --unrolled --no-straight)")
     args = ap.parse_args(argv)
     if args.unrolled_only:
         args.unrolled = args.no_straight = True
@@ -408,19 +434,22 @@ def main(argv=None) -> int:
         unrolled_results = {}
         for name in names if args.unrolled else ():
             unrolled_results[name] = u = unrolled(name, paths[name], args.states, args.repeat, so)
-            ok = ok and u["err"] < 1e-9
+            ok = ok and all(u[a]["err"] < 1e-9 for a in ("FD", "∇ID", "∇FD"))
             print(f"({name}: unrolled, {u['n']} DoF)", file=sys.stderr, flush=True)
     if unrolled_results:
-        print("| Robot | DoF | C lines | generate s | gcc -O2 s | unrolled FD µs | looped FD µs | aba µs | "
-              "unrolled / aba | looped / aba | max rel. error |")
-        print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
-        for name, u in unrolled_results.items():
-            print(f"| {name} | {u['n']} | {u['lines']} | {u['generate']:.2f} | {u['compile']:.2f} | "
-                  f"{u['unrolled'] * 1e6:.2f} | {u['looped'] * 1e6:.2f} | {u['pinocchio'] * 1e6:.2f} | "
-                  f"{u['ratio']:.3f} | {u['looped_ratio']:.3f} | {u['err']:.1e} |")
-        print("\nunrolled: fmugen.codegen.unrolled_aba, the robot's ABA as straight-line C (numbers folded), compiled "
-              "alone with -O2 (the gcc column: its wall time) and called in a C loop; looped: fmugen_chain_fd; "
-              "ratios: medians of the per-round ratios to Pinocchio's aba (Python's call overhead subtracted).\n")
+        print("| Robot | DoF | Algorithm | C lines | generate s | gcc -O2 s | unrolled µs | looped µs | "
+              "Pinocchio µs | unrolled / Pinocchio | looped / Pinocchio | max rel. error |")
+        print("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+        for name, r in unrolled_results.items():
+            for a in ("FD", "∇ID", "∇FD"):
+                u = r[a]
+                print(f"| {name} | {r['n']} | {a} ({PINOCCHIO[a]}) | {u['lines']} | {u['generate']:.2f} | "
+                      f"{u['compile']:.2f} | {u['unrolled'] * 1e6:.2f} | {u['looped'] * 1e6:.2f} | "
+                      f"{u['pinocchio'] * 1e6:.2f} | {u['ratio']:.3f} | {u['looped_ratio']:.3f} | {u['err']:.1e} |")
+        print("\nunrolled: fmugen.codegen.unrolled_aba (FD) and fmugen.codegen.unrolled_derivatives (∇ID, ∇FD), the "
+              "robot's passes as straight-line C (numbers folded), compiled alone with -O2 (the gcc column: its wall "
+              "time) and called in a C loop; looped: the runtime's fmugen_chain_fd, _id_jacobian, _fd_jacobian; "
+              "ratios: medians of the per-round ratios to Pinocchio (Python's call overhead subtracted).\n")
     if args.unrolled_only:
         print(f"check against Pinocchio (relative, 1e-9): {'ok' if ok else 'FAILED'}")
         return 0 if ok else 1
