@@ -100,3 +100,112 @@ def test_not_positive_definite_and_refusals():
         ok.close()
     with pytest.raises(ValueError, match="kind"):
         unrolled_jacobian([True], [-1], lc[:1], [0, 0, -9.81], kind="ddq")
+
+
+def _tree_robot(n, seed, friction_parameter=True, wrench_on=()):
+    """A random tree (general joint axes, prismatic joints, joint offsets, an end-effector frame) as a
+    fmugen Robot, with one symbolic parameter (a Coulomb level) when asked."""
+    import sympy as sp
+
+    from fmugen.robot.description import JOINTS, PRISMATIC, REVOLUTE, Body, Frame, Parameter, Robot
+    from test_tree_dynamics import random_tree
+
+    _, revolute, parents, bodies = random_tree(n, seed=seed)
+    rng = np.random.default_rng(seed)
+    F = lambda v: tuple(sp.Float(float(x)) for x in v)  # noqa: E731
+    FM = lambda M: tuple(F(row) for row in np.asarray(M))  # noqa: E731
+    fc = sp.Symbol("fc", real=True) if friction_parameter else sp.Float(0.4)
+    rb = tuple(Body(name=f"b{i}", joint=REVOLUTE if revolute[i] else PRISMATIC, parent=parents[i],
+                    rotation=FM(b["R"]), translation=F(b["p"]), axis=F(b["axis"]), mass=sp.Float(b["mass"]),
+                    com=F(b["com"]), inertia_com=FM(b["inertia"]), rotor_inertia=sp.Float(b["rotor_inertia"]),
+                    damping=sp.Float(b["damping"]), offset=sp.Float(rng.uniform(-0.5, 0.5)),
+                    friction=fc if i % 2 else 0, friction_velocity=sp.Float(0.1), external_wrench=i in wrench_on)
+               for i, b in enumerate(bodies))
+    return Robot(name="tree", convention=JOINTS, links=(), gravity=F([0, 0, -9.81]), bodies=rb,
+                 frames=(Frame("tool", n - 3, FM(np.eye(3)), F([0.05, 0.1, -0.2])),), end_frame="tool",
+                 parameters=(Parameter("fc", fc, 0.7),) if friction_parameter else ())
+
+
+@pytest.mark.parametrize("n", [8, 14])
+def test_folded_models_get_unrolled_code_equal_to_the_loops(n):
+    """A model whose robot numbers are all known (parameters folded) gets code of its own instead of the
+    runtime's loops -- forward dynamics with the end-effector position, its Jacobian with dp_ee/dq (up to
+    UNROLLED_JACOBIAN_MAX bodies; beyond, the loops' Jacobian beside the unrolled forward dynamics), the
+    inverse dynamics and its Jacobian -- and evaluates what the loops evaluate with the parameter set."""
+    from fmugen.codegen.c_code import generate_c
+    from fmugen.codegen.c_harness import CompiledModel
+    from fmugen.codegen.chain import UNROLLED_JACOBIAN_MAX
+    from fmugen.dynamics.manipulator import Manipulator
+
+    arm = Manipulator(_tree_robot(n, seed=11))
+    rng = np.random.default_rng(6)
+    for kind, m in (("fd", arm.state_space_model(outputs=("p_ee", "qdd"), strategy="loops")),
+                    ("id", arm.inverse_dynamics_model(strategy="loops"))):
+        looped, folded = generate_c(m).source, generate_c(m.with_parameters_folded()).source
+        assert "fmugen_unrolled_" not in looped and "fmugen_chain_" in looped
+        assert f"fmugen_unrolled_{kind}_" in folded
+        assert (f"fmugen_unrolled_{'jacobian' if kind == 'fd' else 'id_jacobian'}_" in folded) == \
+            (n <= UNROLLED_JACOBIAN_MAX)
+        assert ("fmugen_chain_" in folded) == (n > UNROLLED_JACOBIAN_MAX)
+        p = np.array([v.start for v in m.parameters], float)
+        with CompiledModel.build(looped) as cl, CompiledModel.build(folded) as cf:
+            for _ in range(3):
+                if kind == "fd":
+                    x, u = np.r_[rng.uniform(-3, 3, n), rng.uniform(-2, 2, n)], rng.uniform(-10, 10, n)
+                else:
+                    x, u = [], np.r_[rng.uniform(-3, 3, n), rng.uniform(-2, 2, n), rng.uniform(-3, 3, n)]
+                for a, b in zip(cl.evaluate(p, 0.0, x, u), cf.evaluate([], 0.0, x, u)):
+                    if a.size:
+                        assert rel(b, a) < 1e-12
+                for a, b in zip(cl.jacobian(p, 0.0, x, u), cf.jacobian([], 0.0, x, u)):
+                    if a.size:
+                        assert rel(b, a) < 1e-11
+
+
+def test_external_wrenches_keep_the_loops():
+    """External wrenches are the loops' alone (the unrolled code has none): a folded model with them keeps
+    the runtime call."""
+    from fmugen.codegen.c_code import generate_c
+    from fmugen.dynamics.manipulator import Manipulator
+
+    arm = Manipulator(_tree_robot(8, seed=12, friction_parameter=False, wrench_on=(5,)))
+    src = generate_c(arm.state_space_model(outputs=("p_ee",), strategy="loops")).source
+    assert "fmugen_chain_fd(" in src and "fmugen_unrolled_" not in src
+
+
+def test_folded_urdf_fmu_equals_the_looped_fmu(tmp_path):
+    """`fmugen build panda.urdf --fold all` (9 joints, two of them prismatic; the file's damping folded)
+    gives an FMU with the unrolled dynamics and Jacobian that validates and runs, ME and CS, as the
+    FMU with the loops and the damping as a parameter does."""
+    import importlib.metadata
+    from pathlib import Path
+
+    from fmpy import simulate_fmu
+    from fmpy.validation import validate_fmu
+
+    from fmugen.cli import main
+
+    try:
+        root = Path(importlib.metadata.distribution("example-robot-data").locate_file(
+            "cmeel.prefix/share/example-robot-data/robots"))
+    except importlib.metadata.PackageNotFoundError:
+        pytest.skip("example-robot-data is not installed (pip install -e '.[test]')")
+    urdf = root / "panda_description/urdf/panda.urdf"
+    fmus = {}
+    for fold in ("none", "all"):
+        fmus[fold] = tmp_path / f"panda_{fold}.fmu"
+        assert main(["build", str(urdf), "-o", str(fmus[fold]), "--fmi-type", "both", "--fold", fold]) == 0
+        assert validate_fmu(str(fmus[fold])) == []
+    import zipfile
+
+    with zipfile.ZipFile(fmus["all"]) as z:
+        model_c = z.read("sources/model.c").decode()
+    assert "fmugen_unrolled_jacobian_" in model_c and "fmugen_chain_" not in model_c
+    start = {"tau[1]": 3.0, "tau[4]": -2.0, "q[2]": 0.3, "qd[6]": 0.5}
+    outs = ["q[1]", "q[4]", "q[9]", "p_ee[3]"]
+    for fmi_type in ("ModelExchange", "CoSimulation"):
+        tol = {"relative_tolerance": 1e-10} if fmi_type == "ModelExchange" else {}  # CVode: steps chosen alike
+        r = [simulate_fmu(str(fmus[f]), fmi_type=fmi_type, stop_time=0.2, output_interval=0.02, start_values=start,
+                          output=outs, **tol) for f in ("none", "all")]
+        a, b = (np.column_stack([x[o] for o in outs]) for x in r)
+        assert np.abs(a - a[0]).max() > 1e-3 and rel(b, a) < 1e-8, fmi_type

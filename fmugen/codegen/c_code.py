@@ -59,7 +59,7 @@ from sympy.printing.precedence import precedence
 
 from ..errors import FmugenError
 from .model import SymbolicModel, Variable, physical_range
-from .chain import ChainDynamics, chain_call_lines, chain_ops
+from .chain import ChainDynamics, chain_call_lines, chain_ops, unrolled_choice, unrolled_step_lines
 from .cse import common_subexpressions
 from .op_count import OpCount
 from .program import Assign, Program, SolveSPD
@@ -414,12 +414,33 @@ def _reserved(name: str) -> bool:
     return name.startswith("_") or name.startswith(RESERVED_PREFIXES) or name in PREFIXED_NAMES
 
 
+def _number_or_none(e) -> Optional[float]:
+    """The value of a reduced expression (sympy or a CSE Ref) that is a number, else None."""
+    x = getattr(e, "expr", e)
+    return float(x) if getattr(x, "is_Number", False) else None
+
+
+_UNROLLED_STATEMENT = re.compile(r"^\s*const double t\d+ = (.*);$", re.M)
+
+
+def _function_ops_of(source: str) -> OpCount:
+    """The operations of one unrolled step's C (its statements; a sine-cosine pair counts as sin and cos)."""
+    total = OpCount()
+    for m in _UNROLLED_STATEMENT.finditer(source):
+        total = total + count_c_expression(m.group(1))
+    pairs = source.count("UNROLLED_SINCOS(") - 1  # the macro's own definition
+    if pairs > 0:
+        total = total + OpCount(calls=(("cos", pairs), ("sin", pairs)))
+    return total
+
+
 class _Names:
     """Unique C names for sympy symbols."""
 
     def __init__(self):
         self.map: dict = {}
         self.used: set = set(RESERVED_NAMES)
+        self.support: dict = {}  # file-scope functions the bodies call: name -> C source (unrolled dynamics)
 
     def add(self, sym: sp.Symbol, preferred: Optional[str] = None) -> str:
         if sym in self.map:
@@ -646,11 +667,20 @@ def lower(
         st = ent[1]
         if ent[0] == "chain":
             codes = [emit_expr(reduced[idx], out, ind) for _, _, idx in ent[3]]
-            lines, arr, offset, free_line = chain_call_lines(st, body.n_solves, codes, ind)
-            body.n_solves += 1
-            body.n_chains += 1
+            consts = [reduced[idx] for _, _, idx in ent[3][3 * st.n:]]
+            numbers = [_number_or_none(e) for e in consts]
+            if unrolled_choice(st, numbers):  # the robot's numbers are known: code of its own
+                lines, arr, fn, source = unrolled_step_lines(st, numbers, codes[:3 * st.n], ind)
+                names.support[fn] = source
+                offset, free_line = 0, None
+                body.n_solves += 1
+                body.ops = body.ops + _function_ops_of(source)
+            else:
+                lines, arr, offset, free_line = chain_call_lines(st, body.n_solves, codes, ind)
+                body.n_solves += 1
+                body.n_chains += 1
+                body.loop_ops = body.loop_ops + chain_ops(st.n, st.kind, len(st.external))
             out.extend(lines)
-            body.loop_ops = body.loop_ops + chain_ops(st.n, st.kind, len(st.external))
             # the results stay in the call's array: X[i] prints as arr[offset + i] (no copies;
             # stores of consecutive entries become memcpy, see _block_copies)
             for i, xs in enumerate(st.X):
@@ -1182,6 +1212,7 @@ def generate_c(
              + ("#include <stdlib.h>\n" if looped else "")
              + '#include "fmugen_model.h"' + ('\n#include "chain_dynamics.h"' if looped else ""),
              "\n".join(d for d in decls if d),
+             *names.support.values(),
              "/* dx = f(t, x, u, p) and y = g(t, x, u, p) in one pass */\n" + evaluate]
     if has_jac:
         parts.append("/* exact partial derivatives, dense row-major */\n" + jac_src)

@@ -429,6 +429,8 @@ class BodyFrame:
     mass: float = 0.0
     com: tuple = (0.0, 0.0, 0.0)  # B_i coordinates
     inertia_com: tuple = ((0.0,) * 3,) * 3  # about the COM, B_i axes
+    Q: tuple = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))  # B_i's axes in F_i (Q e_z = the joint axis)
+    shift: float = 0.0  # B_i's origin is F_i's moved by shift along the joint axis
 
 
 def _nnz(x) -> int:
@@ -499,7 +501,8 @@ def body_frames(revolute: Sequence[bool], parents: Sequence[int], constants, shi
         M = 0.5 * (M + M.T)
         out.append(BodyFrame(par, bool(revolute[i]), Rc, pc, [[float(x) for x in row] for row in M],
                              float(L[_ROTOR]), float(L[_DAMPING]), float(L[_FRICTION]), float(L[_FRICTION_V]),
-                             m, tuple(float(x) for x in c), tuple(tuple(float(x) for x in row) for row in Ic)))
+                             m, tuple(float(x) for x in c), tuple(tuple(float(x) for x in row) for row in Ic),
+                             tuple(tuple(float(x) for x in row) for row in Q), float(d[i])))
     return out
 
 
@@ -508,8 +511,9 @@ def _is_identity(R) -> bool:
     return bool(np.all(R == np.eye(3)))
 
 
-def _aba(P: Program, bodies: list, gravity, q, qd, tau, locked=frozenset()):
-    """qdd (list of values) by the articulated-body algorithm over values q, qd, tau.
+def _aba(P: Program, bodies: list, gravity, q, qd, tau, locked=frozenset(), out: str = "qdd"):
+    """qdd (list of values) by the articulated-body algorithm over values q, qd, tau, written to the C
+    array ``out`` (its first n entries).
 
     ``locked``: bodies whose joints are held (q_i a constant, qd_i = qdd_i = 0): each is welded to its
     parent -- its articulated inertia and bias force pass to the parent whole, no projection."""
@@ -665,12 +669,12 @@ def _aba(P: Program, bodies: list, gravity, q, qd, tau, locked=frozenset()):
         a = [P.add(ap[k], c[i][k]) for k in range(6)]
         if i in locked:
             qdd[i] = 0.0
-            P.effect(f"qdd[{i}] = 0.0;", [])
+            P.effect(f"{out}[{i}] = 0.0;", [])
             acc[i] = a
             continue
         Ua = P.sop([(U[i][k], a[k]) for k in range(6)])
         qdd[i] = P.sop([(u[i], Dinv[i]), (-1.0, Ua, Dinv[i])])
-        P.effect(f"qdd[{i}] = {c_value(qdd[i])};", [qdd[i]])
+        P.effect(f"{out}[{i}] = {c_value(qdd[i])};", [qdd[i]])
         a[j] = P.add(a[j], qdd[i])
         acc[i] = a
     return qdd
@@ -695,7 +699,8 @@ class UnrolledFD:
 #: exact k pi/2_1 for |k| < 2^20) and fdlibm's kernel polynomials on [-pi/4, pi/4] (errors below
 #: 1e-16 absolute); libm beyond |x| = 1e5 and for NaN or infinity.  glibc's sincos takes about 100
 #: instructions, this about 40 -- a tenth of the forward dynamics of a 30-body tree.
-SINCOS_C = r"""static inline void unrolled_sincos(double x, double *s, double *c)
+SINCOS_C = r"""#ifndef UNROLLED_SINCOS
+static inline void unrolled_sincos(double x, double *s, double *c)
 {
     if (!(fabs(x) < 1e5)) {
         *s = sin(x);
@@ -712,27 +717,37 @@ SINCOS_C = r"""static inline void unrolled_sincos(double x, double *s, double *c
         + z * (2.48015872894767294178e-05 + z * (-2.75573143513906633035e-07
         + z * (2.08757232129817482790e-09 + z * -1.13596475577881948265e-11))))));
     const int n = (int)k;
-    const double v[2] = {sr, cr};
+    double v[2];
+    v[0] = sr;
+    v[1] = cr;
     /* quadrant n mod 4: (sin, cos) = (sr, cr), (cr, -sr), (-sr, -cr), (-cr, sr) */
     *s = (n & 2 ? -1.0 : 1.0) * v[n & 1];
     *c = ((n + 1) & 2 ? -1.0 : 1.0) * v[(n & 1) ^ 1];
 }
 #define UNROLLED_SINCOS(x, s, c) unrolled_sincos(x, s, c)
+#if defined(__GNUC__)
+#define UNROLLED_BLOCK static __attribute__((noinline)) int
+#else
+#define UNROLLED_BLOCK static int
+#endif
+#endif
 """
 
 _TOKEN = re.compile(r"\bt\d+\b")
 
 
 def emit_c(P: Program, name: str, params: Sequence[str], header: Sequence[str], finish: Sequence[str],
-           static: bool = False, block_statements: int = 200) -> tuple:
+           static: bool = False, block_statements: int = 200, standalone: bool = True) -> tuple:
     """The live statements of ``P`` as a C file: one function per group of consecutive blocks (about
     ``block_statements`` statements each; not inlined), called in order by the entry function
     ``int name(params)``, which then runs the ``finish`` lines and returns 0.  A value used by a later
     group goes through the work array ``w``, so each function has short live ranges: one function of
     thousands of statements makes gcc's register allocator spill at random and take seconds (Atlas:
     10 s at -O2, 136 kB of code); cut, it compiles in a fraction of that.  A statement kept for its
-    effect may ``return`` a nonzero status, which the entry function passes on.  Returns (source,
-    statements, functions)."""
+    effect may ``return`` a nonzero status, which the entry function passes on.  The sine-cosine helper
+    is defined once per C file (guarded) and the functions are compiled at -O1 (gcc's options pushed and
+    popped around them), so several such pieces can share a file with other code; ``standalone`` adds
+    the ``#include <math.h>`` a file of its own needs.  Returns (source, statements, functions)."""
     args = [re.split(r"[ *]+", p_.strip())[-1] for p_ in params]
     stmts = P.live()
     home = {st[0]: st[3] for st in stmts if st[0] is not None}
@@ -769,19 +784,15 @@ def emit_c(P: Program, name: str, params: Sequence[str], header: Sequence[str], 
             trig.setdefault((blk, text[4:-1]), {})[text[:3]] = name_
     fn = [f"{name}_b{b}" for b in sorted(by_block)]
     lines = [*header,
-             "#include <math.h>", "",
+             *(["#include <math.h>", ""] if standalone else []),
              "#if defined(__GNUC__) && !defined(__clang__)",
              "/* straight-line code: -O2's passes beyond -O1 (scheduling, PRE, SLP vectorising) measured no faster",
              " * here (Atlas, Talos, iiwa: O1/O2 time 0.94-1.02) and take almost half of gcc's time (Talos: 2.9 s",
              " * CPU at -O2, 1.8 s at -O1) */",
+             "#pragma GCC push_options",
              "#pragma GCC optimize(\"O1\")",
              "#endif",
              SINCOS_C,
-             "#if defined(__GNUC__)",
-             "#define UNROLLED_BLOCK static __attribute__((noinline)) int",
-             "#else",
-             "#define UNROLLED_BLOCK static int",
-             "#endif",
              ""]
     for f, b in zip(fn, sorted(by_block)):
         lines.append(f"UNROLLED_BLOCK {f}({', '.join(params)}, double *w)")
@@ -820,6 +831,7 @@ def emit_c(P: Program, name: str, params: Sequence[str], header: Sequence[str], 
     lines.extend("    " + x for x in finish)
     lines.append("    return 0;")
     lines.append("}")
+    lines += ["#if defined(__GNUC__) && !defined(__clang__)", "#pragma GCC pop_options", "#endif"]
     return "\n".join(lines) + "\n", len(stmts), len(fn)
 
 

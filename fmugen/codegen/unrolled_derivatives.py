@@ -41,7 +41,7 @@ import numpy as np
 
 from .unrolled_aba import Program, Var, _aba, body_frames, c_value, congruence, cross, emit_c
 
-__all__ = ["UnrolledJacobian", "unrolled_jacobian", "from_kernels", "evaluate_numeric",
+__all__ = ["UnrolledJacobian", "unrolled_jacobian", "chain_step", "STEP_KINDS", "from_kernels", "evaluate_numeric",
            "CompiledUnrolledJacobian"]
 
 _EYE = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
@@ -120,19 +120,11 @@ def _friction_slope_terms(P: Program, b, qd):
     return terms
 
 
-def _rnea_derivatives(P: Program, bodies: list, gravity, q, qd, qdd, block0: int):
-    """Recursive Newton-Euler at (q, qd, qdd) and its analytical derivatives: (nq, nd, Mlow, tauF) with
-    nq[i, j], nd[i, j] = -∂ID_i/∂q_j, -∂ID_i/∂qd_j for every related pair (one joint on the other's path),
-    Mlow[i, j] = M[i][j] for j on i's path (rotor inertia on the diagonal) and tauF[i] = S_i . F_i (ID_i
-    without rotor inertia and friction).  Blocks block0 .. block0 + 4n."""
+def _world_kinematics(P: Program, bodies: list, q, block0: int):
+    """World pose of every joint-axis frame B_i (R_i, p_i), the motion subspaces S_i and the body inertias
+    at the world origin (ten numbers each, see _si6); body i in block block0 + i."""
     n = len(bodies)
-    path, subtree = _paths(bodies)
-    children = [[] for _ in range(n)]
-    for i, b in enumerate(bodies):
-        if b.parent >= 0:
-            children[b.parent].append(i)
-
-    # world kinematics: R_i = R_parent Rc_i Rz(q_i), p_i, S_i, the body inertias at the world origin
+    # R_i = R_parent Rc_i Rz(q_i) (Rc_i mostly a signed permutation: free)
     R, p, S, I = [None] * n, [None] * n, [None] * n, [None] * n
     for i, b in enumerate(bodies):
         P.block = block0 + i
@@ -161,6 +153,23 @@ def _rnea_derivatives(P: Program, bodies: list, gravity, q, qd, qdd, block0: int
             P.sop([(Jw[0][2],), (-m, c[0], c[2])]),
             P.sop([(Jw[1][2],), (-m, c[1], c[2])])]
         R[i], p[i] = Ri, pi
+
+    return R, p, S, I
+
+
+def _rnea_derivatives(P: Program, bodies: list, gravity, q, qd, qdd, block0: int):
+    """Recursive Newton-Euler at (q, qd, qdd) and its analytical derivatives: (nq, nd, Mlow, tauF) with
+    nq[i, j], nd[i, j] = -∂ID_i/∂q_j, -∂ID_i/∂qd_j for every related pair (one joint on the other's path),
+    Mlow[i, j] = M[i][j] for j on i's path (rotor inertia on the diagonal) and tauF[i] = S_i . F_i (ID_i
+    without rotor inertia and friction).  Blocks block0 .. block0 + 4n."""
+    n = len(bodies)
+    path, subtree = _paths(bodies)
+    children = [[] for _ in range(n)]
+    for i, b in enumerate(bodies):
+        if b.parent >= 0:
+            children[b.parent].append(i)
+
+    R, p, S, I = _world_kinematics(P, bodies, q, block0)
 
     # recursive Newton-Euler at qdd, forward: v, a, momenta h = I v, forces f = I a + v x* h, and per
     # joint dv_j = S_j x v_parent, w_j = S_j x a_parent - dv_j x v_parent (u_j = -2 dv_j)
@@ -248,10 +257,10 @@ def _rnea_derivatives(P: Program, bodies: list, gravity, q, qd, qdd, block0: int
     return nq, nd, Mlow, tauF
 
 
-def _fd_jacobian(P: Program, bodies: list, gravity, q, qd, tau):
-    """qdd (n values) and J (n x 3n values) = [∂qdd/∂q, ∂qdd/∂qd, M^-1]."""
+def _fd_jacobian(P: Program, bodies: list, gravity, q, qd, tau, out: str = "qdd"):
+    """qdd (n values, written to the C array ``out``) and J (n x 3n values) = [∂qdd/∂q, ∂qdd/∂qd, M^-1]."""
     n = len(bodies)
-    qdd = _aba(P, bodies, gravity, q, qd, tau)
+    qdd = _aba(P, bodies, gravity, q, qd, tau, out=out)
     block0 = 3 * n + 2  # the blocks after those of the ABA
     nq, nd, Mlow, _ = _rnea_derivatives(P, bodies, gravity, q, qd, qdd, block0)
     path, subtree = _paths(bodies)
@@ -393,6 +402,90 @@ def from_kernels(kernels, kind: str = "fd", **kw) -> UnrolledJacobian:
     """:func:`unrolled_jacobian` of a :class:`fmugen.batch.Kernels`."""
     return unrolled_jacobian(kernels.revolute, kernels.parents, kernels.constants, np.asarray(kernels.globals)[:3],
                              kind, **kw)
+
+
+# ------------------------------------------------------------ a step of a generated model
+def _end_effector(P: Program, bodies: list, q, ee_body: int, ee_position, block0: int):
+    """p_ee (3 values) and dp_ee/dq (3 x n values): the point ``ee_position`` of body ``ee_body``'s frame
+    F (-1: none, zeros).  B = F Q with its origin moved by ``shift`` along the joint axis, so
+    p_ee = p_B + R_B (Q^T ee_position - shift e_z); a joint j on the body's path moves it by
+    z_j x (p_ee - p_j) (revolute) or z_j (prismatic) per unit of q_j."""
+    n = len(bodies)
+    dp = [[0.0] * n for _ in range(3)]
+    if ee_body < 0:
+        return [0.0, 0.0, 0.0], dp
+    R, p, S, _ = _world_kinematics(P, bodies, q, block0)  # the same statements as the passes' (shared)
+    b = bodies[ee_body]
+    c = np.array(b.Q).T @ np.asarray(ee_position, float) - np.array([0.0, 0.0, b.shift])
+    pe = [P.sop([(p[ee_body][r],)] + [(R[ee_body][r][k], float(c[k])) for k in range(3)]) for r in range(3)]
+    j = ee_body
+    while j >= 0:
+        if bodies[j].revolute:
+            z = S[j][:3]
+            col = cross(P, z, [P.sop([(pe[r],), (-1.0, p[j][r])]) for r in range(3)])
+        else:
+            col = S[j][3:]
+        for r in range(3):
+            dp[r][j] = col[r]
+        j = bodies[j].parent
+    return pe, dp
+
+
+#: what a runtime step computes (fmugen.codegen.chain.ChainDynamics: kind -> the layout of X)
+STEP_KINDS = ("fd", "jacobian", "id", "id_jacobian")
+
+
+def chain_step(kind: str, revolute: Sequence[bool], parents: Sequence[int], constants, gravity, ee_body: int,
+               ee_position, name: str) -> UnrolledJacobian:
+    """A static C function computing what the runtime call of a :class:`fmugen.codegen.chain.ChainDynamics`
+    step of this ``kind`` computes, for the robot's numbers (no external wrenches)::
+
+        static int NAME(const double *q, const double *qd, const double *u, double *x);
+
+    u is tau (fd, jacobian) or qdd (id, id_jacobian); x receives the step's X: fd [qdd, p_ee],
+    jacobian [qdd, dqdd (n x 3n), dp_ee/dq (3 x n)], id [tau], id_jacobian [tau, dtau (n x 3n)].
+    Returns the runtime's statuses (FMUGEN_OK, _NOT_POSITIVE_DEFINITE, _NOT_FINITE).  The text is
+    one piece of a larger C file (:func:`fmugen.codegen.unrolled_aba.emit_c`, ``standalone=False``)."""
+    if kind not in STEP_KINDS:
+        raise ValueError(f"kind {kind!r}: one of {', '.join(STEP_KINDS)}")
+    n = len(revolute)
+    bodies = body_frames(revolute, parents, constants)
+    P = Program()
+    q, qd, u = ([Var(f"{a}[{i}]") for i in range(n)] for a in ("q", "qd", "u"))
+    J = None
+    if kind == "fd":
+        _aba(P, bodies, gravity, q, qd, u, out="x")
+    elif kind == "jacobian":
+        _, J = _fd_jacobian(P, bodies, gravity, q, qd, u, out="x")
+    else:
+        tau, J = _id_jacobian(P, bodies, gravity, q, qd, u)
+        P.block = 11 * n + 3
+        for i in range(n):
+            P.effect(f"x[{i}] = {c_value(tau[i])};", [tau[i]])
+    P.block = 11 * n + 4  # after the passes' blocks (blocks follow the order of emission)
+    if kind != "id":
+        for r in range(n if kind != "fd" else 0):
+            for c in range(3 * n):
+                P.effect(f"x[{n + 3 * n * r + c}] = {c_value(J[r][c])};", [J[r][c]])
+    if kind in ("fd", "jacobian"):
+        pe, dp = _end_effector(P, bodies, q, ee_body, ee_position, 11 * n + 5)
+        P.block = 12 * n + 6
+        at = n if kind == "fd" else n + 3 * n * n
+        if kind == "fd":
+            for r in range(3):
+                P.effect(f"x[{at + r}] = {c_value(pe[r])};", [pe[r]])
+        else:
+            for r in range(3):
+                for j in range(n):
+                    P.effect(f"x[{at + n * r + j}] = {c_value(dp[r][j])};", [dp[r][j]])
+    words = {"fd": "forward dynamics and end-effector position", "jacobian": "forward dynamics, its Jacobian and "
+             "the end effector's", "id": "inverse dynamics", "id_jacobian": "inverse dynamics and its Jacobian"}[kind]
+    header = [f"/* {name}: the {words} of the {n}-body robot, generated by fmugen.codegen.unrolled_derivatives",
+              " * (its numbers folded into the code) */"]
+    source, count, nblocks = emit_c(P, name, ("const double *q", "const double *qd", "const double *u", "double *x"),
+                                    header, [f"for (int i = 0; i < {n}; i++)", "    if (!isfinite(x[i])) return 2;"],
+                                    static=True, standalone=False)
+    return UnrolledJacobian(name, n, kind, source, count, nblocks)
 
 
 # ------------------------------------------------------------ the C harness (tests, benchmarks)
