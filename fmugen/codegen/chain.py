@@ -27,6 +27,11 @@ generator (:func:`fmugen.codegen.c_code.lower`) knows how to print it; the
 Python evaluators (:mod:`fmugen.codegen.python_code`: linearisation, trim)
 call the same C loops through ctypes (:func:`evaluate_chain`; the runtime file
 is compiled once per process into a temporary folder).
+
+When every body constant is a number at generation time (parameters folded)
+the C generator prints the step as a call of code generated for the robot
+instead (:func:`unrolled_choice`, :func:`unrolled_step_lines`): the same
+model, its numbers folded into straight-line code.
 """
 from __future__ import annotations
 
