@@ -379,8 +379,9 @@ def unrolled(name: str, path: Path, states: int, repeat: int, so) -> dict:
     out = {"n": n}
     for a in got:
         tu, tl, tp = (np.array(x) for x in t[a])
-        out[a] = {"err": err[a], "lines": gens[a].lines, "generate": generate[a], "compile": compiled[a].compile_seconds,
-                  "unrolled": statistics.median(tu), "looped": statistics.median(tl), "pinocchio": statistics.median(tp),
+        out[a] = {"err": err[a], "lines": gens[a].lines, "generate": generate[a],
+                  "compile": compiled[a].compile_seconds, "unrolled": statistics.median(tu),
+                  "looped": statistics.median(tl), "pinocchio": statistics.median(tp),
                   "ratio": statistics.median(tu / tp), "looped_ratio": statistics.median(tl / tp)}
     return out
 
@@ -446,7 +447,8 @@ def main(argv=None) -> int:
                 print(f"| {name} | {r['n']} | {a} ({PINOCCHIO[a]}) | {u['lines']} | {u['generate']:.2f} | "
                       f"{u['compile']:.2f} | {u['unrolled'] * 1e6:.2f} | {u['looped'] * 1e6:.2f} | "
                       f"{u['pinocchio'] * 1e6:.2f} | {u['ratio']:.3f} | {u['looped_ratio']:.3f} | {u['err']:.1e} |")
-        print("\nunrolled: fmugen.codegen.unrolled_aba (FD) and fmugen.codegen.unrolled_derivatives (∇ID, ∇FD), the "
+        print("\nunrolled: fmugen.codegen.unrolled_aba (FD) and fmugen.codegen.unrolled_derivatives (∇ID, ∇FD), "
+              "the "
               "robot's passes as straight-line C (numbers folded), compiled alone with -O2 (the gcc column: its wall "
               "time) and called in a C loop; looped: the runtime's fmugen_chain_fd, _id_jacobian, _fd_jacobian; "
               "ratios: medians of the per-round ratios to Pinocchio (Python's call overhead subtracted).\n")

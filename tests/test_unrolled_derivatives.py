@@ -26,7 +26,8 @@ def test_equals_pinocchio(name):
     iv = [m[1] for m in mp]
     ix = np.ix_(iv, iv)
     n = kernels.n
-    fd, idj = CompiledUnrolledJacobian(from_kernels(kernels, "fd")), CompiledUnrolledJacobian(from_kernels(kernels, "id"))
+    fd = CompiledUnrolledJacobian(from_kernels(kernels, "fd"))
+    idj = CompiledUnrolledJacobian(from_kernels(kernels, "id"))
     try:
         rng = np.random.default_rng(4)
         q, qd, x = rng.uniform(-1, 1, (3, n)), rng.uniform(-1, 1, (3, n)), rng.uniform(-3, 3, (3, n))

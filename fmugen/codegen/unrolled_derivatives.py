@@ -45,7 +45,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .unrolled_aba import Program, Var, _aba, body_frames, c_value, congruence, cross, emit_c
+from .unrolled_aba import (CompiledUnrolled, Program, UnrolledFD, Var, _aba, body_frames, c_value, congruence,
+                           cross, emit_c)
 
 __all__ = ["UnrolledJacobian", "unrolled_jacobian", "chain_step", "STEP_KINDS", "from_kernels", "evaluate_numeric",
            "CompiledUnrolledJacobian"]
@@ -235,7 +236,8 @@ def _rnea_derivatives(P: Program, bodies: list, gravity, q, qd, qdd, block0: int
         KS, Kdv = k_apply(i, Si), k_apply(i, dv[i])
         g1, g2, g3 = _cross_terms(HC[i][:3], Si[:3]), _cross_terms(HC[i][3:], Si[3:]), _cross_terms(HC[i][3:], Si[:3])
         al[i] = [P.sop(t) for t in _apply_terms(IC6, Si)] + \
-                [P.sop([(KS[k],)] + g1[k] + g2[k]) for k in range(3)] + [P.sop([(KS[3 + k],)] + g3[k]) for k in range(3)]
+                [P.sop([(KS[k],)] + g1[k] + g2[k]) for k in range(3)] + \
+                [P.sop([(KS[3 + k],)] + g3[k]) for k in range(3)]
         # P_i = IC u_i + K S_i + S_i x* HC with u_i = -2 dv_i;  Q_i = S_i x* F - (IC w_i + K dv_i + dv_i x* HC)
         Pv[i] = [P.sop(_scaled(_apply_terms(IC6, dv[i]), -2.0)[r] + [(KS[r],)] + _crf_terms(Si, HC[i])[r])
                  for r in range(6)]
@@ -346,18 +348,10 @@ _KINDS = {"fd": (_fd_jacobian, ("q", "qd", "tau"), "qdd", "the forward dynamics 
 
 
 @dataclass
-class UnrolledJacobian:
-    """The generated C (see :class:`fmugen.codegen.unrolled_aba.UnrolledFD`); ``kind``: "fd" or "id"."""
-    name: str
-    n: int
-    kind: str
-    source: str
-    statements: int
-    blocks: int
-
-    @property
-    def lines(self) -> int:
-        return self.source.count("\n")
+class UnrolledJacobian(UnrolledFD):
+    """The generated C (as :class:`fmugen.codegen.unrolled_aba.UnrolledFD`); ``kind``: "fd" or "id" (the
+    functions of :func:`unrolled_jacobian`), or one of :data:`STEP_KINDS` (:func:`chain_step`)."""
+    kind: str = "fd"
 
 
 def unrolled_jacobian(revolute: Sequence[bool], parents: Sequence[int], constants, gravity, kind: str = "fd",
@@ -392,7 +386,7 @@ def unrolled_jacobian(revolute: Sequence[bool], parents: Sequence[int], constant
     source, count, nblocks = emit_c(P, name, params, header,
                                     [f"for (int i = 0; i < {n}; i++)", f"    if (!isfinite({out}[i])) return 2;"],
                                     static=static, block_statements=block_statements)
-    return UnrolledJacobian(name, n, kind, source, count, nblocks)
+    return UnrolledJacobian(name, n, source, count, nblocks, kind)
 
 
 def evaluate_numeric(revolute, parents, constants, gravity, q, qd, u, kind: str = "fd"):
@@ -491,7 +485,7 @@ def chain_step(kind: str, revolute: Sequence[bool], parents: Sequence[int], cons
     source, count, nblocks = emit_c(P, name, ("const double *q", "const double *qd", "const double *u", "double *x"),
                                     header, [f"for (int i = 0; i < {n}; i++)", "    if (!isfinite(x[i])) return 2;"],
                                     static=True, standalone=False)
-    return UnrolledJacobian(name, n, kind, source, count, nblocks)
+    return UnrolledJacobian(name, n, source, count, nblocks, kind)
 
 
 # ------------------------------------------------------------ the C harness (tests, benchmarks)
@@ -520,33 +514,16 @@ double unrolled_time(int k, const double *q, const double *qd, const double *u, 
 """
 
 
-class CompiledUnrolledJacobian:
+class CompiledUnrolledJacobian(CompiledUnrolled):
     """An :class:`UnrolledJacobian` compiled into a shared library in a temporary folder (as
     :class:`fmugen.codegen.unrolled_aba.CompiledUnrolledFD`).  ``derivatives(q, qd, u)`` returns, in the
     order of :meth:`fmugen.batch.Kernels.fd_derivatives` and ``id_derivatives``, (qdd, ∂qdd/∂q, ∂qdd/∂qd,
     M^-1) for u = tau (fd) or (tau, ∂tau/∂q, ∂tau/∂qd, M) for u = qdd (id)."""
 
     def __init__(self, gen: UnrolledJacobian, cc: str = "cc", flags: Sequence[str] = ("-O2",)):
-        import ctypes
-        import shutil
-
-        from .unrolled_aba import compile_shared
-
-        self.n, self.kind = gen.n, gen.kind
-        self._rm = shutil.rmtree
-        self._dir, self._lib, self.compile_seconds = compile_shared(gen.source, _HARNESS % {"name": gen.name}, cc,
-                                                                    flags, "the unrolled Jacobian")
-        vp = ctypes.c_void_p
-        self._lib.unrolled_rows.argtypes = [ctypes.c_int, ctypes.c_int, vp, vp, vp, vp, vp]
-        self._lib.unrolled_rows.restype = ctypes.c_int
-        self._lib.unrolled_time.argtypes = [ctypes.c_int, vp, vp, vp, vp, vp]
-        self._lib.unrolled_time.restype = ctypes.c_double
-
-    def _arrays(self, q, qd, u):
-        arrs = [np.ascontiguousarray(np.atleast_2d(np.asarray(a, dtype=float))) for a in (q, qd, u)]
-        if any(a.shape != arrs[0].shape or a.shape[1] != self.n for a in arrs):
-            raise ValueError(f"q, qd, {'tau' if self.kind == 'fd' else 'qdd'}: rows of {self.n} numbers of one shape")
-        return arrs
+        self.kind = gen.kind
+        self.inputs = ("q", "qd", "tau" if gen.kind == "fd" else "qdd")
+        super().__init__(gen.source, _HARNESS % {"name": gen.name}, gen.n, 5, cc, flags, "the unrolled Jacobian")
 
     def derivatives(self, q, qd, u) -> tuple:
         """(result, ∂/∂q, ∂/∂qd, third block) of every row of states (one row: without the leading axis)."""
@@ -569,15 +546,3 @@ class CompiledUnrolledJacobian:
         y, J = np.zeros(self.n), np.zeros(3 * self.n * self.n)
         return self._lib.unrolled_time(int(k), q.ctypes.data, qd.ctypes.data, u.ctypes.data, y.ctypes.data,
                                        J.ctypes.data)
-
-    def close(self):
-        if self._dir is not None:
-            self._lib = None
-            self._rm(self._dir, True)
-            self._dir = None
-
-    def __del__(self):
-        try:
-            self.close()
-        except Exception:
-            pass
