@@ -36,7 +36,7 @@ def test_folding():
 
 def test_inline_sincos(tmp_path):
     (tmp_path / "s.c").write_text("#include <math.h>\n" + SINCOS_C + "\nvoid many(int n, const double *x, double *s, "
-                                  "double *c) { for (int i = 0; i < n; i++) unrolled_sincos(x[i], s + i, c + i); }\n")
+                                  "double *c) { for (int i = 0; i < n; i++) fmugen_unrolled_sincos(x[i], s + i, c + i); }\n")
     subprocess.run(["cc", "-std=c99", "-O2", "-fPIC", "-shared", "-o", str(tmp_path / "s.so"), str(tmp_path / "s.c"),
                     "-lm"], check=True)
     lib = ctypes.CDLL(str(tmp_path / "s.so"))

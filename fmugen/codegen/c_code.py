@@ -428,7 +428,7 @@ def _function_ops_of(source: str) -> OpCount:
     total = OpCount()
     for m in _UNROLLED_STATEMENT.finditer(source):
         total = total + count_c_expression(m.group(1))
-    pairs = source.count("UNROLLED_SINCOS(") - 1  # the macro's own definition
+    pairs = source.count("FMUGEN_UNROLLED_SINCOS(") - 1  # the macro's own definition
     if pairs > 0:
         total = total + OpCount(calls=(("cos", pairs), ("sin", pairs)))
     return total
@@ -670,7 +670,7 @@ def lower(
             consts = [reduced[idx] for _, _, idx in ent[3][3 * st.n:]]
             numbers = [_number_or_none(e) for e in consts]
             if unrolled_choice(st, numbers):  # the robot's numbers are known: code of its own
-                lines, arr, fn, source = unrolled_step_lines(st, numbers, codes[:3 * st.n], ind)
+                lines, arr, fn, source = unrolled_step_lines(st, body.n_solves, numbers, codes[:3 * st.n], ind)
                 names.support[fn] = source
                 offset, free_line = 0, None
                 body.n_solves += 1

@@ -232,7 +232,7 @@ def chain_call_lines(st: ChainDynamics, index: int, b_code: list, ind: str) -> t
     function returns.
     """
     n, ne = st.n, len(st.external)
-    tag = f"chain{index}"
+    tag = f"fmugen_chain{index}"  # "fmugen": a prefix no model name takes (c_code.RESERVED_PREFIXES)
     joint = ", ".join(str(j) for j in st.joint_array())
     nb = 3 * n + NC * n + NG + 6 * ne
     nx = st.outputs_size()
@@ -275,8 +275,10 @@ def chain_call_lines(st: ChainDynamics, index: int, b_code: list, ind: str) -> t
 #: dynamics always -- 2-5x faster than the loops (``python examples/bench_derivatives.py --unrolled``:
 #: FD 0.10-0.23x Pinocchio's ``aba`` against 0.45-0.50x; gcc ~0.3 s of CPU per 1000 lines, linear in
 #: n) -- and their Jacobians up to this many bodies: the unrolled Jacobian is about half the loops' time
-#: there (iiwa 1.6 against 2.8 µs, HyQ 2.6 against 4.1 µs) for under a second of gcc, while at 30 bodies
-#: (Atlas) it saves a fifth (12.5 against 16 µs) for 4.7 s of gcc: a large tree keeps the loops.
+#: there (``--unrolled-only``, one run: iiwa 1.7 against 3.0 µs, HyQ 2.2 against 3.9 µs) for about a
+#: second of gcc, while at 30 bodies (Atlas) it saves a fifth (11.4 against 14.1 µs) for 7.5 s of gcc
+#: and from 44 on (Talos, Tiago) its straight-line products outgrow the caches and it is slower than the
+#: loops (61 against 26 µs, 119 against 42 µs): a large tree keeps the loops.
 UNROLLED_JACOBIAN_MAX = 12
 
 
@@ -288,9 +290,12 @@ def unrolled_choice(st: ChainDynamics, numbers: Sequence) -> bool:
     return st.kind in ("fd", "id") or st.n <= UNROLLED_JACOBIAN_MAX
 
 
-def unrolled_step_lines(st: ChainDynamics, numbers: Sequence[float], in_codes: Sequence[str], ind: str) -> tuple:
-    """C statements of a step generated for its robot's ``numbers`` (:func:`unrolled_choice`):
-    ``(lines, output array, function name, function source)``; ``in_codes`` are the printed q, qd, u."""
+def unrolled_step_lines(st: ChainDynamics, index: int, numbers: Sequence[float], in_codes: Sequence[str],
+                        ind: str) -> tuple:
+    """C statements of step ``index`` of a function, generated for its robot's ``numbers``
+    (:func:`unrolled_choice`): ``(lines, output array, function name, function source)``; ``in_codes`` are
+    the printed q, qd, u.  The function is named by a hash of its text: one copy per file however many
+    functions call it."""
     import hashlib
 
     from .unrolled_derivatives import chain_step
@@ -301,15 +306,15 @@ def unrolled_step_lines(st: ChainDynamics, numbers: Sequence[float], in_codes: S
     gen = chain_step(st.kind, st.revolute, st.parents, lc, g[:3], st.end_effector, g[3:6], "UNROLLED_NAME")
     name = f"fmugen_unrolled_{st.kind}_{hashlib.sha1(gen.source.encode()).hexdigest()[:12]}"
     source = gen.source.replace("UNROLLED_NAME", name)
-    tag = f"{name[len('fmugen_unrolled_'):]}"
+    tag = f"fmugen_unrolled{index}"  # "fmugen": a prefix no model name takes (c_code.RESERVED_PREFIXES)
     what = {"fd": "forward dynamics", "jacobian": "Jacobian of the forward dynamics", "id": "inverse dynamics",
             "id_jacobian": "inverse dynamics and its Jacobian"}[st.kind]
     lines = [f"{ind}/* {what} of the {n}-body robot, its numbers folded: {name} (above) */",
-             f"{ind}double u{tag}[{3 * n}], x{tag}[{st.outputs_size()}];"]
-    lines += [f"{ind}u{tag}[{k}] = {c};" for k, c in enumerate(in_codes)]
-    lines += [f"{ind}status = {name}(u{tag}, u{tag} + {n}, u{tag} + {2 * n}, x{tag});",
+             f"{ind}double {tag}_u[{3 * n}], {tag}_x[{st.outputs_size()}];"]
+    lines += [f"{ind}{tag}_u[{k}] = {c};" for k, c in enumerate(in_codes)]
+    lines += [f"{ind}status = {name}({tag}_u, {tag}_u + {n}, {tag}_u + {2 * n}, {tag}_x);",
               f"{ind}if (status != FMUGEN_OK) return status;"]
-    return lines, f"x{tag}", name, source
+    return lines, f"{tag}_x", name, source
 
 
 def chain_ops(n: int, kind: str, ne: int = 0):

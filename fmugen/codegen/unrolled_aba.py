@@ -699,8 +699,8 @@ class UnrolledFD:
 #: exact k pi/2_1 for |k| < 2^20) and fdlibm's kernel polynomials on [-pi/4, pi/4] (errors below
 #: 1e-16 absolute); libm beyond |x| = 1e5 and for NaN or infinity.  glibc's sincos takes about 100
 #: instructions, this about 40 -- a tenth of the forward dynamics of a 30-body tree.
-SINCOS_C = r"""#ifndef UNROLLED_SINCOS
-static inline void unrolled_sincos(double x, double *s, double *c)
+SINCOS_C = r"""#ifndef FMUGEN_UNROLLED_SINCOS
+static inline void fmugen_unrolled_sincos(double x, double *s, double *c)
 {
     if (!(fabs(x) < 1e5)) {
         *s = sin(x);
@@ -724,11 +724,11 @@ static inline void unrolled_sincos(double x, double *s, double *c)
     *s = (n & 2 ? -1.0 : 1.0) * v[n & 1];
     *c = ((n + 1) & 2 ? -1.0 : 1.0) * v[(n & 1) ^ 1];
 }
-#define UNROLLED_SINCOS(x, s, c) unrolled_sincos(x, s, c)
+#define FMUGEN_UNROLLED_SINCOS(x, s, c) fmugen_unrolled_sincos(x, s, c)
 #if defined(__GNUC__)
-#define UNROLLED_BLOCK static __attribute__((noinline)) int
+#define FMUGEN_UNROLLED_BLOCK static __attribute__((noinline)) int
 #else
-#define UNROLLED_BLOCK static int
+#define FMUGEN_UNROLLED_BLOCK static int
 #endif
 #endif
 """
@@ -795,7 +795,7 @@ def emit_c(P: Program, name: str, params: Sequence[str], header: Sequence[str], 
              SINCOS_C,
              ""]
     for f, b in zip(fn, sorted(by_block)):
-        lines.append(f"UNROLLED_BLOCK {f}({', '.join(params)}, double *w)")
+        lines.append(f"FMUGEN_UNROLLED_BLOCK {f}({', '.join(params)}, double *w)")
         lines.append("{")
         lines.append("    " + " ".join(f"(void){a};" for a in args) + " (void)w;")
         paired = set()
@@ -810,7 +810,7 @@ def emit_c(P: Program, name: str, params: Sequence[str], header: Sequence[str], 
             if pair is not None and len(pair) == 2:
                 s_name, c_name = pair["sin"], pair["cos"]
                 lines.append(f"    double {s_name}, {c_name};")
-                lines.append(f"    UNROLLED_SINCOS({text[4:-1]}, &{s_name}, &{c_name});")
+                lines.append(f"    FMUGEN_UNROLLED_SINCOS({text[4:-1]}, &{s_name}, &{c_name});")
                 paired.update((s_name, c_name))
                 for nm in (s_name, c_name):
                     if nm in slot:
