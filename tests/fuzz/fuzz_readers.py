@@ -582,6 +582,8 @@ class Runner:
                 changed = False
                 rec.write_text(json.dumps(r, indent=rng.choice([None, 1, 4]), sort_keys=rng.random() < 0.5))
             if cls != "reformat":
+                # an edit that wrote the value already there (inputs = [] over []) damaged nothing
+                changed = r != json.loads(raw)
                 rec.write_text(json.dumps(r))
         elif cls == "hostile-json":
             rec.write_text(rng.choice(["[]", "1", "null", '"x"', "[" * 100000 + "]" * 100000,
