@@ -210,3 +210,32 @@ def test_folded_urdf_fmu_equals_the_looped_fmu(tmp_path):
                           output=outs, **tol) for f in ("none", "all")]
         a, b = (np.column_stack([x[o] for o in outs]) for x in r)
         assert np.abs(a - a[0]).max() > 1e-3 and rel(b, a) < 1e-8, fmi_type
+
+
+def test_a_massless_leaf_keeps_the_loops_and_their_run_time_status():
+    """Numbers that make the mass matrix singular at every state (a massless, inertia-free leaf: its pivot
+    folds to 0) give no unrolled code: the folded model keeps the loops' call, which reports the state as
+    the model with its parameters free does (status FMUGEN_NOT_POSITIVE_DEFINITE), instead of a build that
+    fails or code that divides by zero."""
+    from dataclasses import replace
+
+    import sympy as sp
+
+    from fmugen.codegen.c_code import generate_c
+    from fmugen.codegen.c_harness import CompiledModel
+    from fmugen.dynamics.manipulator import Manipulator
+    from fmugen.robot.description import Body
+
+    robot = _tree_robot(8, seed=13, friction_parameter=False)
+    leaf = [i for i in range(8) if all(b.parent != i for b in robot.bodies)][0]
+    zero3 = (sp.Float(0),) * 3
+    bodies = list(robot.bodies)
+    b = bodies[leaf]
+    bodies[leaf] = Body(name=b.name, joint=b.joint, parent=b.parent, rotation=b.rotation, translation=b.translation,
+                        axis=b.axis, mass=sp.Float(0), com=zero3, inertia_com=(zero3,) * 3, rotor_inertia=sp.Float(0),
+                        damping=b.damping, offset=b.offset)
+    m = Manipulator(replace(robot, bodies=tuple(bodies))).state_space_model(outputs=("p_ee",), strategy="loops")
+    src = generate_c(m.with_parameters_folded()).source
+    assert "fmugen_chain_fd(" in src and "fmugen_unrolled_" not in src
+    with CompiledModel.build(src) as cm, pytest.raises(RuntimeError, match="status 1"):  # NOT_POSITIVE_DEFINITE
+        cm.evaluate([], 0.0, np.zeros(16), np.zeros(8))

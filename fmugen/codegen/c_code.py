@@ -669,8 +669,10 @@ def lower(
             codes = [emit_expr(reduced[idx], out, ind) for _, _, idx in ent[3]]
             consts = [reduced[idx] for _, _, idx in ent[3][3 * st.n:]]
             numbers = [_number_or_none(e) for e in consts]
-            if unrolled_choice(st, numbers):  # the robot's numbers are known: code of its own
-                lines, arr, fn, source = unrolled_step_lines(st, body.n_solves, numbers, codes[:3 * st.n], ind)
+            unrolled = unrolled_step_lines(st, body.n_solves, numbers, codes[:3 * st.n], ind) \
+                if unrolled_choice(st, numbers) else None  # the robot's numbers are known: code of its own
+            if unrolled is not None:
+                lines, arr, fn, source = unrolled
                 names.support[fn] = source
                 offset, free_line = 0, None
                 body.n_solves += 1

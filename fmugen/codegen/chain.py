@@ -295,15 +295,21 @@ def unrolled_step_lines(st: ChainDynamics, index: int, numbers: Sequence[float],
     """C statements of step ``index`` of a function, generated for its robot's ``numbers``
     (:func:`unrolled_choice`): ``(lines, output array, function name, function source)``; ``in_codes`` are
     the printed q, qd, u.  The function is named by a hash of its text: one copy per file however many
-    functions call it."""
+    functions call it.  None when the numbers make a mass matrix that is not positive definite at every
+    state (a massless leaf: a pivot that folds to 0): the loops' call then reports it at run time, as the
+    same model with its parameters free does."""
     import hashlib
 
+    from .unrolled_aba import NotPositiveDefinite
     from .unrolled_derivatives import chain_step
 
     n = st.n
     lc = np.asarray(numbers[:NC * n], float).reshape(n, NC)
     g = np.asarray(numbers[NC * n:NC * n + NG], float)
-    gen = chain_step(st.kind, st.revolute, st.parents, lc, g[:3], st.end_effector, g[3:6], "UNROLLED_NAME")
+    try:
+        gen = chain_step(st.kind, st.revolute, st.parents, lc, g[:3], st.end_effector, g[3:6], "UNROLLED_NAME")
+    except NotPositiveDefinite:  # a pivot folded to a non-positive constant
+        return None
     name = f"fmugen_unrolled_{st.kind}_{hashlib.sha1(gen.source.encode()).hexdigest()[:12]}"
     source = gen.source.replace("UNROLLED_NAME", name)
     tag = f"fmugen_unrolled{index}"  # "fmugen": a prefix no model name takes (c_code.RESERVED_PREFIXES)

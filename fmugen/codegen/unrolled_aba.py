@@ -66,11 +66,16 @@ from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
-__all__ = ["Var", "Program", "UnrolledFD", "unrolled_fd", "emit_c", "compile_shared", "CompiledUnrolled", "from_kernels",
+__all__ = ["NotPositiveDefinite", "Var", "Program", "UnrolledFD", "unrolled_fd", "emit_c", "compile_shared", "CompiledUnrolled", "from_kernels",
            "body_frames", "evaluate_numeric", "CompiledUnrolledFD"]
 
 NC = 29  # per-body constants (c_runtime/chain_dynamics.h), repeated to keep this module free of sympy
 _ROT, _POS, _AXIS, _MASS, _COM, _INERTIA, _ROTOR, _DAMPING, _FRICTION, _FRICTION_V = 0, 9, 12, 15, 16, 19, 25, 26, 27, 28
+
+
+class NotPositiveDefinite(ValueError):
+    """The robot's numbers make a pivot of the dynamics (an articulated inertia, a diagonal of L) a
+    non-positive constant: the mass matrix is singular at every state (a massless leaf)."""
 
 
 # ------------------------------------------------------------ the expression type
@@ -621,7 +626,7 @@ def _aba(P: Program, bodies: list, gravity, q, qd, tau, locked=frozenset(), out:
         if isinstance(D, Var):
             P.effect(f"if (!({c_value(D)} > 0.0)) return 1;", [D])
         elif not D > 0.0:
-            raise ValueError(f"body {i}: articulated inertia {D} is not positive")
+            raise NotPositiveDefinite(f"body {i}: articulated inertia {D} is not positive")
         Dinv[i] = P.recip(D)
         fric = P.mul(b.damping, qd[i])
         if b.friction != 0.0:

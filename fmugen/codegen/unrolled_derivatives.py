@@ -45,7 +45,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .unrolled_aba import (CompiledUnrolled, Program, UnrolledFD, Var, _aba, body_frames, c_value, congruence,
+from .unrolled_aba import (CompiledUnrolled, NotPositiveDefinite, Program, UnrolledFD, Var, _aba, body_frames, c_value, congruence,
                            cross, emit_c)
 
 __all__ = ["UnrolledJacobian", "unrolled_jacobian", "chain_step", "STEP_KINDS", "from_kernels", "evaluate_numeric",
@@ -282,7 +282,7 @@ def _fd_jacobian(P: Program, bodies: list, gravity, q, qd, tau, out: str = "qdd"
         if isinstance(dkk, Var):
             P.effect(f"if (!({c_value(dkk)} > 0.0)) return 1;", [dkk])
         elif not dkk > 0.0:
-            raise ValueError(f"body {k}: the mass matrix is not positive definite")
+            raise NotPositiveDefinite(f"body {k}: the mass matrix is not positive definite")
         d = _sqrt(P, dkk)
         inv = P.recip(d)
         L[k, k] = d
