@@ -157,7 +157,6 @@ def measure(name: str, path: Path, states: int, repeat: int, so) -> dict:
     import pinocchio as pin
     from fmugen.batch import Kernels
     from fmugen.codegen.benchmarks import pinocchio_urdf_map, to_pinocchio
-    from fmugen.codegen.chain import chain_work_doubles
     from fmugen.robot.urdf import load_urdf
 
     with warnings.catch_warnings():
