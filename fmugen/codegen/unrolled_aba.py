@@ -66,8 +66,8 @@ from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
-__all__ = ["NotPositiveDefinite", "Var", "Program", "UnrolledFD", "unrolled_fd", "emit_c", "compile_shared", "CompiledUnrolled", "from_kernels",
-           "body_frames", "evaluate_numeric", "CompiledUnrolledFD"]
+__all__ = ["NotPositiveDefinite", "Var", "Program", "UnrolledFD", "unrolled_fd", "emit_c", "compile_shared",
+           "CompiledUnrolled", "from_kernels", "body_frames", "evaluate_numeric", "CompiledUnrolledFD"]
 
 NC = 29  # per-body constants (c_runtime/chain_dynamics.h), repeated to keep this module free of sympy
 _ROT, _POS, _AXIS, _MASS, _COM, _INERTIA, _ROTOR, _DAMPING, _FRICTION, _FRICTION_V = 0, 9, 12, 15, 16, 19, 25, 26, 27, 28
