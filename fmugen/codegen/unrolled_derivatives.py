@@ -45,8 +45,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .unrolled_aba import (CompiledUnrolled, NotPositiveDefinite, Program, UnrolledFD, Var, _aba, body_frames, c_value, congruence,
-                           cross, emit_c)
+from .unrolled_aba import (CompiledUnrolled, NotPositiveDefinite, Program, UnrolledFD, Var, _aba, body_frames,
+                           c_value, congruence, cross, emit_c)
 
 __all__ = ["UnrolledJacobian", "unrolled_jacobian", "chain_step", "STEP_KINDS", "from_kernels", "evaluate_numeric",
            "CompiledUnrolledJacobian"]
