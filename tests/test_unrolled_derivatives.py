@@ -26,7 +26,9 @@ def test_equals_pinocchio(name):
     iv = [m[1] for m in mp]
     ix = np.ix_(iv, iv)
     n = kernels.n
-    fd = CompiledUnrolledJacobian(from_kernels(kernels, "fd"))
+    gen = from_kernels(kernels, "fd")
+    assert "FMUGEN_UNROLLED_BLOCK_V3 fmugen_unrolled_fd_jacobian_b" in gen.source  # x86-64-v3 and baseline
+    fd = CompiledUnrolledJacobian(gen)
     idj = CompiledUnrolledJacobian(from_kernels(kernels, "id"))
     try:
         rng = np.random.default_rng(4)
@@ -148,6 +150,9 @@ def test_folded_models_get_unrolled_code_equal_to_the_loops(n):
         assert (f"fmugen_unrolled_{'jacobian' if kind == 'fd' else 'id_jacobian'}_" in folded) == \
             (n <= UNROLLED_JACOBIAN_MAX)
         assert ("fmugen_chain_" in folded) == (n > UNROLLED_JACOBIAN_MAX)
+        # the Jacobians' functions carry the x86-64-v3 clone, the dynamics' alone not (their build time)
+        assert ("FMUGEN_UNROLLED_BLOCK_V3 fmugen_unrolled_" in folded) == (n <= UNROLLED_JACOBIAN_MAX)
+        assert "FMUGEN_UNROLLED_BLOCK fmugen_unrolled_" in folded
         p = np.array([v.start for v in m.parameters], float)
         with CompiledModel.build(looped) as cl, CompiledModel.build(folded) as cf:
             for _ in range(3):

@@ -26,9 +26,16 @@ wrenches not (a model with them keeps the runtime's loops).  :func:`chain_step` 
 generated model calls in place of the runtime (the end-effector position and its derivative added), when
 the robot's numbers are known (:func:`fmugen.codegen.chain.unrolled_choice`).
 
-Measured (``examples/bench_derivatives.py --unrolled-only``): ∇FD 0.37-0.49x Pinocchio's
-``computeABADerivatives`` on the arms and HyQ, against 0.67-0.79x for the loops; past ~30 bodies the
-straight-line products outgrow the caches (Talos 1.4x, Tiago 2.3x) and the loops are faster.
+The Jacobians' functions are compiled twice, for x86-64-v3 (AVX2 and FMA) and for the baseline, and the
+loader picks one (gcc on glibc, :func:`fmugen.codegen.unrolled_aba.emit_c`): the code is bound by
+instruction fetch (iiwa: 100 kB of code, 16,500 instructions, 3,000 of them register copies that
+three-operand AVX instructions do without), and the x86-64-v3 build takes 0.70x the time.  The forward
+and inverse dynamics alone keep the baseline (the large trees' build time).  Results differ between
+the two builds by rounding (fused multiply-adds), as glibc's own libm does between CPUs.
+
+Measured (``examples/bench_derivatives.py --unrolled-only``): ∇FD 0.19-0.25x Pinocchio's
+``computeABADerivatives`` on the arms and HyQ, 0.26x on Atlas, against 0.54-0.65x for the loops; past
+~40 bodies the straight-line products outgrow the caches and the loops are faster.
 
 The generated function::
 
@@ -385,7 +392,7 @@ def unrolled_jacobian(revolute: Sequence[bool], parents: Sequence[int], constant
     params = tuple(f"const double *{a}" for a in ins) + (f"double *{out}", "double *J")
     source, count, nblocks = emit_c(P, name, params, header,
                                     [f"for (int i = 0; i < {n}; i++)", f"    if (!isfinite({out}[i])) return 2;"],
-                                    static=static, block_statements=block_statements)
+                                    static=static, block_statements=block_statements, clones=True)
     return UnrolledJacobian(name, n, source, count, nblocks, kind)
 
 
@@ -482,7 +489,7 @@ def chain_step(kind: str, revolute: Sequence[bool], parents: Sequence[int], cons
               " * (its numbers folded into the code) */"]
     source, count, nblocks = emit_c(P, name, ("const double *q", "const double *qd", "const double *u", "double *x"),
                                     header, [f"for (int i = 0; i < {n}; i++)", "    if (!isfinite(x[i])) return 2;"],
-                                    static=True, standalone=False)
+                                    static=True, standalone=False, clones=kind in ("jacobian", "id_jacobian"))
     return UnrolledJacobian(name, n, source, count, nblocks, kind)
 
 
