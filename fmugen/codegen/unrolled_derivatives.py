@@ -29,13 +29,15 @@ the robot's numbers are known (:func:`fmugen.codegen.chain.unrolled_choice`).
 The Jacobians' functions are compiled twice, for x86-64-v3 (AVX2 and FMA) and for the baseline, and the
 loader picks one (gcc on glibc, :func:`fmugen.codegen.unrolled_aba.emit_c`): the code is bound by
 instruction fetch (iiwa: 100 kB of code, 16,500 instructions, 3,000 of them register copies that
-three-operand AVX instructions do without), and the x86-64-v3 build takes 0.70x the time.  The forward
+three-operand AVX instructions do without; 9,300 in the x86-64-v3 build), which takes 0.70x the time.  The forward
 and inverse dynamics alone keep the baseline (the large trees' build time).  Results differ between
 the two builds by rounding (fused multiply-adds), as glibc's own libm does between CPUs.
 
 Measured (``examples/bench_derivatives.py --unrolled-only``): ∇FD 0.19-0.25x Pinocchio's
-``computeABADerivatives`` on the arms and HyQ, 0.26x on Atlas, against 0.54-0.65x for the loops; past
-~40 bodies the straight-line products outgrow the caches and the loops are faster.
+``computeABADerivatives`` on the arms and HyQ, 0.26x on Atlas, against 0.54-0.65x for the loops; on the
+largest trees the straight-line products outgrow the caches (Talos 0.36x, Tiago 0.70x; the loops 0.54x
+and 0.74x) and take 25 and 65 s to compile, so models beyond ``UNROLLED_JACOBIAN_MAX`` bodies
+(:mod:`fmugen.codegen.chain`) keep the loops.
 
 The generated function::
 
