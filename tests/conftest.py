@@ -5,8 +5,19 @@ fmpy routes every FMU's log messages through one process-wide proxy in its
 and never points it back, so once ``f`` is gone the next FMU that logs through
 fmpy's default callbacks calls freed memory.  After every test the proxy is
 pointed back at fmpy's own printer (through a callback kept alive here).
+
+OpenBLAS picks its kernels by the CPU (Haswell, SkylakeX, Zen, ...), and the
+kernels round differently: the master's Newton solves then differ in the last
+bits from one machine to another, and the results stored bit for bit
+(tests/test_cosim_structure.py) were made with the Haswell kernels.  The suite
+runs with those kernels on every x86-64 CPU (AVX2, the CI machines' floor); the
+variable must be set before numpy is first imported, which is why it is here.
 """
 import os
+import platform
+
+if platform.machine() in ("x86_64", "AMD64"):
+    os.environ.setdefault("OPENBLAS_CORETYPE", "Haswell")
 import warnings
 from ctypes import byref
 
