@@ -750,7 +750,8 @@ _TOKEN = re.compile(r"\bt\d+\b")
 
 
 def emit_c(P: Program, name: str, params: Sequence[str], header: Sequence[str], finish: Sequence[str],
-           static: bool = False, block_statements: int = 200, standalone: bool = True, clones: bool = False) -> tuple:
+           static: bool = False, block_statements: int = 200, standalone: bool = True, clones: bool = False,
+           scratch: int = 0, loops: Sequence[tuple] = ()) -> tuple:
     """The live statements of ``P`` as a C file: one function per group of consecutive blocks (about
     ``block_statements`` statements each; not inlined), called in order by the entry function
     ``int name(params)``, which then runs the ``finish`` lines and returns 0.  A value used by a later
@@ -763,8 +764,12 @@ def emit_c(P: Program, name: str, params: Sequence[str], header: Sequence[str], 
     the ``#include <math.h>`` a file of its own needs.  ``clones``: each function also compiled for
     x86-64-v3 and chosen at load time (FMUGEN_UNROLLED_BLOCK_V3; with gcc's FMA contraction, which -O1
     and -std=c99 leave out): the Jacobians, where it measured 0.70x the baseline's time (iiwa) for twice the
-    compile time; not the forward dynamics, whose build time on the large trees counts more.  Returns
-    (source, statements, functions)."""
+    compile time; not the forward dynamics, whose build time on the large trees counts more.
+
+    ``loops``: (suffix, body lines) of functions called after the blocks, compiled at -O2 with gcc's
+    vectoriser (dense loops over what the statements stored; the large trees' Jacobian product).  The
+    statements and the loops reach ``scratch`` doubles of their own as ``fmugen_wb[k]`` (past the work
+    array's slots).  Returns (source, statements, functions)."""
     args = [re.split(r"[ *]+", p_.strip())[-1] for p_ in params]
     stmts = P.live()
     home = {st[0]: st[3] for st in stmts if st[0] is not None}
@@ -799,6 +804,11 @@ def emit_c(P: Program, name: str, params: Sequence[str], header: Sequence[str], 
     for name_, text, _, blk in stmts:
         if name_ and text[:4] in ("sin(", "cos("):
             trig.setdefault((blk, text[4:-1]), {})[text[:3]] = name_
+    wb = f"w + {len(slot)}"  # the statements' and loops' own scratch
+
+    def scratch_in(t: str) -> str:
+        return t.replace("fmugen_wb[", f"w[{len(slot)} + ")
+
     fn = [f"{name}_b{b}" for b in sorted(by_block)]
     lines = [*header,
              *(["#include <math.h>", ""] if standalone else []),
@@ -820,6 +830,7 @@ def emit_c(P: Program, name: str, params: Sequence[str], header: Sequence[str], 
         for name_, text, deps, blk in by_block[b]:
             t = text_in(text, b)
             if name_ is None:
+                t = scratch_in(t)
                 lines.append(f"    {t}")
                 continue
             if name_ in paired:
@@ -840,9 +851,32 @@ def emit_c(P: Program, name: str, params: Sequence[str], header: Sequence[str], 
         lines.append("    return 0;")
         lines.append("}")
         lines.append("")
+    if loops:
+        lines += ["#if defined(__GNUC__) && !defined(__clang__)",
+                  "/* dense loops: -O2 with the vectoriser (AVX2 in the x86-64-v3 build) */",
+                  "#pragma GCC pop_options",
+                  "#pragma GCC push_options",
+                  "#pragma GCC optimize(\"O2\", \"tree-vectorize\", \"fp-contract=fast\")",
+                  "#endif",
+                  "#if !defined(FMUGEN_UNROLLED_V4) && (defined(__GNUC__) || defined(__clang__))",
+                  "#include <string.h>",
+                  "/* four doubles, unaligned: their sums stay in registers (AVX in the x86-64-v3 build) */",
+                  "typedef double fmugen_v4 __attribute__((vector_size(32), aligned(8)));",
+                  "#define FMUGEN_UNROLLED_V4 1",
+                  "#endif"]
+    for suffix, body in loops:
+        fn.append(f"{name}_{suffix}")
+        lines.append(f"FMUGEN_UNROLLED_BLOCK{'_V3' if clones else ''} {fn[-1]}({', '.join(params)}, double *w)")
+        lines.append("{")
+        lines.append("    " + " ".join(f"(void){a};" for a in args) + " (void)w;")
+        lines.append(f"    const double *fmugen_wb = {wb};")
+        lines.extend("    " + x for x in body)
+        lines.append("    return 0;")
+        lines.append("}")
+        lines.append("")
     lines.append(f"{'static ' if static else ''}int {name}({', '.join(params)})")
     lines.append("{")
-    lines.append(f"    double w[{max(len(slot), 1)}];")
+    lines.append(f"    double w[{max(len(slot) + scratch, 1)}];")
     lines.append("    int status;")
     for f in fn:
         lines.append(f"    if ((status = {f}({', '.join(args)}, w))) return status;")
