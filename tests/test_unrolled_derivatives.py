@@ -82,6 +82,48 @@ def test_rotor_damping_friction_equal_the_runtime():
         kernels.close()
 
 
+def test_product_loop_on_interleaved_branches_equals_the_sums_and_the_original_numbering():
+    """The loop that forms M^-1 (-∂ID) (the default) against the straight-line sums and against the robot
+    numbered the usual way: HyQ's four legs renumbered depth by depth, so that every root branch is broken
+    by the others (the loop then runs over spans holding the other branches' zeros), with rotor inertia,
+    damping and friction on."""
+    _, _, kernels, _, _ = robot("hyq")
+    n = kernels.n
+    lc = np.array(kernels.constants, float).reshape(n, -1)
+    rng = np.random.default_rng(8)
+    lc[:, 25] = rng.uniform(0.0, 0.3, n)  # rotor inertia
+    lc[:, 26] = rng.uniform(0.0, 2.0, n)  # damping
+    lc[1::2, 27], lc[:, 28] = 1.5, 0.05  # Coulomb friction
+    depth = [0] * n
+    for i, par in enumerate(kernels.parents):
+        depth[i] = depth[par] + 1 if par >= 0 else 0
+    order = sorted(range(n), key=lambda i: (depth[i], i))  # old index of each new body, parents first
+    new = {old: k for k, old in enumerate(order)}
+    parents = [new[kernels.parents[o]] if kernels.parents[o] >= 0 else -1 for o in order]
+    root = []
+    for par in parents:
+        root.append(root[par] if par >= 0 else len(root))
+    assert root != sorted(root)  # each branch broken by the others
+    revolute = [kernels.revolute[o] for o in order]
+    g = kernels.globals[:3]
+    gens = [unrolled_jacobian(revolute, parents, lc[order], g, dense_product=d) for d in (True, False)]
+    gens.append(unrolled_jacobian(kernels.revolute, kernels.parents, lc, g))  # the usual numbering
+    assert "fmugen_unrolled_fd_jacobian_product(" in gens[0].source and "_product(" not in gens[1].source
+    made = [CompiledUnrolledJacobian(gen) for gen in gens]
+    try:
+        q, qd, x = rng.uniform(-1, 1, (3, n)), rng.uniform(-1, 1, (3, n)), rng.uniform(-3, 3, (3, n))
+        loop, sums = (m.derivatives(q[:, order], qd[:, order], x[:, order]) for m in made[:2])
+        ref = made[2].derivatives(q, qd, x)
+        ix = np.ix_(order, order)
+        for a, b, r in zip(loop, sums, ref):
+            assert rel(a, b) < 1e-12
+            assert rel(a, r[:, order] if r.ndim == 2 else r[:, ix[0], ix[1]]) < 1e-12
+    finally:
+        for m in made:
+            m.close()
+        kernels.close()
+
+
 def test_not_positive_definite_and_refusals():
     """A state the dynamics cannot answer (NaN: the first positivity check fails) is reported as status 1
     (LinAlgError) with no result; a nonsense kind is refused."""

@@ -274,8 +274,10 @@ def _rnea_derivatives(P: Program, bodies: list, gravity, q, qd, qdd, block0: int
     return nq, nd, Mlow, tauF
 
 
-def _fd_jacobian(P: Program, bodies: list, gravity, q, qd, tau, out: str = "qdd"):
-    """qdd (n values, written to the C array ``out``) and J (n x 3n values) = [∂qdd/∂q, ∂qdd/∂qd, M^-1]."""
+def _fd_jacobian(P: Program, bodies: list, gravity, q, qd, tau, out: str = "qdd", product: bool = True):
+    """qdd (n values, written to the C array ``out``) and J (n x 3n values) = [∂qdd/∂q, ∂qdd/∂qd, M^-1];
+    without ``product``, J's first 2n columns are left to a loop (:class:`_DenseProduct`): J is then
+    (M^-1, related, -∂ID/∂q, -∂ID/∂qd), the latter two {(i, c): value} for i related to c."""
     n = len(bodies)
     qdd = _aba(P, bodies, gravity, q, qd, tau, out=out)
     block0 = 3 * n + 2  # the blocks after those of the ABA
@@ -318,6 +320,8 @@ def _fd_jacobian(P: Program, bodies: list, gravity, q, qd, tau, out: str = "qdd"
 
     # the columns: J_q[r][c] = sum_i M^-1[r][i] (-dID_q)[i][c] over the i related to c
     related = [sorted(set(path[c]) | set(subtree[c])) for c in range(n)]
+    if not product:
+        return qdd, (Minv, related, nq, nd)
     J = [[0.0] * (3 * n) for _ in range(n)]
     for r in range(n):
         P.block = block0 + 7 * n + 1 + r
@@ -326,6 +330,124 @@ def _fd_jacobian(P: Program, bodies: list, gravity, q, qd, tau, out: str = "qdd"
             J[r][n + c] = P.sop([(Minv[r, i], nd[i, c]) for i in related[c]])
             J[r][2 * n + c] = Minv[r, c]
     return qdd, J
+
+
+class _DenseProduct:
+    """[∂qdd/∂q, ∂qdd/∂qd] = M^-1 [-∂ID/∂q, -∂ID/∂qd] as a loop instead of straight-line sums.
+
+    On the large trees the product is most of the Jacobian's arithmetic (Tiago: 76,000 of 136,000
+    multiplications) and M^-1 is dense on each root branch, so straight-line code spends it one scalar
+    at a time from a megabyte of instructions.  Here the statements store M^-1 (into J's last n columns,
+    where it belongs) and the nonzero entries of -∂ID (into the scratch ``fmugen_wb``: two per pair of
+    related joints), and a loop adds, for each column c and each joint i related to c, the scaled row i
+    of M^-1 over c's branch: axpys of the branch's length, which gcc vectorises (AVX2 in the x86-64-v3
+    build).  Rows of other branches are zeros, stored by statements."""
+
+    def __init__(self, n: int, Minv, related, nq, nd, bodies):
+        self.n = n
+        root = []
+        for i, b in enumerate(bodies):
+            root.append(root[b.parent] if b.parent >= 0 else i)
+        # each column's rows: the span of its root branch (a branch broken by another: its span holds
+        # the other's zero entries of M^-1, which are stored like the rest)
+        span = {}
+        for i, r in enumerate(root):
+            lo, hi = span.get(r, (i, i + 1))
+            span[r] = (min(lo, i), max(hi, i + 1))
+        self.rows = [span[root[c]] for c in range(n)]
+        self.Minv, self.related, self.nq, self.nd = Minv, related, nq, nd
+        self.start = [0]
+        for c in range(n):
+            self.start.append(self.start[-1] + len(related[c]))
+
+    @property
+    def scratch(self) -> int:
+        return 2 * self.start[-1]
+
+    def effects(self, P: Program, target: str, base: int):
+        """The statements: M^-1, the zero rows of the first 2n columns, and -∂ID's entries."""
+        n = self.n
+        for r in range(n):
+            for c in range(n):
+                v = self.Minv[r, c]
+                P.effect(f"{target}[{base + 3 * n * r + 2 * n + c}] = {c_value(v)};", [v])
+        for c in range(n):
+            lo, hi = self.rows[c]
+            for r in [*range(lo), *range(hi, n)]:
+                P.effect(f"{target}[{base + 3 * n * r + c}] = 0.0;", [])
+                P.effect(f"{target}[{base + 3 * n * r + n + c}] = 0.0;", [])
+            for t, i in enumerate(self.related[c]):
+                k = 2 * (self.start[c] + t)
+                for kk, v in ((k, self.nq[i, c]), (k + 1, self.nd[i, c])):
+                    P.effect(f"fmugen_wb[{kk}] = {c_value(v)};", [v])
+
+    def loop(self, target: str, base: int) -> list:
+        """The loop's C lines: one loop per branch span, its length a constant."""
+        n, k3 = self.n, 3 * self.n
+        rel = ", ".join(str(i) for c in range(n) for i in self.related[c])
+        lines = [f"static const short rel[{self.start[-1]}] = {{{rel}}};  /* the joints related to each column */",
+                 f"static const short first[{n + 1}] = {{{', '.join(str(x) for x in self.start)}}};",
+                 f"double *const out = {target} + {base};"]
+        spans = sorted(set(self.rows))
+        for s_, (lo, hi) in enumerate(spans):
+            cols = [c for c in range(n) if self.rows[c] == (lo, hi)]
+            nb = hi - lo
+            if cols == list(range(cols[0], cols[-1] + 1)):
+                lines += [f"for (int c = {cols[0]}; c <= {cols[-1]}; c++) {{  /* rows {lo}..{hi - 1} */"]
+            else:  # a branch broken by another
+                lines += [f"static const short cols{s_}[{len(cols)}] = {{{', '.join(str(c) for c in cols)}}};",
+                          f"for (int u = 0; u < {len(cols)}; u++) {{  /* rows {lo}..{hi - 1} */",
+                          f"    const int c = cols{s_}[u];"]
+            for r0 in range(0, nb, self.CHUNK):  # the accumulators of a chunk of rows stay in registers
+                lines += ["    " + x for x in self._chunk(lo + r0, min(self.CHUNK, nb - r0), k3, 2 * n, n)]
+            lines += ["}"]
+        return lines
+
+    @staticmethod
+    def _chunk(row: int, w: int, k3: int, minv: int, n: int) -> list:
+        """Rows row .. row + w - 1 of column c: with gcc's and clang's vector types four rows per register
+        (a plain array of accumulators is kept in memory: a load and a store per multiply-add), else plain
+        loops; the rows past the last four in scalars."""
+        nv, ns = divmod(w, 4)
+        vec = ["#ifdef FMUGEN_UNROLLED_V4", "{"]
+        vec += ["    fmugen_v4 " + ", ".join(f"q{k} = {{0.0}}, d{k} = {{0.0}}" for k in range(nv)) + ";"] if nv else []
+        vec += ["    double " + ", ".join(f"sq{k} = 0.0, sd{k} = 0.0" for k in range(ns)) + ";"] if ns else []
+        vec += ["    for (int t = first[c]; t < first[c + 1]; t++) {",
+                f"        const double *m = out + {k3} * rel[t] + {minv + row};",
+                "        const double bq = fmugen_wb[2 * t], bd = fmugen_wb[2 * t + 1];"]
+        for k in range(nv):
+            vec += [f"        fmugen_v4 m{k};", f"        memcpy(&m{k}, m + {4 * k}, sizeof m{k});",
+                    f"        q{k} += bq * m{k};", f"        d{k} += bd * m{k};"]
+        for k in range(ns):
+            vec += [f"        sq{k} += bq * m[{4 * nv + k}];", f"        sd{k} += bd * m[{4 * nv + k}];"]
+        vec += ["    }"]
+        for k in range(nv):
+            for lane in range(4):
+                r = row + 4 * k + lane
+                vec += [f"    out[{k3 * r} + c] = q{k}[{lane}];", f"    out[{k3 * r + n} + c] = d{k}[{lane}];"]
+        for k in range(ns):
+            r = row + 4 * nv + k
+            vec += [f"    out[{k3 * r} + c] = sq{k};", f"    out[{k3 * r + n} + c] = sd{k};"]
+        vec += ["}", "#else"]
+        plain = ["{",
+                 f"    double xq[{w}] = {{0.0}}, xd[{w}] = {{0.0}};",
+                 "    for (int t = first[c]; t < first[c + 1]; t++) {",
+                 f"        const double *m = out + {k3} * rel[t] + {minv + row};",
+                 "        const double bq = fmugen_wb[2 * t], bd = fmugen_wb[2 * t + 1];",
+                 f"        for (int r = 0; r < {w}; r++) {{",
+                 "            xq[r] += bq * m[r];",
+                 "            xd[r] += bd * m[r];",
+                 "        }",
+                 "    }",
+                 f"    for (int r = 0; r < {w}; r++) {{",
+                 f"        out[{k3} * ({row} + r) + c] = xq[r];",
+                 f"        out[{k3} * ({row} + r) + {n} + c] = xd[r];",
+                 "    }",
+                 "}", "#endif"]
+        return vec + plain
+
+    #: rows per pass over a column's terms: 16 accumulators of q and of qd in 8 AVX registers
+    CHUNK = 16
 
 
 def _id_jacobian(P: Program, bodies: list, gravity, q, qd, qdd):
@@ -364,7 +486,8 @@ class UnrolledJacobian(UnrolledFD):
 
 
 def unrolled_jacobian(revolute: Sequence[bool], parents: Sequence[int], constants, gravity, kind: str = "fd",
-                      name: str = "", static: bool = False, block_statements: int = 200) -> UnrolledJacobian:
+                      name: str = "", static: bool = False, block_statements: int = 200,
+                      dense_product: bool = True) -> UnrolledJacobian:
     """Straight-line C of the forward (``kind="fd"``) or inverse (``"id"``) dynamics and its Jacobian
     (``constants``: n x NC, the numbers of :class:`fmugen.batch.Kernels`)::
 
@@ -372,7 +495,9 @@ def unrolled_jacobian(revolute: Sequence[bool], parents: Sequence[int], constant
         int NAME(const double *q, const double *qd, const double *qdd, double *tau, double *J);   id
 
     J is n x 3n, row-major.  Returns 0, 1 (an articulated inertia or a pivot of M not positive; fd) or 2
-    (the result not finite)."""
+    (the result not finite).  ``dense_product``: the product M^-1 (-∂ID) of fd as a loop
+    (:class:`_DenseProduct`, faster on every robot measured) or as straight-line sums (False: the
+    reference the tests hold the loop against)."""
     if kind not in _KINDS:
         raise ValueError(f"kind {kind!r}: 'fd' or 'id'")
     passes, ins, out, words = _KINDS[kind]
@@ -381,20 +506,27 @@ def unrolled_jacobian(revolute: Sequence[bool], parents: Sequence[int], constant
     bodies = body_frames(revolute, parents, constants)
     P = Program()
     args = [[Var(f"{a}[{i}]") for i in range(n)] for a in ins]
-    res, J = passes(P, bodies, gravity, *args)
+    loop = kind == "fd" and dense_product
+    res, J = passes(P, bodies, gravity, *args, **({"product": False} if loop else {}))
     P.block = 11 * n + 3  # after the passes' last block (blocks follow the order of emission)
     if kind == "id":
         for i in range(n):
             P.effect(f"tau[{i}] = {c_value(res[i])};", [res[i]])
-    for r in range(n):
-        for c in range(3 * n):
-            P.effect(f"J[{3 * n * r + c}] = {c_value(J[r][c])};", [J[r][c]])
+    dense = _DenseProduct(n, *J, bodies) if loop else None
+    if dense:
+        dense.effects(P, "J", 0)
+    else:
+        for r in range(n):
+            for c in range(3 * n):
+                P.effect(f"J[{3 * n * r + c}] = {c_value(J[r][c])};", [J[r][c]])
     header = [f"/* generated by fmugen.codegen.unrolled_derivatives: {words} ({n} bodies),",
               " * the robot's numbers folded into the code */"]
     params = tuple(f"const double *{a}" for a in ins) + (f"double *{out}", "double *J")
     source, count, nblocks = emit_c(P, name, params, header,
                                     [f"for (int i = 0; i < {n}; i++)", f"    if (!isfinite({out}[i])) return 2;"],
-                                    static=static, block_statements=block_statements, clones=True)
+                                    static=static, block_statements=block_statements, clones=True,
+                                    scratch=dense.scratch if dense else 0,
+                                    loops=[("product", dense.loop("J", 0))] if dense else ())
     return UnrolledJacobian(name, n, source, count, nblocks, kind)
 
 
@@ -461,18 +593,21 @@ def chain_step(kind: str, revolute: Sequence[bool], parents: Sequence[int], cons
     bodies = body_frames(revolute, parents, constants)
     P = Program()
     q, qd, u = ([Var(f"{a}[{i}]") for i in range(n)] for a in ("q", "qd", "u"))
-    J = None
+    J, dense = None, None
     if kind == "fd":
         _aba(P, bodies, gravity, q, qd, u, out="x")
     elif kind == "jacobian":
-        _, J = _fd_jacobian(P, bodies, gravity, q, qd, u, out="x")
+        _, parts = _fd_jacobian(P, bodies, gravity, q, qd, u, out="x", product=False)
+        dense = _DenseProduct(n, *parts, bodies)
     else:
         tau, J = _id_jacobian(P, bodies, gravity, q, qd, u)
         P.block = 11 * n + 3
         for i in range(n):
             P.effect(f"x[{i}] = {c_value(tau[i])};", [tau[i]])
     P.block = 11 * n + 4  # after the passes' blocks (blocks follow the order of emission)
-    if kind in ("jacobian", "id_jacobian"):
+    if dense:
+        dense.effects(P, "x", n)
+    elif kind == "id_jacobian":
         for r in range(n):
             for c in range(3 * n):
                 P.effect(f"x[{n + 3 * n * r + c}] = {c_value(J[r][c])};", [J[r][c]])
@@ -491,7 +626,9 @@ def chain_step(kind: str, revolute: Sequence[bool], parents: Sequence[int], cons
               " * (its numbers folded into the code) */"]
     source, count, nblocks = emit_c(P, name, ("const double *q", "const double *qd", "const double *u", "double *x"),
                                     header, [f"for (int i = 0; i < {n}; i++)", "    if (!isfinite(x[i])) return 2;"],
-                                    static=True, standalone=False, clones=kind in ("jacobian", "id_jacobian"))
+                                    static=True, standalone=False, clones=kind in ("jacobian", "id_jacobian"),
+                                    scratch=dense.scratch if dense else 0,
+                                    loops=[("product", dense.loop("x", n))] if dense else ())
     return UnrolledJacobian(name, n, source, count, nblocks, kind)
 
 
