@@ -273,12 +273,12 @@ def chain_call_lines(st: ChainDynamics, index: int, b_code: list, ind: str) -> t
 #: all``) and which has no external wrenches is generated per robot instead of calling the loops
 #: (:func:`unrolled_step_lines`; :mod:`fmugen.codegen.unrolled_derivatives`): the forward and inverse
 #: dynamics always -- 2-5x faster than the loops (``python examples/bench_derivatives.py --unrolled``:
-#: FD 0.10-0.23x Pinocchio's ``aba`` against 0.45-0.50x; gcc ~0.3 s of CPU per 1000 lines, linear in
-#: n) -- and their Jacobians up to this many bodies: the unrolled Jacobian is about half the loops' time
-#: there (``--unrolled-only``, one run: iiwa 1.7 against 3.0 µs, HyQ 2.2 against 3.9 µs) for about a
-#: second of gcc, while at 30 bodies (Atlas) it saves a fifth (11.4 against 14.1 µs) for 7.5 s of gcc
-#: and from 44 on (Talos, Tiago) its straight-line products outgrow the caches and it is slower than the
-#: loops (61 against 26 µs, 119 against 42 µs): a large tree keeps the loops.
+#: FD 0.10-0.20x Pinocchio's ``aba`` against 0.43-0.48x; gcc ~0.3 s of CPU per 1000 lines, linear in
+#: n) -- and their Jacobians up to this many bodies: there the unrolled Jacobian takes a third of the
+#: loops' time (``--unrolled-only``, one run: iiwa 1.09 against 3.23 µs, HyQ 1.55 against 4.45 µs) for
+#: about a second of gcc.  Larger trees gain as much (Atlas 7.0 against 15.9 µs, Talos 13.6 against
+#: 29.5, Tiago 21.9 against 49.1) but their Jacobians take 7-17 s of gcc (compiled twice, baseline and
+#: x86-64-v3), which an FMU build should not pay unasked: a large tree keeps the loops.
 UNROLLED_JACOBIAN_MAX = 12
 
 
