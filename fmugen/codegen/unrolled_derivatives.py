@@ -37,7 +37,7 @@ and inverse dynamics alone keep the baseline (the large trees' build time).  Res
 the two builds by rounding (fused multiply-adds), as glibc's own libm does between CPUs.
 
 Measured (``examples/bench_derivatives.py --unrolled-only``, one run): ∇FD 0.19-0.23x Pinocchio's
-``computeABADerivatives`` on the arms and HyQ, 0.24x on Atlas, 0.25x on Talos, 0.33x on Tiago, against
+``computeABADerivatives`` on the arms and HyQ, 0.24x on Atlas, 0.25x on Talos, 0.33-0.35x on Tiago, against
 0.53-0.74x for the loops; with the product as straight-line sums Talos and Tiago were at 0.36x and
 0.70x and compiled for 25 and 65 s, now 12 and 17 s.  That is still long for an FMU build, so models
 beyond ``UNROLLED_JACOBIAN_MAX`` bodies (:mod:`fmugen.codegen.chain`) keep the loops.
