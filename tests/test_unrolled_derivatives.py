@@ -53,19 +53,27 @@ def test_equals_pinocchio(name):
         kernels.close()
 
 
+def _hyq_with_drives(seed: int, first: int):
+    """HyQ's Kernels, its body constants with random rotor inertia and damping and Coulomb friction on every
+    other joint from ``first``, and the random generator."""
+    _, _, kernels, _, _ = robot("hyq")
+    n = kernels.n
+    lc = np.array(kernels.constants, float).reshape(n, -1)
+    rng = np.random.default_rng(seed)
+    lc[:, 25] = rng.uniform(0.0, 0.3, n)  # rotor inertia
+    lc[:, 26] = rng.uniform(0.0, 2.0, n)  # damping
+    lc[first::2, 27] = 1.5  # Coulomb level
+    lc[:, 28] = 0.05
+    return kernels, lc, rng
+
+
 def test_rotor_damping_friction_equal_the_runtime():
     """Rotor inertia, viscous damping and smooth Coulomb friction, which Pinocchio has not, against the
     looped runtime's fmugen_chain_fd_jacobian and fmugen_chain_id_jacobian on the same numbers (HyQ: a tree)."""
     from fmugen.batch import Kernels
 
-    _, _, kernels, _, _ = robot("hyq")
+    kernels, lc, rng = _hyq_with_drives(5, 0)
     n = kernels.n
-    lc = np.array(kernels.constants, float).reshape(n, -1)
-    rng = np.random.default_rng(5)
-    lc[:, 25] = rng.uniform(0.0, 0.3, n)  # rotor inertia
-    lc[:, 26] = rng.uniform(0.0, 2.0, n)  # damping
-    lc[::2, 27] = 1.5  # Coulomb level on every other joint
-    lc[:, 28] = 0.05
     k2 = Kernels(kernels.revolute, kernels.parents, lc, kernels.globals[:3])
     compiled = {kind: CompiledUnrolledJacobian(unrolled_jacobian(k2.revolute, k2.parents, lc, kernels.globals[:3],
                                                                  kind)) for kind in ("fd", "id")}
@@ -87,13 +95,8 @@ def test_product_loop_on_interleaved_branches_equals_the_sums_and_the_original_n
     numbered the usual way: HyQ's four legs renumbered depth by depth, so that every root branch is broken
     by the others (the loop then runs over spans holding the other branches' zeros), with rotor inertia,
     damping and friction on."""
-    _, _, kernels, _, _ = robot("hyq")
+    kernels, lc, rng = _hyq_with_drives(8, 1)
     n = kernels.n
-    lc = np.array(kernels.constants, float).reshape(n, -1)
-    rng = np.random.default_rng(8)
-    lc[:, 25] = rng.uniform(0.0, 0.3, n)  # rotor inertia
-    lc[:, 26] = rng.uniform(0.0, 2.0, n)  # damping
-    lc[1::2, 27], lc[:, 28] = 1.5, 0.05  # Coulomb friction
     depth = [0] * n
     for i, par in enumerate(kernels.parents):
         depth[i] = depth[par] + 1 if par >= 0 else 0
