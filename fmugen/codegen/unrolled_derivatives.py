@@ -345,15 +345,14 @@ class _DenseProduct:
     related joints), and a loop adds, for each column c and each joint i related to c, the scaled row i
     of M^-1 over c's branch: axpys of the branch's length, which gcc vectorises (AVX2 in the x86-64-v3
     build).  Rows of other branches are zeros, stored by statements.  Faster than the sums on every robot
-    measured (µs, the same run: UR5 0.86 against 0.91, iiwa 1.10 against 1.18, Atlas 7.0 against 7.8,
-    Talos 13.3 against 19.6, Tiago 21.8 against 46.6), and a third to three fifths of the compile time.
+    measured (µs, both timed in one run per robot: UR5 0.86 against 0.91, iiwa 1.10 against 1.18, Atlas
+    7.0 against 7.8, Talos 13.0 against 20.1, Tiago 22.2 against 44.0), for 0.3-0.6 of the compile time on
+    the large trees (Tiago 16 against 62 s) and 0.8-0.9 on the arms.
     Tried and dropped: M^-1 = X X^T as a loop too (short loops over the subtrees: Tiago 24.3 µs)."""
 
     def __init__(self, n: int, Minv, related, nq, nd, bodies):
         self.n = n
-        root = []
-        for i, b in enumerate(bodies):
-            root.append(root[b.parent] if b.parent >= 0 else i)
+        root = [p[-1] for p in _paths(bodies)[0]]
         # each column's rows: the span of its root branch (a branch broken by another: its span holds
         # the other's zero entries of M^-1, which are stored like the rest)
         span = {}
@@ -366,9 +365,9 @@ class _DenseProduct:
         for c in range(n):
             self.start.append(self.start[-1] + len(related[c]))
 
-    @property
-    def scratch(self) -> int:
-        return 2 * self.start[-1]
+    def emit_args(self, target: str, base: int) -> dict:
+        """emit_c's arguments for the loop: the scratch of -∂ID's entries and the loop's function."""
+        return {"scratch": 2 * self.start[-1], "loops": [("product", self.loop(target, base))]}
 
     def effects(self, P: Program, target: str, base: int):
         """The statements: M^-1, the zero rows of the first 2n columns, and -∂ID's entries."""
@@ -531,8 +530,7 @@ def unrolled_jacobian(revolute: Sequence[bool], parents: Sequence[int], constant
     source, count, nblocks = emit_c(P, name, params, header,
                                     [f"for (int i = 0; i < {n}; i++)", f"    if (!isfinite({out}[i])) return 2;"],
                                     static=static, block_statements=block_statements, clones=True,
-                                    scratch=dense.scratch if dense else 0,
-                                    loops=[("product", dense.loop("J", 0))] if dense else ())
+                                    **(dense.emit_args("J", 0) if dense else {}))
     return UnrolledJacobian(name, n, source, count, nblocks, kind)
 
 
@@ -633,8 +631,7 @@ def chain_step(kind: str, revolute: Sequence[bool], parents: Sequence[int], cons
     source, count, nblocks = emit_c(P, name, ("const double *q", "const double *qd", "const double *u", "double *x"),
                                     header, [f"for (int i = 0; i < {n}; i++)", "    if (!isfinite(x[i])) return 2;"],
                                     static=True, standalone=False, clones=kind in ("jacobian", "id_jacobian"),
-                                    scratch=dense.scratch if dense else 0,
-                                    loops=[("product", dense.loop("x", n))] if dense else ())
+                                    **(dense.emit_args("x", n) if dense else {}))
     return UnrolledJacobian(name, n, source, count, nblocks, kind)
 
 
