@@ -112,6 +112,7 @@ class Program:
         self.stmts = []  # (name, C text, names used, block); name None: a side effect, always kept
         self.memo = {}
         self.block = 0
+        self.homes = {}  # name: the block of its statement
 
     def _emit(self, text: str, deps) -> Var:
         name = self.memo.get(text)
@@ -119,11 +120,18 @@ class Program:
             name = f"{self.prefix}{len(self.stmts)}"
             self.stmts.append((name, text, tuple(deps), self.block))
             self.memo[text] = name
+            self.homes[name] = self.block
         return Var(name)
 
     def effect(self, text: str, uses):
         """A statement kept for its effect (an output, a check); ``uses``: the values it reads."""
         self.stmts.append((None, text, tuple(u.name for u in uses if isinstance(u, Var)), self.block))
+
+    def home(self, values, default: int) -> int:
+        """The block of the latest statement among ``values`` (``default`` for constants): an effect placed
+        there reads them from registers, not through the work array (when nothing else needs them)."""
+        return max((self.homes[v.name] for v in values if isinstance(v, Var) and v.name in self.homes),
+                   default=default)
 
     def sop(self, products) -> object:
         """sum over ``products`` (each a sequence of factors: floats and Vars) of the factors' product."""
@@ -869,7 +877,7 @@ def emit_c(P: Program, name: str, params: Sequence[str], header: Sequence[str], 
         lines.append(f"FMUGEN_UNROLLED_BLOCK{'_V3' if clones else ''} {fn[-1]}({', '.join(params)}, double *w)")
         lines.append("{")
         lines.append("    " + " ".join(f"(void){a};" for a in args) + " (void)w;")
-        lines.append(f"    const double *fmugen_wb = {wb};")
+        lines.append(f"    double *const fmugen_wb = {wb};")
         lines.extend("    " + x for x in body)
         lines.append("    return 0;")
         lines.append("}")

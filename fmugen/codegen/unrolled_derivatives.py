@@ -177,10 +177,12 @@ def _world_kinematics(P: Program, bodies: list, q, block0: int):
 
 
 def _rnea_derivatives(P: Program, bodies: list, gravity, q, qd, qdd, block0: int):
-    """Recursive Newton-Euler at (q, qd, qdd) and its analytical derivatives: (nq, nd, Mlow, tauF) with
-    nq[i, j], nd[i, j] = -∂ID_i/∂q_j, -∂ID_i/∂qd_j for every related pair (one joint on the other's path),
-    Mlow[i, j] = M[i][j] for j on i's path (rotor inertia on the diagonal) and tauF[i] = S_i . F_i (ID_i
-    without rotor inertia and friction).  Blocks block0 .. block0 + 4n."""
+    """Recursive Newton-Euler at (q, qd, qdd) and its analytical derivatives: (nq, nd, Mlow, tauF, parts)
+    with nq[i, j], nd[i, j] = -∂ID_i/∂q_j, -∂ID_i/∂qd_j for every related pair (one joint on the other's
+    path), Mlow[i, j] = M[i][j] for j on i's path (rotor inertia on the diagonal), tauF[i] = S_i . F_i (ID_i
+    without rotor inertia and friction) and parts = (al, P, Q, w, dv, S, slope): the per-body vectors the
+    entries are dot products of (slope: d(passive force)/dqd), for a loop to form them
+    (:class:`_DenseProduct`).  Blocks block0 .. block0 + 4n."""
     n = len(bodies)
     path, subtree = _paths(bodies)
     children = [[] for _ in range(n)]
@@ -260,31 +262,32 @@ def _rnea_derivatives(P: Program, bodies: list, gravity, q, qd, qdd, block0: int
             Mlow[i, j] = P.sop([(al[i][k], S[j][k]) for k in range(6)] + ([(b.rotor,)] if j == i else []))
 
     # -dID: entries (i, j) for j on the path of i (row i: al_i) and (j, i) for j strictly above i (column i: P, Q)
-    nq, nd = {}, {}
+    nq, nd, slope = {}, {}, [None] * n
     for i, b in enumerate(bodies):
         P.block = block0 + 3 * n + 1 + i
+        slope[i] = P.sop(_friction_slope_terms(P, b, qd[i]))
         for j in path[i]:
             nq[i, j] = P.sop([(al[i][k], w[j][k]) for k in range(6)] + [(al[i][6 + k], dv[j][k]) for k in range(6)])
             terms = [(2.0, al[i][k], dv[j][k]) for k in range(6)] + [(-1.0, al[i][6 + k], S[j][k]) for k in range(6)]
             if j == i:
-                terms += [(-1.0, *t) for t in _friction_slope_terms(P, b, qd[i])]
+                terms += [(-1.0, slope[i])]
             nd[i, j] = P.sop(terms)
             if j != i:
                 nq[j, i] = P.sop([(-1.0, S[j][k], Qv[i][k]) for k in range(6)])
                 nd[j, i] = P.sop([(-1.0, S[j][k], Pv[i][k]) for k in range(6)])
 
     tauF = [P.sop([(S[i][k], F[i][k]) for k in range(6)]) for i in range(n)]
-    return nq, nd, Mlow, tauF
+    return nq, nd, Mlow, tauF, (al, Pv, Qv, w, dv, S, slope)
 
 
 def _fd_jacobian(P: Program, bodies: list, gravity, q, qd, tau, out: str = "qdd", product: bool = True):
     """qdd (n values, written to the C array ``out``) and J (n x 3n values) = [∂qdd/∂q, ∂qdd/∂qd, M^-1];
     without ``product``, J's first 2n columns are left to a loop (:class:`_DenseProduct`): J is then
-    (M^-1, related, -∂ID/∂q, -∂ID/∂qd), the latter two {(i, c): value} for i related to c."""
+    (M^-1, related, parts), ``parts`` the vectors -∂ID's entries are formed of (:func:`_rnea_derivatives`)."""
     n = len(bodies)
     qdd = _aba(P, bodies, gravity, q, qd, tau, out=out)
     block0 = 3 * n + 2  # the blocks after those of the ABA
-    nq, nd, Mlow, _ = _rnea_derivatives(P, bodies, gravity, q, qd, qdd, block0)
+    nq, nd, Mlow, _, parts = _rnea_derivatives(P, bodies, gravity, q, qd, qdd, block0)
     path, subtree = _paths(bodies)
 
     # M = L^T L without fill-in, leaves first: L[k][j] (j on k's path) from M[k][j] minus the terms of
@@ -324,7 +327,7 @@ def _fd_jacobian(P: Program, bodies: list, gravity, q, qd, tau, out: str = "qdd"
     # the columns: J_q[r][c] = sum_i M^-1[r][i] (-dID_q)[i][c] over the i related to c
     related = [sorted(set(path[c]) | set(subtree[c])) for c in range(n)]
     if not product:
-        return qdd, (Minv, related, nq, nd)
+        return qdd, (Minv, related, parts)
     J = [[0.0] * (3 * n) for _ in range(n)]
     for r in range(n):
         P.block = block0 + 7 * n + 1 + r
@@ -336,23 +339,34 @@ def _fd_jacobian(P: Program, bodies: list, gravity, q, qd, tau, out: str = "qdd"
 
 
 class _DenseProduct:
-    """[∂qdd/∂q, ∂qdd/∂qd] = M^-1 [-∂ID/∂q, -∂ID/∂qd] as a loop instead of straight-line sums.
+    """[∂qdd/∂q, ∂qdd/∂qd] = M^-1 [-∂ID/∂q, -∂ID/∂qd] as loops instead of straight-line sums.
 
     On the large trees the product is most of the Jacobian's arithmetic (Tiago: 76,000 of 136,000
     multiplications) and M^-1 is dense on each root branch, so straight-line code spends it one scalar
     at a time from a megabyte of instructions.  Here the statements store M^-1 (into J's last n columns,
-    where it belongs) and the nonzero entries of -∂ID (into the scratch ``fmugen_wb``: two per pair of
-    related joints), and a loop adds, for each column c and each joint i related to c, the scaled row i
-    of M^-1 over c's branch: axpys of the branch's length, which gcc vectorises (AVX2 in the x86-64-v3
-    build).  Rows of other branches are zeros, stored by statements.  Faster than the sums on every robot
-    measured (µs, both timed in one run per robot: UR5 0.86 against 0.91, iiwa 1.10 against 1.18, Atlas
-    7.0 against 7.8, Talos 13.0 against 20.1, Tiago 22.2 against 44.0), for 0.3-0.6 of the compile time on
-    the large trees (Tiago 16 against 62 s) and 0.8-0.9 on the arms.
+    where it belongs) and the per-body vectors of -∂ID (the scratch ``fmugen_wb``), and two loops follow:
+
+    * -∂ID's entries, two per pair of related joints: column j's rows i in j's subtree are
+      al_i . [w_j; dv_j] and 2 al_i . dv_j - al_i . S_j (less the friction's slope on the diagonal), its rows
+      above j -S_j . Q_i and -S_j . P_i -- dot products of 12 and 6 numbers, four rows i at a time over
+      the runs of consecutive bodies of j's subtree (al, P, Q stored component by component).  As
+      statements they were a sixth of Tiago's time (two loads per multiplication, one at a time);
+    * for each column c and each joint i related to c, the scaled row i of M^-1 over c's branch: axpys of
+      the branch's length, 16 rows of accumulators in registers.
+
+    gcc vectorises both (AVX2 in the x86-64-v3 build).  Rows of other branches are zeros, stored by
+    statements.  The product as a loop was faster than the sums on every robot measured (µs, both timed
+    in one run per robot: UR5 0.86 against 0.91, iiwa 1.10 against 1.18, Atlas 7.0 against 7.8, Talos 13.0
+    against 20.1, Tiago 22.2 against 44.0), for 0.3-0.6 of the compile time on the large trees (Tiago 16
+    against 62 s) and 0.8-0.9 on the arms.
     Tried and dropped: M^-1 = X X^T as a loop too (short loops over the subtrees: Tiago 24.3 µs)."""
 
-    def __init__(self, n: int, Minv, related, nq, nd, bodies):
+    def __init__(self, n: int, Minv, related, parts, bodies):
+        if any(not b.parent < i for i, b in enumerate(bodies)):
+            raise ValueError("bodies must follow their parents (parent < body)")
         self.n = n
-        root = [p[-1] for p in _paths(bodies)[0]]
+        path, subtree = _paths(bodies)
+        root = [p[-1] for p in path]
         # each column's rows: the span of its root branch (a branch broken by another: its span holds
         # the other's zero entries of M^-1, which are stored like the rest)
         span = {}
@@ -360,39 +374,150 @@ class _DenseProduct:
             lo, hi = span.get(r, (i, i + 1))
             span[r] = (min(lo, i), max(hi, i + 1))
         self.rows = [span[root[c]] for c in range(n)]
-        self.Minv, self.related, self.nq, self.nd = Minv, related, nq, nd
+        self.Minv, self.related, self.parts = Minv, related, parts
         self.start = [0]
         for c in range(n):
             self.start.append(self.start[-1] + len(related[c]))
+        # parents first: column j's related joints are its ancestors by depth, then its subtree in order,
+        # so (i, j) is entry start[j] + depth[j] + (rank of i in the subtree) and (j, i), j above i, entry
+        # start[i] + depth[j]
+        self.depth = [len(p) - 1 for p in path]
+        self.sub = [sorted(x) for x in subtree]
+        for j in range(n):
+            assert related[j] == sorted(path[j][1:]) + self.sub[j]
+        t = self.start[-1]
+        # the scratch: -∂ID/∂q's and -∂ID/∂qd's entries, al (12 x n), P, Q (6 x n), [w, dv, S] of each body,
+        # the friction's slopes
+        self.at = {"bq": 0, "bd": t, "al": 2 * t, "P": 2 * t + 12 * n, "Q": 2 * t + 18 * n, "ws": 2 * t + 24 * n,
+                   "slope": 2 * t + 42 * n, "end": 2 * t + 43 * n}
 
     def emit_args(self, target: str, base: int) -> dict:
-        """emit_c's arguments for the loop: the scratch of -∂ID's entries and the loop's function."""
-        return {"scratch": 2 * self.start[-1], "loops": [("product", self.loop(target, base))]}
+        """emit_c's arguments for the loops: the scratch and the loops' function."""
+        return {"scratch": self.at["end"], "loops": [("product", self.loop(target, base))]}
 
     def effects(self, P: Program, target: str, base: int):
-        """The statements: M^-1, the zero rows of the first 2n columns, and -∂ID's entries."""
-        n = self.n
+        """The statements: M^-1, the zero rows of the first 2n columns and the vectors of -∂ID, each stored
+        in the block that computes it (from a register: through the work array, M^-1 alone took 8% of
+        Tiago's time)."""
+        n, end, at = self.n, P.block, self.at
+        al, Pv, Qv, w, dv, S, slope = self.parts
+
+        def store(text, v):
+            P.block = P.home([v], end)
+            P.effect(text, [v])
+
         for r in range(n):
             for c in range(n):
-                v = self.Minv[r, c]
-                P.effect(f"{target}[{base + 3 * n * r + 2 * n + c}] = {c_value(v)};", [v])
+                store(f"{target}[{base + 3 * n * r + 2 * n + c}] = {c_value(self.Minv[r, c])};", self.Minv[r, c])
         for c in range(n):
             lo, hi = self.rows[c]
             for r in [*range(lo), *range(hi, n)]:
-                P.effect(f"{target}[{base + 3 * n * r + c}] = 0.0;", [])
-                P.effect(f"{target}[{base + 3 * n * r + n + c}] = 0.0;", [])
-            for t, i in enumerate(self.related[c]):
-                k = 2 * (self.start[c] + t)
-                for kk, v in ((k, self.nq[i, c]), (k + 1, self.nd[i, c])):
-                    P.effect(f"fmugen_wb[{kk}] = {c_value(v)};", [v])
+                store(f"{target}[{base + 3 * n * r + c}] = 0.0;", 0.0)
+                store(f"{target}[{base + 3 * n * r + n + c}] = 0.0;", 0.0)
+        for i in range(n):
+            for k in range(12):
+                store(f"fmugen_wb[{at['al'] + n * k + i}] = {c_value(al[i][k])};", al[i][k])
+            for k in range(6):
+                store(f"fmugen_wb[{at['P'] + n * k + i}] = {c_value(Pv[i][k])};", Pv[i][k])
+                store(f"fmugen_wb[{at['Q'] + n * k + i}] = {c_value(Qv[i][k])};", Qv[i][k])
+            for k, v in enumerate([*w[i], *dv[i], *S[i]]):
+                store(f"fmugen_wb[{at['ws'] + 18 * i + k}] = {c_value(v)};", v)
+            if isinstance(slope[i], Var):
+                store(f"fmugen_wb[{at['slope'] + i}] = {c_value(slope[i])};", slope[i])
+        P.block = end
+
+    def _runs(self, first: int) -> list:
+        """(j, first body, length) of the runs of consecutive bodies in each j's subtree (its own row left
+        out for ``first`` = 1)."""
+        runs = []
+        for j in range(self.n):
+            for i in self.sub[j][first:]:
+                if runs and runs[-1][0] == j and runs[-1][1] + runs[-1][2] == i:
+                    runs[-1][2] += 1
+                else:
+                    runs.append([j, i, 1])
+        return runs
+
+    def _did(self) -> list:
+        """The loops forming -∂ID's entries (four rows i at a time with the vector type, the rest in
+        scalars)."""
+        n, at = self.n, self.at
+        lower, upper = self._runs(0), self._runs(1)
+        # the lower runs' first entries: start[j] + depth[j] + rank in the subtree
+        low = [self.start[j] + self.depth[j] + self.sub[j].index(i) for j, i, _ in lower]
+        lines = [f"static const short lower[{len(lower)}][4] = {{"
+                 + ", ".join(f"{{{j}, {i}, {m}, {k}}}" for (j, i, m), k in zip(lower, low)) + "};",
+                 f"static const short upper[{len(upper)}][4] = {{"
+                 + ", ".join(f"{{{j}, {i}, {m}, {self.depth[j]}}}" for j, i, m in upper) + "};",
+                 f"double *const bq = w_ + {at['bq']}, *const bd = w_ + {at['bd']};",
+                 f"const double *const al = w_ + {at['al']}, *const Pt = w_ + {at['P']}, "
+                 f"*const Qt = w_ + {at['Q']};",
+                 "/* rows i in the subtree of column j: al_i . [w_j; dv_j] and 2 al_i . dv_j - al_i . S_j */",
+                 f"for (int u = 0; u < {len(lower)}; u++) {{",
+                 f"    const int i0 = lower[u][1], len = lower[u][2];",
+                 f"    const double *W = w_ + {at['ws']} + 18 * lower[u][0];",
+                 "    double *oq = bq + lower[u][3], *od = bd + lower[u][3];",
+                 "    int t = 0;"]
+
+        def body(vec: bool, what: str) -> list:
+            ty = "fmugen_v4" if vec else "double"
+            if vec:
+                ld = (lambda a, k: f"memcpy(&x, {a} + {n * k} + i0 + t, sizeof x);")
+            else:
+                ld = (lambda a, k: f"x = {a}[{n * k} + i0 + t];")
+            if what == "lower":
+                ls = [f"{ty} sq = {{0.0}}, sd = {{0.0}}, x;" if vec else "double sq = 0.0, sd = 0.0, x;"]
+                for k in range(6):
+                    ls += [ld("al", k), f"sq += W[{k}] * x;", f"sd += (2.0 * W[{6 + k}]) * x;"]
+                for k in range(6):
+                    ls += [ld("al", 6 + k), f"sq += W[{6 + k}] * x;", f"sd -= W[{12 + k}] * x;"]
+                ls += ["memcpy(oq + t, &sq, sizeof sq);", "memcpy(od + t, &sd, sizeof sd);"] if vec else \
+                    ["oq[t] = sq;", "od[t] = sd;"]
+            else:
+                ls = [f"{ty} sq = {{0.0}}, sd = {{0.0}}, x;" if vec else "double sq = 0.0, sd = 0.0, x;"]
+                for k in range(6):
+                    ls += [ld("Qt", k), f"sq -= S[{k}] * x;", ld("Pt", k), f"sd -= S[{k}] * x;"]
+                if vec:
+                    ls += ["for (int l = 0; l < 4; l++) {",
+                           "    const int e = first[i0 + t + l] + dj;",
+                           "    bq[e] = sq[l];", "    bd[e] = sd[l];", "}"]
+                else:
+                    ls += ["bq[first[i0 + t] + dj] = sq;", "bd[first[i0 + t] + dj] = sd;"]
+            return ls
+
+        lines += ["#ifdef FMUGEN_UNROLLED_V4", "    for (; t + 4 <= len; t += 4) {"]
+        lines += ["        " + x for x in body(True, "lower")]
+        lines += ["    }", "#endif", "    for (; t < len; t++) {"]
+        lines += ["        " + x for x in body(False, "lower")]
+        lines += ["    }", "}"]
+        # the friction's slope on the diagonal
+        for j, s in enumerate(self.parts[6]):
+            if isinstance(s, Var):
+                lines.append(f"bd[{self.start[j] + self.depth[j]}] -= w_[{at['slope'] + j}];")
+            elif s != 0.0:
+                lines.append(f"bd[{self.start[j] + self.depth[j]}] -= {c_value(s)};")
+        lines += ["/* rows j above column i: -S_j . Q_i and -S_j . P_i, four columns i at a time */",
+                  f"for (int u = 0; u < {len(upper)}; u++) {{",
+                  "    const int i0 = upper[u][1], len = upper[u][2], dj = upper[u][3];",
+                  f"    const double *S = w_ + {at['ws']} + 18 * upper[u][0] + 12;",
+                  "    int t = 0;",
+                  "#ifdef FMUGEN_UNROLLED_V4", "    for (; t + 4 <= len; t += 4) {"]
+        lines += ["        " + x for x in body(True, "upper")]
+        lines += ["    }", "#endif", "    for (; t < len; t++) {"]
+        lines += ["        " + x for x in body(False, "upper")]
+        lines += ["    }", "}"]
+        return lines
 
     def loop(self, target: str, base: int) -> list:
-        """The loop's C lines: one loop per branch span, its length a constant."""
+        """The loops' C lines: -∂ID's entries, then the product, one loop per branch span (its length a
+        constant)."""
         n, k3 = self.n, 3 * self.n
         rel = ", ".join(str(i) for c in range(n) for i in self.related[c])
         lines = [f"static const short rel[{self.start[-1]}] = {{{rel}}};  /* the joints related to each column */",
                  f"static const short first[{n + 1}] = {{{', '.join(str(x) for x in self.start)}}};",
+                 "double *const w_ = fmugen_wb;",
                  f"double *const out = {target} + {base};"]
+        lines += ["{"] + ["    " + x for x in self._did()] + ["}"]
         spans = sorted(set(self.rows))
         for s_, (lo, hi) in enumerate(spans):
             cols = [c for c in range(n) if self.rows[c] == (lo, hi)]
@@ -404,12 +529,13 @@ class _DenseProduct:
                           f"for (int u = 0; u < {len(cols)}; u++) {{  /* rows {lo}..{hi - 1} */",
                           f"    const int c = cols{s_}[u];"]
             for r0 in range(0, nb, self.CHUNK):  # the accumulators of a chunk of rows stay in registers
-                lines += ["    " + x for x in self._chunk(lo + r0, min(self.CHUNK, nb - r0), k3, 2 * n, n)]
+                lines += ["    " + x for x in self._chunk(lo + r0, min(self.CHUNK, nb - r0), k3, 2 * n, n,
+                                                          self.at["bd"])]
             lines += ["}"]
         return lines
 
     @staticmethod
-    def _chunk(row: int, w: int, k3: int, minv: int, n: int) -> list:
+    def _chunk(row: int, w: int, k3: int, minv: int, n: int, bd: int) -> list:
         """Rows row .. row + w - 1 of column c: with gcc's and clang's vector types four rows per register
         (a plain array of accumulators is kept in memory: a load and a store per multiply-add), else plain
         loops; the rows past the last four in scalars."""
@@ -419,7 +545,7 @@ class _DenseProduct:
         vec += ["    double " + ", ".join(f"sq{k} = 0.0, sd{k} = 0.0" for k in range(ns)) + ";"] if ns else []
         vec += ["    for (int t = first[c]; t < first[c + 1]; t++) {",
                 f"        const double *m = out + {k3} * rel[t] + {minv + row};",
-                "        const double bq = fmugen_wb[2 * t], bd = fmugen_wb[2 * t + 1];"]
+                f"        const double bq = fmugen_wb[t], bd = fmugen_wb[{bd} + t];"]
         for k in range(nv):
             vec += [f"        fmugen_v4 m{k};", f"        memcpy(&m{k}, m + {4 * k}, sizeof m{k});",
                     f"        q{k} += bq * m{k};", f"        d{k} += bd * m{k};"]
@@ -438,7 +564,7 @@ class _DenseProduct:
                  f"    double xq[{w}] = {{0.0}}, xd[{w}] = {{0.0}};",
                  "    for (int t = first[c]; t < first[c + 1]; t++) {",
                  f"        const double *m = out + {k3} * rel[t] + {minv + row};",
-                 "        const double bq = fmugen_wb[2 * t], bd = fmugen_wb[2 * t + 1];",
+                 f"        const double bq = fmugen_wb[t], bd = fmugen_wb[{bd} + t];",
                  f"        for (int r = 0; r < {w}; r++) {{",
                  "            xq[r] += bq * m[r];",
                  "            xd[r] += bd * m[r];",
@@ -458,7 +584,7 @@ class _DenseProduct:
 def _id_jacobian(P: Program, bodies: list, gravity, q, qd, qdd):
     """tau (n values) and J (n x 3n values) = [∂tau/∂q, ∂tau/∂qd, M]."""
     n = len(bodies)
-    nq, nd, Mlow, tauF = _rnea_derivatives(P, bodies, gravity, q, qd, qdd, 0)
+    nq, nd, Mlow, tauF, _ = _rnea_derivatives(P, bodies, gravity, q, qd, qdd, 0)
     P.block = 4 * n + 1
     tau = []
     for i, b in enumerate(bodies):
