@@ -51,7 +51,7 @@ TIMER = r"""
 #include <time.h>
 #include <stdlib.h>
 #include "chain_dynamics.c"
-static double now(void) { struct timespec t; clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t); return t.tv_sec + 1e-9 * t.tv_nsec; }
+static double now(void) { struct timespec t; clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t); return t.tv_sec + 1e-9 * t.tv_nsec; }
 /* seconds per call of the forward dynamics (kind 0) or its Jacobian (kind 1), k calls */
 double time_calls(int kind, int k, int n, const int *jt, const double *lc, const double *g, const double *q,
                   const double *qd, const double *tau, double *out, double *work)

@@ -955,13 +955,13 @@ int unrolled_rows(int rows, int n, const double *q, const double *qd, const doub
     }
     return 0;
 }
-/* CPU seconds per call over k calls at one state */
+/* CPU seconds of the calling thread per call over k calls at one state */
 double unrolled_time(int k, const double *q, const double *qd, const double *tau, double *qdd)
 {
     struct timespec a, b;
-    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &a);
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &a);
     for (int i = 0; i < k; i++) %(name)s(q, qd, tau, qdd);
-    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &b);
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &b);
     return ((b.tv_sec - a.tv_sec) + 1e-9 * (b.tv_nsec - a.tv_nsec)) / k;
 }
 """

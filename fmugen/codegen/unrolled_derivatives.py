@@ -385,9 +385,10 @@ class _DenseProduct:
         self.sub = [sorted(x) for x in subtree]
         for j in range(n):
             assert related[j] == sorted(path[j][1:]) + self.sub[j]
-        t = self.start[-1]
-        # the scratch: -∂ID/∂q's and -∂ID/∂qd's entries, al (12 x n), P, Q (6 x n), [w, dv, S] of each body,
-        # the friction's slopes
+        t = self.start[-1] + 3
+        # the scratch: -∂ID/∂q's and -∂ID/∂qd's entries (each followed by three slots that the last run's
+        # four-row store may overrun), al (12 x n), P, Q (6 x n), [w, dv, S] of each body, the friction's
+        # slopes
         self.at = {"bq": 0, "bd": t, "al": 2 * t, "P": 2 * t + 12 * n, "Q": 2 * t + 18 * n, "ws": 2 * t + 24 * n,
                    "slope": 2 * t + 42 * n, "end": 2 * t + 43 * n}
 
@@ -478,18 +479,22 @@ class _DenseProduct:
                 for k in range(6):
                     ls += [ld("Qt", k), f"sq -= S[{k}] * x;", ld("Pt", k), f"sd -= S[{k}] * x;"]
                 if vec:
-                    ls += ["for (int l = 0; l < 4; l++) {",
+                    ls += ["for (int l = 0; l < 4 && t + l < len; l++) {",
                            "    const int e = first[i0 + t + l] + dj;",
                            "    bq[e] = sq[l];", "    bd[e] = sd[l];", "}"]
                 else:
                     ls += ["bq[first[i0 + t] + dj] = sq;", "bd[first[i0 + t] + dj] = sd;"]
             return ls
 
-        lines += ["#ifdef FMUGEN_UNROLLED_V4", "    for (; t + 4 <= len; t += 4) {"]
+        # four rows at a time to the end of the run: the lanes past it (rows of other subtrees, or past n
+        # into the next component) land on the run's next entries -- the next run's, the next column's,
+        # written after this one -- or on the three spare slots after the last column (no scalar tail: it
+        # was most of these loops' instructions on the arms)
+        lines += ["#ifdef FMUGEN_UNROLLED_V4", "    for (; t < len; t += 4) {"]
         lines += ["        " + x for x in body(True, "lower")]
-        lines += ["    }", "#endif", "    for (; t < len; t++) {"]
+        lines += ["    }", "#else", "    for (; t < len; t++) {"]
         lines += ["        " + x for x in body(False, "lower")]
-        lines += ["    }", "}"]
+        lines += ["    }", "#endif", "}"]
         # the friction's slope on the diagonal
         for j, s in enumerate(self.parts[6]):
             if isinstance(s, Var):
@@ -501,11 +506,11 @@ class _DenseProduct:
                   "    const int i0 = upper[u][1], len = upper[u][2], dj = upper[u][3];",
                   f"    const double *S = w_ + {at['ws']} + 18 * upper[u][0] + 12;",
                   "    int t = 0;",
-                  "#ifdef FMUGEN_UNROLLED_V4", "    for (; t + 4 <= len; t += 4) {"]
+                  "#ifdef FMUGEN_UNROLLED_V4", "    for (; t < len; t += 4) {  /* the lanes past the run not stored */"]
         lines += ["        " + x for x in body(True, "upper")]
-        lines += ["    }", "#endif", "    for (; t < len; t++) {"]
+        lines += ["    }", "#else", "    for (; t < len; t++) {"]
         lines += ["        " + x for x in body(False, "upper")]
-        lines += ["    }", "}"]
+        lines += ["    }", "#endif", "}"]
         return lines
 
     def loop(self, target: str, base: int) -> list:
@@ -540,21 +545,26 @@ class _DenseProduct:
         (a plain array of accumulators is kept in memory: a load and a store per multiply-add), else plain
         loops; the rows past the last four in scalars."""
         nv, ns = divmod(w, 4)
+        # rows past the last four: one more register over the last four rows (overlapping the one
+        # before, its new lanes stored) when there are four, else scalars
+        at = [4 * k for k in range(nv)] + ([w - 4] if nv and ns else [])
+        new = [(0, 4)] * nv + ([(4 - ns, 4)] if nv and ns else [])
+        ns = 0 if nv else ns
         vec = ["#ifdef FMUGEN_UNROLLED_V4", "{"]
-        vec += ["    fmugen_v4 " + ", ".join(f"q{k} = {{0.0}}, d{k} = {{0.0}}" for k in range(nv)) + ";"] if nv else []
+        vec += ["    fmugen_v4 " + ", ".join(f"q{k} = {{0.0}}, d{k} = {{0.0}}" for k in range(len(at))) + ";"] if at else []
         vec += ["    double " + ", ".join(f"sq{k} = 0.0, sd{k} = 0.0" for k in range(ns)) + ";"] if ns else []
         vec += ["    for (int t = first[c]; t < first[c + 1]; t++) {",
                 f"        const double *m = out + {k3} * rel[t] + {minv + row};",
                 f"        const double bq = fmugen_wb[t], bd = fmugen_wb[{bd} + t];"]
-        for k in range(nv):
-            vec += [f"        fmugen_v4 m{k};", f"        memcpy(&m{k}, m + {4 * k}, sizeof m{k});",
+        for k, a in enumerate(at):
+            vec += [f"        fmugen_v4 m{k};", f"        memcpy(&m{k}, m + {a}, sizeof m{k});",
                     f"        q{k} += bq * m{k};", f"        d{k} += bd * m{k};"]
         for k in range(ns):
             vec += [f"        sq{k} += bq * m[{4 * nv + k}];", f"        sd{k} += bd * m[{4 * nv + k}];"]
         vec += ["    }"]
-        for k in range(nv):
-            for lane in range(4):
-                r = row + 4 * k + lane
+        for k, (a, (l0, l1)) in enumerate(zip(at, new)):
+            for lane in range(l0, l1):
+                r = row + a + lane
                 vec += [f"    out[{k3 * r} + c] = q{k}[{lane}];", f"    out[{k3 * r + n} + c] = d{k}[{lane}];"]
         for k in range(ns):
             r = row + 4 * nv + k
@@ -775,13 +785,13 @@ int unrolled_rows(int rows, int n, const double *q, const double *qd, const doub
     }
     return 0;
 }
-/* CPU seconds per call over k calls at one state */
+/* CPU seconds of the calling thread per call over k calls at one state */
 double unrolled_time(int k, const double *q, const double *qd, const double *u, double *y, double *J)
 {
     struct timespec a, b;
-    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &a);
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &a);
     for (int i = 0; i < k; i++) %(name)s(q, qd, u, y, J);
-    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &b);
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &b);
     return ((b.tv_sec - a.tv_sec) + 1e-9 * (b.tv_nsec - a.tv_nsec)) / k;
 }
 """
