@@ -289,3 +289,36 @@ def test_a_massless_leaf_keeps_the_loops_and_their_run_time_status():
     assert "fmugen_chain_fd(" in src and "fmugen_unrolled_" not in src
     with CompiledModel.build(src) as cm, pytest.raises(RuntimeError, match="status 1"):  # NOT_POSITIVE_DEFINITE
         cm.evaluate([], 0.0, np.zeros(16), np.zeros(8))
+
+
+def test_source_independent_of_hash_seed(tmp_path):
+    """The work array's slots follow the statements' order, not Python's string hashes (PYTHONHASHSEED):
+    the same robot gives the same C text in every process, as an FMU build must."""
+    import os
+    import subprocess
+    import sys
+    import textwrap
+
+    script = tmp_path / "gen.py"
+    script.write_text(textwrap.dedent(f"""
+        import hashlib, sys
+        sys.path.insert(0, {os.path.dirname(__file__)!r})
+        from test_unrolled_derivatives import _tree_robot
+        from fmugen.batch import Kernels
+        from fmugen.codegen.unrolled_aba import unrolled_fd
+        from fmugen.codegen.unrolled_derivatives import unrolled_jacobian
+        k = Kernels.from_robot(_tree_robot(9, 5, friction_parameter=False))
+        g = k.globals[:3]
+        texts = [unrolled_fd(k.revolute, k.parents, k.constants, g).source]
+        texts += [unrolled_jacobian(k.revolute, k.parents, k.constants, g, kind).source for kind in ("fd", "id")]
+        print(hashlib.sha256("".join(texts).encode()).hexdigest())
+    """))
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    path = os.pathsep.join([root] + ([os.environ["PYTHONPATH"]] if os.environ.get("PYTHONPATH") else []))
+    digests = set()
+    for seed in ("1", "2", "3"):
+        r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                           env=dict(os.environ, PYTHONHASHSEED=seed, PYTHONPATH=path))
+        assert r.returncode == 0, r.stderr
+        digests.add(r.stdout.strip())
+    assert len(digests) == 1 and len(next(iter(digests))) == 64

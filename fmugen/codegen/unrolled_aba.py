@@ -175,7 +175,7 @@ class Program:
             parts.append(("- " if const < 0 else "+ ") + _fmt(abs(const)))
         text = " ".join(parts)
         text = text[2:] if text.startswith("+ ") else "-" + text[2:]
-        v = self._emit(text, {n for k, _ in items for n in k})
+        v = self._emit(text, dict.fromkeys(n for k, _ in items for n in k))
         return -v if flip else v
 
     def add(self, *xs):
