@@ -195,9 +195,13 @@ def test_folded_models_get_unrolled_code_equal_to_the_loops(n):
         assert (f"fmugen_unrolled_{'jacobian' if kind == 'fd' else 'id_jacobian'}_" in folded) == \
             (n <= UNROLLED_JACOBIAN_MAX)
         assert ("fmugen_chain_" in folded) == (n > UNROLLED_JACOBIAN_MAX)
-        # the Jacobians' functions carry the x86-64-v3 clone, the dynamics' alone not (their build time)
-        assert ("FMUGEN_UNROLLED_BLOCK_V3 fmugen_unrolled_" in folded) == (n <= UNROLLED_JACOBIAN_MAX)
-        assert "FMUGEN_UNROLLED_BLOCK fmugen_unrolled_" in folded
+        # the forward dynamics' and the Jacobians' functions carry the x86-64-v3 clone, the inverse dynamics' not
+        v3 = "FMUGEN_UNROLLED_BLOCK_V3 fmugen_unrolled_"
+        jac = v3 + ("jacobian_" if kind == "fd" else "id_jacobian_")
+        assert (jac in folded) == (n <= UNROLLED_JACOBIAN_MAX)
+        assert (v3 + "fd_" in folded) == (kind == "fd")
+        assert ("FMUGEN_UNROLLED_BLOCK fmugen_unrolled_id_" in folded) == (kind == "id")
+        assert "FMUGEN_UNROLLED_BLOCK fmugen_unrolled_fd_" not in folded
         p = np.array([v.start for v in m.parameters], float)
         with CompiledModel.build(looped) as cl, CompiledModel.build(folded) as cf:
             for _ in range(3):

@@ -37,7 +37,7 @@ The Jacobians' functions are compiled twice, for x86-64-v3 (AVX2 and FMA) and fo
 loader picks one (gcc on glibc, :func:`fmugen.codegen.unrolled_aba.emit_c`): the code is bound by
 instruction fetch (iiwa: 100 kB of code, 16,500 instructions, 3,000 of them register copies that
 three-operand AVX instructions do without; 9,300 in the x86-64-v3 build), which takes 0.70x the time.  The forward
-and inverse dynamics alone keep the baseline (the large trees' build time).  Results differ between
+dynamics are built so too; the inverse dynamics alone keep the baseline.  Results differ between
 the two builds by rounding (fused multiply-adds), as glibc's own libm does between CPUs.
 
 Measured (``examples/bench_derivatives.py --unrolled-only``, one run): ∇FD 0.19-0.23x Pinocchio's
@@ -838,7 +838,7 @@ def chain_step(kind: str, revolute: Sequence[bool], parents: Sequence[int], cons
               " * (its numbers folded into the code) */"]
     source, count, nblocks = emit_c(P, name, ("const double *q", "const double *qd", "const double *u", "double *x"),
                                     header, [f"for (int i = 0; i < {n}; i++)", "    if (!isfinite(x[i])) return 2;"],
-                                    static=True, standalone=False, clones=kind in ("jacobian", "id_jacobian"),
+                                    static=True, standalone=False, clones=kind != "id",
                                     **(dense.emit_args("x", n) if dense else {}))
     return UnrolledJacobian(name, n, source, count, nblocks, kind)
 
