@@ -367,8 +367,8 @@ def _fd_jacobian(P: Program, bodies: list, gravity, q, qd, tau, out: str = "qdd"
             d = _sqrt(P, dkk)
             inv = P.recip(d)
             L[k, k] = d
-            for j in path[k][1:]:
-                L[k, j] = P.sop([(Mlow[k, j], inv)] + [(*t, inv) for t in pend[k, j]])
+            for j in path[k][1:]:  # the sum, then one product by 1/d (not 1/d in every term)
+                L[k, j] = P.mul(P.sop([(Mlow[k, j],)] + pend[k, j]), inv)
             for i in path[k][1:]:
                 for j in path[i]:
                     pend[i, j].append((-1.0, L[k, i], L[k, j]))
@@ -378,7 +378,7 @@ def _fd_jacobian(P: Program, bodies: list, gravity, q, qd, tau, out: str = "qdd"
             X[i, i] = P.recip(L[i, i])
             for kk in path[i][1:]:
                 upto = path[i][1:path[i].index(kk) + 1]  # from the parent of i up to k
-                X[i, kk] = P.sop([(-1.0, L[i, j], X[j, kk], X[i, i]) for j in upto])
+                X[i, kk] = P.sop([(-1.0, P.sop([(L[i, j], X[j, kk]) for j in upto]), X[i, i])])
         for ai in range(n):
             P.block = block + 2 * n + ai
             pa = set(path[ai])
@@ -389,9 +389,16 @@ def _fd_jacobian(P: Program, bodies: list, gravity, q, qd, tau, out: str = "qdd"
         P.block = block + 3 * n
         rhs = [P.sop([(tau[i],), (-1.0, bias[i])] + [(-1.0, *t) for t in _passive(P, b, qd[i])])
                for i, b in enumerate(bodies)]
+        # qdd = M^-1 rhs (other branches' zeros fold away), or X (X^T rhs), two passes over the paths, where
+        # that has fewer products: on a tree, not on a chain (Tiago 922 against 2,118; iiwa 56 against 49)
+        rows = [[(Minv[r, i], rhs[i]) for i in range(n) if isinstance(Minv[r, i], Var) or Minv[r, i] != 0.0]
+                for r in range(n)]
+        if 2 * sum(len(p_) for p_ in path) < sum(len(t) for t in rows):
+            y = [P.sop([(X[i, k], rhs[i]) for i in subtree[k]]) for k in range(n)]
+            rows = [[(X[r, k], y[k]) for k in path[r]] for r in range(n)]
         qdd = []
         for r in range(n):
-            qdd.append(P.sop([(Minv[r, i], rhs[i]) for i in range(n)]))  # other branches' zeros fold away
+            qdd.append(P.sop(rows[r]))
             P.effect(f"{out}[{r}] = {c_value(qdd[r])};", [qdd[r]])
         solved.extend(qdd)
         return qdd, block + 3 * n + 1
