@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from erd_robots import rel, robot
+from fmugen.codegen import unrolled_derivatives
 from fmugen.codegen.unrolled_derivatives import (CompiledUnrolledJacobian, evaluate_numeric, from_kernels,
                                                  unrolled_jacobian)
 
@@ -111,15 +112,20 @@ def test_product_loop_on_interleaved_branches_equals_the_sums_and_the_original_n
     g = kernels.globals[:3]
     gens = [unrolled_jacobian(revolute, parents, lc[order], g, dense_product=d) for d in (True, False)]
     gens.append(unrolled_jacobian(kernels.revolute, kernels.parents, lc, g))  # the usual numbering
+    with pytest.MonkeyPatch.context() as mp:  # M^-1 = X X^T as the loop as well, over the broken spans
+        mp.setattr(unrolled_derivatives, "MINV_LOOP_MIN", 0)
+        gens.append(unrolled_jacobian(revolute, parents, lc[order], g))
+    assert "Xc[xdst[t]]" in gens[3].source and "Xc[xdst[t]]" not in gens[0].source
     assert "fmugen_unrolled_fd_jacobian_product(" in gens[0].source and "_product(" not in gens[1].source
     made = [CompiledUnrolledJacobian(gen) for gen in gens]
     try:
         q, qd, x = rng.uniform(-1, 1, (3, n)), rng.uniform(-1, 1, (3, n)), rng.uniform(-3, 3, (3, n))
         loop, sums = (m.derivatives(q[:, order], qd[:, order], x[:, order]) for m in made[:2])
         ref = made[2].derivatives(q, qd, x)
+        minv_loop = made[3].derivatives(q[:, order], qd[:, order], x[:, order])
         ix = np.ix_(order, order)
-        for a, b, r in zip(loop, sums, ref):
-            assert rel(a, b) < 1e-12
+        for a, b, r, c in zip(loop, sums, ref, minv_loop):
+            assert rel(a, b) < 1e-12 and rel(c, b) < 1e-12
             assert rel(a, r[:, order] if r.ndim == 2 else r[:, ix[0], ix[1]]) < 1e-12
     finally:
         for m in made:
@@ -326,3 +332,38 @@ def test_source_independent_of_hash_seed(tmp_path):
         assert r.returncode == 0, r.stderr
         digests.add(r.stdout.strip())
     assert len(digests) == 1 and len(next(iter(digests))) == 64
+
+
+def test_loops_of_every_shape_and_their_plain_c_equal_the_sums():
+    """The loops' variants on one branch of nine joints (Panda, with rotor inertia, damping and friction):
+    M^-1 from the statements or as the loop X X^T, the product's sums of both kinds in one pass or one
+    kind a pass in chunks of rows (ROWS 8: a pass of eight rows and one of a single row), and each of those
+    in the plain C of a compiler without vector types, against the straight-line sums."""
+    import dataclasses
+
+    _, _, kernels, _, _ = robot("panda")
+    n = kernels.n
+    lc = np.array(kernels.constants, float).reshape(n, -1)
+    rng = np.random.default_rng(12)
+    lc[:, 25], lc[:, 26], lc[::2, 27], lc[:, 28] = rng.uniform(0, 0.3, n), rng.uniform(0, 2, n), 1.5, 0.05
+    args = (kernels.revolute, kernels.parents, lc, kernels.globals[:3])
+    gens = [unrolled_jacobian(*args, dense_product=False), unrolled_jacobian(*args)]
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(unrolled_derivatives, "MINV_LOOP_MIN", 0)
+        gens.append(unrolled_jacobian(*args))
+        mp.setattr(unrolled_derivatives._DenseProduct, "ROWS", 8)
+        gens.append(unrolled_jacobian(*args))
+    assert "Xc[xdst[t]]" in gens[2].source and "FMUGEN_SHUFFLE(a0, a1" in gens[1].source
+    assert gens[3].source.count("for (int t = first[c]; t < first[c + 1]; t++)") == 2 * 2 * 2  # 2 kinds x 2 chunks
+    gens += [dataclasses.replace(g, source=g.source.replace("#ifdef FMUGEN_UNROLLED_V4", "#if 0")) for g in gens[1:]]
+    made = [CompiledUnrolledJacobian(g) for g in gens]
+    try:
+        q, qd, x = rng.uniform(-1, 1, (3, n)), rng.uniform(-1, 1, (3, n)), rng.uniform(-3, 3, (3, n))
+        ref = made[0].derivatives(q, qd, x)
+        for m in made[1:]:
+            for a, b in zip(m.derivatives(q, qd, x), ref):
+                assert rel(a, b) < 1e-12
+    finally:
+        for m in made:
+            m.close()
+        kernels.close()

@@ -69,6 +69,11 @@ __all__ = ["UnrolledJacobian", "unrolled_jacobian", "chain_step", "STEP_KINDS", 
 
 _EYE = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
 
+#: M^-1 = X X^T as a loop (:meth:`_DenseProduct._minv`) from this many products of its statements on (the sum
+#: of s (s + 1) / 2 over the bodies, s the size of a body's subtree): Tiago has 7,215 (the loop 0.95x the time),
+#: Talos 2,120 and Atlas 741 (the loop 0.98x and 1.03x), the arms under 200 (1.07x; each timed in one process)
+MINV_LOOP_MIN = 4000
+
 
 # ------------------------------------------------------------ spatial algebra as lists of product terms
 def _cross_terms(a, b):
@@ -343,15 +348,17 @@ def _passive(P: Program, b, qd):
 
 def _fd_jacobian(P: Program, bodies: list, gravity, q, qd, tau, out: str = "qdd", product: bool = True):
     """qdd (n values, written to the C array ``out``) and J (n x 3n values) = [∂qdd/∂q, ∂qdd/∂qd, M^-1];
-    without ``product``, J's first 2n columns are left to a loop (:class:`_DenseProduct`): J is then
-    (M^-1, related, parts), ``parts`` the vectors -∂ID's entries are formed of (:func:`_rnea_derivatives`).
+    without ``product``, M^-1 and J's first 2n columns are left to loops (:class:`_DenseProduct`): J is then
+    (X, related, parts), X = L^-1 (its entries (i, k), k on i's path), ``parts`` the vectors -∂ID's entries
+    are formed of (:func:`_rnea_derivatives`).
 
     qdd = M^-1 (tau - bias - passive) from the M^-1 the Jacobian holds, not by the articulated-body
     algorithm (11 % fewer instructions on iiwa): the derivatives' passes run in the forward dynamics'
     order (:func:`_rnea_derivatives` with ``solve``)."""
     n = len(bodies)
     path, subtree = _paths(bodies)
-    Minv, solved = {}, []
+    Minv, solved, Xs = {}, [], {}
+    minv_loop = sum(len(s) * (len(s) + 1) // 2 for s in subtree) >= MINV_LOOP_MIN
 
     def solve(Mlow, bias, block):
         # M = L^T L without fill-in, leaves first: L[k][j] (j on k's path) from M[k][j] minus the terms of
@@ -379,7 +386,8 @@ def _fd_jacobian(P: Program, bodies: list, gravity, q, qd, tau, out: str = "qdd"
             for kk in path[i][1:]:
                 upto = path[i][1:path[i].index(kk) + 1]  # from the parent of i up to k
                 X[i, kk] = P.sop([(-1.0, P.sop([(L[i, j], X[j, kk]) for j in upto]), X[i, i])])
-        for ai in range(n):
+        Xs.update(X)
+        for ai in range(n) if product or not minv_loop else ():  # else M^-1 = X X^T is a loop (_DenseProduct)
             P.block = block + 2 * n + ai
             pa = set(path[ai])
             for bi in range(ai + 1):
@@ -390,10 +398,11 @@ def _fd_jacobian(P: Program, bodies: list, gravity, q, qd, tau, out: str = "qdd"
         rhs = [P.sop([(tau[i],), (-1.0, bias[i])] + [(-1.0, *t) for t in _passive(P, b, qd[i])])
                for i, b in enumerate(bodies)]
         # qdd = M^-1 rhs (other branches' zeros fold away), or X (X^T rhs), two passes over the paths, where
-        # that has fewer products: on a tree, not on a chain (Tiago 922 against 2,118; iiwa 56 against 49)
+        # M^-1 is left to the loop or that has fewer products: on a tree, not on a chain (Tiago 922 against
+        # 2,118; iiwa 56 against 49)
         rows = [[(Minv[r, i], rhs[i]) for i in range(n) if isinstance(Minv[r, i], Var) or Minv[r, i] != 0.0]
-                for r in range(n)]
-        if 2 * sum(len(p_) for p_ in path) < sum(len(t) for t in rows):
+                for r in range(n)] if Minv else None
+        if not Minv or 2 * sum(len(p_) for p_ in path) < sum(len(t) for t in rows):
             y = [P.sop([(X[i, k], rhs[i]) for i in subtree[k]]) for k in range(n)]
             rows = [[(X[r, k], y[k]) for k in path[r]] for r in range(n)]
         qdd = []
@@ -408,7 +417,7 @@ def _fd_jacobian(P: Program, bodies: list, gravity, q, qd, tau, out: str = "qdd"
     # the columns: J_q[r][c] = sum_i M^-1[r][i] (-dID_q)[i][c] over the i related to c
     related = [sorted(set(path[c]) | set(subtree[c])) for c in range(n)]
     if not product:
-        return solved, (Minv, related, parts)
+        return solved, (Xs, Minv, related, parts)
     J = [[0.0] * (3 * n) for _ in range(n)]
     for r in range(n):
         P.block = 9 * n + 2 + r
@@ -425,28 +434,38 @@ class _DenseProduct:
     On the large trees the product is most of the Jacobian's arithmetic (Tiago: 76,000 of 136,000
     multiplications) and M^-1 is dense on each root branch, so straight-line code spends it one scalar
     at a time from a megabyte of instructions.  Here the statements store M^-1 (into J's last n columns,
-    where it belongs) and the per-body vectors of -∂ID (the scratch ``fmugen_wb``), and two loops follow:
+    where it belongs) -- or, where X X^T has many products (``MINV_LOOP_MIN``: Tiago, not Talos), X's rows
+    -- and the per-body vectors of -∂ID (the scratch ``fmugen_wb``), and the loops follow:
 
+    * M^-1 = X X^T from X's rows (:meth:`_minv`), where the statements did not form it;
     * -∂ID's entries, two per pair of related joints: column j's rows i in j's subtree are
       al_i . [w_j; dv_j] and 2 al_i . dv_j - al_i . S_j (less the friction's slope on the diagonal), its rows
       above j -S_j . Q_i and -S_j . P_i -- dot products of 12 and 6 numbers, four rows i at a time over
       the runs of consecutive bodies of j's subtree (al, P, Q stored component by component).  As
       statements they were a sixth of Tiago's time (two loads per multiplication, one at a time);
     * for each column c and each joint i related to c, the scaled row i of M^-1 over c's branch: axpys of
-      the branch's length, 16 rows of accumulators in registers.
+      the branch's length, up to 48 rows of sums in twelve registers (both kinds, q and qd, in one pass
+      up to 24 rows), stored contiguously into the scratch T;
+    * T into J's rows, four by four through register shuffles: stored straight from the sums, a row of
+      J apart, the scalars took a sixth of the loops' instructions.
 
-    gcc vectorises both (AVX2 in the x86-64-v3 build).  Rows of other branches are zeros, stored by
+    gcc vectorises them (AVX2 in the x86-64-v3 build).  Rows of other branches are zeros, stored by
     statements.  The product as a loop was faster than the sums on every robot measured (µs, both timed
     in one run per robot: UR5 0.86 against 0.91, iiwa 1.10 against 1.18, Atlas 7.0 against 7.8, Talos 13.0
     against 20.1, Tiago 22.2 against 44.0), for 0.3-0.6 of the compile time on the large trees (Tiago 16
-    against 62 s) and 0.8-0.9 on the arms.
-    Tried and dropped: M^-1 = X X^T as a loop too (short loops over the subtrees: Tiago 24.3 µs)."""
+    against 62 s) and 0.8-0.9 on the arms.  The passes into T, the transposes and M^-1 as a loop on Tiago
+    against the product's earlier stores and M^-1 as statements: 0.90x the time on Atlas, 0.96x Talos,
+    0.94x Tiago, 0.99x HyQ, the arms within 1.5 % (both timed in one process)."""
 
-    def __init__(self, n: int, Minv, related, parts, bodies):
+    def __init__(self, n: int, X, Minv, related, parts, bodies):
         if any(not b.parent < i for i, b in enumerate(bodies)):
             raise ValueError("bodies must follow their parents (parent < body)")
         self.n = n
         path, subtree = _paths(bodies)
+        self.path = path
+        self.poff = [0]  # X's row i: entries poff[i] .. poff[i + 1] - 1, for path[i] in order
+        for p_ in path:
+            self.poff.append(self.poff[-1] + len(p_))
         root = [p[-1] for p in path]
         # each column's rows: the span of its root branch (a branch broken by another: its span holds
         # the other's zero entries of M^-1, which are stored like the rest)
@@ -455,7 +474,7 @@ class _DenseProduct:
             lo, hi = span.get(r, (i, i + 1))
             span[r] = (min(lo, i), max(hi, i + 1))
         self.rows = [span[root[c]] for c in range(n)]
-        self.Minv, self.related, self.parts = Minv, related, parts
+        self.X, self.Minv, self.related, self.parts = X, Minv, related, parts
         self.start = [0]
         for c in range(n):
             self.start.append(self.start[-1] + len(related[c]))
@@ -470,17 +489,29 @@ class _DenseProduct:
         # the scratch: -∂ID/∂q's and -∂ID/∂qd's entries (each followed by three slots that the last run's
         # four-row store may overrun), al (12 x n), P, Q (6 x n), [w, dv, S] of each body, the friction's
         # slopes
+        # the spans (rows lo..hi-1), their columns and where their sums start in T (q's, then qd's) and
+        # their columns of X in Xc
+        self.spans, t0, x0 = [], 0, 0
+        for lo, hi in sorted(set(self.rows)):
+            cols = [c for c in range(n) if self.rows[c] == (lo, hi)]
+            self.spans.append((lo, hi, cols, t0, x0))
+            t0 += 2 * len(cols) * (hi - lo)
+            x0 += len(cols) * (hi - lo)
+        # ... the friction's slopes, T (the product's sums, column after column), X's rows (by path) and
+        # X's columns over the spans' rows (zeros off the subtrees)
+        e = 2 * t + 43 * n
         self.at = {"bq": 0, "bd": t, "al": 2 * t, "P": 2 * t + 12 * n, "Q": 2 * t + 18 * n, "ws": 2 * t + 24 * n,
-                   "slope": 2 * t + 42 * n, "end": 2 * t + 43 * n}
+                   "slope": 2 * t + 42 * n, "T": e, "Xp": e + t0, "Xc": e + t0 + self.poff[-1],
+                   "end": e + t0 + (self.poff[-1] + x0 if not Minv else 0)}
 
     def emit_args(self, target: str, base: int) -> dict:
         """emit_c's arguments for the loops: the scratch and the loops' function."""
         return {"scratch": self.at["end"], "loops": [("product", self.loop(target, base))]}
 
     def effects(self, P: Program, target: str, base: int):
-        """The statements: M^-1, the zero rows of the first 2n columns and the vectors of -∂ID, each stored
-        in the block that computes it (from a register: through the work array, M^-1 alone took 8% of
-        Tiago's time)."""
+        """The statements: X's rows, the zero rows of the first 2n columns and the vectors of -∂ID, each
+        stored in the block that computes it (from a register: through the work array, M^-1 alone took 8%
+        of Tiago's time)."""
         n, end, at = self.n, P.block, self.at
         al, Pv, Qv, w, dv, S, slope = self.parts
 
@@ -488,9 +519,12 @@ class _DenseProduct:
             P.block = P.home([v], end)
             P.effect(text, [v])
 
-        for r in range(n):
+        for r in range(n) if self.Minv else ():
             for c in range(n):
                 store(f"{target}[{base + 3 * n * r + 2 * n + c}] = {c_value(self.Minv[r, c])};", self.Minv[r, c])
+        for i in range(n) if not self.Minv else ():
+            for m, k in enumerate(self.path[i]):
+                store(f"fmugen_wb[{at['Xp'] + self.poff[i] + m}] = {c_value(self.X[i, k])};", self.X[i, k])
         for c in range(n):
             lo, hi = self.rows[c]
             for r in [*range(lo), *range(hi, n)]:
@@ -596,82 +630,162 @@ class _DenseProduct:
 
     def loop(self, target: str, base: int) -> list:
         """The loops' C lines: -∂ID's entries, then the product, one loop per branch span (its length a
-        constant)."""
-        n, k3 = self.n, 3 * self.n
+        constant) over the span's columns, each column's sums into the scratch T (column after column),
+        then T written into J's rows."""
+        n = self.n
         rel = ", ".join(str(i) for c in range(n) for i in self.related[c])
         lines = [f"static const short rel[{self.start[-1]}] = {{{rel}}};  /* the joints related to each column */",
                  f"static const short first[{n + 1}] = {{{', '.join(str(x) for x in self.start)}}};",
                  "double *const w_ = fmugen_wb;",
                  f"double *const out = {target} + {base};"]
+        lines += self._minv(target, base) if not self.Minv else []
         lines += ["{"] + ["    " + x for x in self._did()] + ["}"]
-        spans = sorted(set(self.rows))
-        for s_, (lo, hi) in enumerate(spans):
-            cols = [c for c in range(n) if self.rows[c] == (lo, hi)]
+        for s_, (lo, hi, cols, t0, _) in enumerate(self.spans):
             nb = hi - lo
             if cols == list(range(cols[0], cols[-1] + 1)):
-                lines += [f"for (int c = {cols[0]}; c <= {cols[-1]}; c++) {{  /* rows {lo}..{hi - 1} */"]
+                lines += [f"for (int c = {cols[0]}; c <= {cols[-1]}; c++) {{  /* rows {lo}..{hi - 1} */",
+                          f"    const int u = c - {cols[0]};"]
             else:  # a branch broken by another
                 lines += [f"static const short cols{s_}[{len(cols)}] = {{{', '.join(str(c) for c in cols)}}};",
                           f"for (int u = 0; u < {len(cols)}; u++) {{  /* rows {lo}..{hi - 1} */",
                           f"    const int c = cols{s_}[u];"]
-            for r0 in range(0, nb, self.CHUNK):  # the accumulators of a chunk of rows stay in registers
-                lines += ["    " + x for x in self._chunk(lo + r0, min(self.CHUNK, nb - r0), k3, 2 * n, n,
-                                                          self.at["bd"])]
+            # a pass holds its sums in registers: both kinds at once up to half of ROWS, else one kind at
+            # a time, ROWS rows a pass
+            R = self.ROWS
+            passes = [(("q", "d"), 0, nb)] if 2 * nb <= R else \
+                [((kind,), r0, min(R, nb - r0)) for kind in ("q", "d") for r0 in range(0, nb, R)]
+            for kinds, r0, w in passes:
+                lines += ["    " + x for x in self._pass(kinds, lo, r0, w, nb, len(cols), t0)]
             lines += ["}"]
+            lines += self._transpose(lo, nb, cols, t0)
         return lines
 
+    #: rows of sums a pass over a column's terms holds in registers: 48, twelve AVX registers
+    ROWS = 48
+
+    def _pass(self, kinds, lo: int, r0: int, w: int, nb: int, ncols: int, t0: int) -> list:
+        """Span rows lo + r0 .. lo + r0 + w - 1 of column c (the span's u-th) for each kind ("q": the column
+        of ∂qdd/∂q, "d": of ∂qdd/∂qd), summed over the related joints' rows of M^-1, into T."""
+        at = self.at
+        coef = {"q": "fmugen_wb[t]", "d": f"fmugen_wb[{at['bd']} + t]"}
+        dest = {k: f"fmugen_wb + {at['T'] + t0 + (0 if k == 'q' else ncols * nb) + r0} + {nb} * u" for k in kinds}
+        return self._sums("first[c]", "first[c + 1]", f"out + {3 * self.n} * rel[t] + {2 * self.n + lo + r0}",
+                          {k: coef[k] for k in kinds}, dest, w)
+
     @staticmethod
-    def _chunk(row: int, w: int, k3: int, minv: int, n: int, bd: int) -> list:
-        """Rows row .. row + w - 1 of column c: with gcc's and clang's vector types four rows per register
-        (a plain array of accumulators is kept in memory: a load and a store per multiply-add), else plain
-        loops; the rows past the last four in scalars."""
-        nv, ns = divmod(w, 4)
-        # rows past the last four: one more register over the last four rows (overlapping the one
-        # before, its new lanes stored) when there are four, else scalars
-        at = [4 * k for k in range(nv)] + ([w - 4] if nv and ns else [])
-        new = [(0, 4)] * nv + ([(4 - ns, 4)] if nv and ns else [])
-        ns = 0 if nv else ns
+    def _sums(t0: str, t1: str, row: str, coef: dict, dest: dict, w: int) -> list:
+        """For each kind k of ``coef``: the sum over t = t0 .. t1 - 1 of coef[k] times the w doubles at
+        ``row`` (C expressions of t), stored at ``dest[k]``: with gcc's and clang's vector types four rows a
+        register (the rows past the last four: one more register overlapping the one before, or scalars
+        below four rows), else plain loops.  At most 12 registers of sums: a pass of the loop over t."""
+        kinds = list(coef)
+        nv = w // 4
+        regs = [4 * k for k in range(nv)] + ([w - 4] if nv and w % 4 else [])
+        head = [f"    for (int t = {t0}; t < {t1}; t++) {{", f"        const double *m = {row};"]
+        head += [f"        const double b{k} = {coef[k]};" for k in kinds]
         vec = ["#ifdef FMUGEN_UNROLLED_V4", "{"]
-        regs = ", ".join(f"q{k} = {{0.0}}, d{k} = {{0.0}}" for k in range(len(at)))
-        vec += [f"    fmugen_v4 {regs};"] if at else []
-        vec += ["    double " + ", ".join(f"sq{k} = 0.0, sd{k} = 0.0" for k in range(ns)) + ";"] if ns else []
-        vec += ["    for (int t = first[c]; t < first[c + 1]; t++) {",
-                f"        const double *m = out + {k3} * rel[t] + {minv + row};",
-                f"        const double bq = fmugen_wb[t], bd = fmugen_wb[{bd} + t];"]
-        for k, a in enumerate(at):
-            vec += [f"        fmugen_v4 m{k};", f"        memcpy(&m{k}, m + {a}, sizeof m{k});",
-                    f"        q{k} += bq * m{k};", f"        d{k} += bd * m{k};"]
-        for k in range(ns):
-            vec += [f"        sq{k} += bq * m[{4 * nv + k}];", f"        sd{k} += bd * m[{4 * nv + k}];"]
-        vec += ["    }"]
-        for k, (a, (l0, l1)) in enumerate(zip(at, new)):
-            for lane in range(l0, l1):
-                r = row + a + lane
-                vec += [f"    out[{k3 * r} + c] = q{k}[{lane}];", f"    out[{k3 * r + n} + c] = d{k}[{lane}];"]
-        for k in range(ns):
-            r = row + 4 * nv + k
-            vec += [f"    out[{k3 * r} + c] = sq{k};", f"    out[{k3 * r + n} + c] = sd{k};"]
-        vec += ["}", "#else"]
-        plain = ["{",
-                 f"    double xq[{w}] = {{0.0}}, xd[{w}] = {{0.0}};",
-                 "    for (int t = first[c]; t < first[c + 1]; t++) {",
-                 f"        const double *m = out + {k3} * rel[t] + {minv + row};",
-                 f"        const double bq = fmugen_wb[t], bd = fmugen_wb[{bd} + t];",
-                 f"        for (int r = 0; r < {w}; r++) {{",
-                 "            xq[r] += bq * m[r];",
-                 "            xd[r] += bd * m[r];",
-                 "        }",
-                 "    }",
-                 f"    for (int r = 0; r < {w}; r++) {{",
-                 f"        out[{k3} * ({row} + r) + c] = xq[r];",
-                 f"        out[{k3} * ({row} + r) + {n} + c] = xd[r];",
-                 "    }",
-                 "}", "#endif"]
-        return vec + plain
+        if regs:
+            vec += ["    fmugen_v4 " + ", ".join(f"{k}{j} = {{0.0}}" for k in kinds for j in range(len(regs))) + ", x;"]
+            vec += head + [f"        memcpy(&x, m + {a}, sizeof x);" + "".join(f" {k}{j} += b{k} * x;" for k in kinds)
+                           for j, a in enumerate(regs)]
+            vec += ["    }"] + [f"    memcpy({dest[k]} + {a}, &{k}{j}, sizeof {k}{j});"
+                                for k in kinds for j, a in enumerate(regs)]
+        else:
+            vec += ["    double " + ", ".join(f"{k}{j} = 0.0" for k in kinds for j in range(w)) + ";"]
+            vec += head + [f"        {k}{j} += b{k} * m[{j}];" for j in range(w) for k in kinds]
+            vec += ["    }"] + [f"    ({dest[k]})[{j}] = {k}{j};" for k in kinds for j in range(w)]
+        vec += ["}", "#else", "{"]
+        vec += ["    double " + ", ".join(f"{k}[{w}]" for k in kinds) + ";",
+                f"    for (int r = 0; r < {w}; r++) {{ " + " ".join(f"{k}[r] = 0.0;" for k in kinds) + " }"]
+        vec += head + [f"        for (int r = 0; r < {w}; r++) {{ " + " ".join(f"{k}[r] += b{k} * m[r];" for k in kinds)
+                       + " }", "    }"]
+        vec += [f"    for (int r = 0; r < {w}; r++) {{ " + " ".join(f"({dest[k]})[r] = {k}[r];" for k in kinds) + " }"]
+        return vec + ["}", "#endif"]
 
-    #: rows per pass over a column's terms: 16 accumulators of q and of qd in 8 AVX registers
-    CHUNK = 16
+    def _minv(self, target: str, base: int) -> list:
+        """M^-1 = X X^T into J's last n columns: per span, X's columns over the span's rows (zeros off the
+        subtrees) from its rows by path, then column b of M^-1 (row b: M^-1 is symmetric) the sum of
+        X[b][k] times column k over the joints k on b's path, ROWS rows a pass; entries outside a row's span
+        zero.  As statements (one sum per entry, X X^T over the common paths) M^-1 was a fifth of Tiago's
+        code, 116 of 552 kB in the x86-64-v3 build, which then streams from the third-level cache at every
+        call: more than a 512 kB second-level cache holds (callgrind's cache model with one of 512 kB: 8,900
+        misses of instructions a call, 6,900 with the loop)."""
+        n, k3, at = self.n, 3 * self.n, self.at
+        u_of = {}
+        for lo, hi, cols, _, _ in self.spans:
+            u_of.update({c: u for u, c in enumerate(cols)})
+        pcol = [u_of[k] for i in range(n) for k in self.path[i]]
+        lines = ["{",
+                 f"    static const short pfirst[{n + 1}] = {{{', '.join(str(x) for x in self.poff)}}};",
+                 f"    static const short pcol[{len(pcol)}] = {{{', '.join(str(x) for x in pcol)}}};",
+                 f"    double *const out2 = {target} + {base + 2 * n};"]
+        for s_, (lo, hi, cols, _, x0) in enumerate(self.spans):
+            nb, ncols = hi - lo, len(cols)
+            src = [self.poff[b] + m for b in cols for m in range(len(self.path[b]))]
+            dst = [u_of[k] * nb + b - lo for b in cols for k in self.path[b]]
+            contiguous = cols == list(range(cols[0], cols[-1] + 1))
+            lines += ["    {",
+                      f"        double *const Xc = fmugen_wb + {at['Xc'] + x0};  /* rows {lo}..{hi - 1} */",
+                      f"        static const int xsrc[{len(src)}] = {{{', '.join(str(x) for x in src)}}};",
+                      f"        static const int xdst[{len(dst)}] = {{{', '.join(str(x) for x in dst)}}};",
+                      f"        memset(Xc, 0, {ncols * nb} * sizeof(double));",
+                      f"        for (int t = 0; t < {len(src)}; t++) Xc[xdst[t]] = fmugen_wb[{at['Xp']} + xsrc[t]];"]
+            if contiguous:
+                lines += [f"        for (int c = {cols[0]}; c <= {cols[-1]}; c++) {{"]
+            else:
+                lines += [f"        static const short mcols{s_}[{ncols}] = {{{', '.join(str(c) for c in cols)}}};",
+                          f"        for (int u = 0; u < {ncols}; u++) {{", f"            const int c = mcols{s_}[u];"]
+            if lo > 0:
+                lines.append(f"            memset(out2 + {k3} * c, 0, {lo} * sizeof(double));")
+            if hi < n:
+                lines.append(f"            memset(out2 + {k3} * c + {hi}, 0, {n - hi} * sizeof(double));")
+            for r0 in range(0, nb, self.ROWS):
+                w = min(self.ROWS, nb - r0)
+                lines += ["            " + x for x in self._sums(
+                    "pfirst[c]", "pfirst[c + 1]", f"Xc + {nb} * pcol[t] + {r0}", {"x": f"fmugen_wb[{at['Xp']} + t]"},
+                    {"x": f"out2 + {k3} * c + {lo + r0}"}, w)]
+            lines += ["        }", "    }"]
+        return lines + ["}"]
 
+    def _transpose(self, lo: int, nb: int, cols: list, t0: int) -> list:
+        """T (a column's rows contiguous) into J's rows: four by four with register shuffles where the
+        span's columns are its rows (a branch numbered without a gap) and four or more, else one by one.
+        Scalar stores straight from the sums, a row of J apart, took a sixth of the loops' instructions."""
+        n, k3, T = self.n, 3 * self.n, self.at["T"] + t0
+        ncols = len(cols)
+        plain = [f"for (int u = 0; u < {ncols}; u++)" + (f"  /* columns {cols[0]}..{cols[-1]} */" if ncols > 1 else ""),
+                 f"    for (int r = 0; r < {nb}; r++) {{",
+                 f"        const int c = {'u + %d' % cols[0] if cols == list(range(cols[0], cols[-1] + 1)) else 'colsT[u]'};",
+                 f"        out[{k3} * ({lo} + r) + c] = fmugen_wb[{T} + {nb} * u + r];",
+                 f"        out[{k3} * ({lo} + r) + {n} + c] = fmugen_wb[{T + ncols * nb} + {nb} * u + r];",
+                 "    }"]
+        if cols != list(range(cols[0], cols[-1] + 1)):
+            return ["{", f"    static const short colsT[{ncols}] = {{{', '.join(str(c) for c in cols)}}};"] + \
+                ["    " + x for x in plain] + ["}"]
+        if nb < 4 or cols != list(range(lo, lo + nb)):
+            return plain
+        starts = list(range(0, nb - 3, 4)) + ([nb - 4] if nb % 4 else [])
+        lines = ["#ifdef FMUGEN_UNROLLED_V4",
+                 "{",
+                 f"    static const short st[{len(starts)}] = {{{', '.join(str(x) for x in starts)}}};",
+                 f"    for (int x = 0; x < {len(starts)}; x++)",
+                 f"        for (int y = 0; y < {len(starts)}; y++)",
+                 "            for (int h = 0; h < 2; h++) {  /* q, then qd */",
+                 f"                const double *s = fmugen_wb + {T} + h * {ncols * nb} + {nb} * st[y] + st[x];",
+                 f"                double *d = out + {k3} * ({lo} + st[x]) + h * {n} + {lo} + st[y];",
+                 "                fmugen_v4 a0, a1, a2, a3;",
+                 f"                memcpy(&a0, s, sizeof a0); memcpy(&a1, s + {nb}, sizeof a1);",
+                 f"                memcpy(&a2, s + {2 * nb}, sizeof a2); memcpy(&a3, s + {3 * nb}, sizeof a3);",
+                 "                const fmugen_v4 b0 = FMUGEN_SHUFFLE(a0, a1, 0, 4, 2, 6), b1 = FMUGEN_SHUFFLE(a0, a1, 1, 5, 3, 7);",
+                 "                const fmugen_v4 b2 = FMUGEN_SHUFFLE(a2, a3, 0, 4, 2, 6), b3 = FMUGEN_SHUFFLE(a2, a3, 1, 5, 3, 7);",
+                 "                a0 = FMUGEN_SHUFFLE(b0, b2, 0, 1, 4, 5); a1 = FMUGEN_SHUFFLE(b1, b3, 0, 1, 4, 5);",
+                 "                a2 = FMUGEN_SHUFFLE(b0, b2, 2, 3, 6, 7); a3 = FMUGEN_SHUFFLE(b1, b3, 2, 3, 6, 7);",
+                 f"                memcpy(d, &a0, sizeof a0); memcpy(d + {k3}, &a1, sizeof a1);",
+                 f"                memcpy(d + {2 * k3}, &a2, sizeof a2); memcpy(d + {3 * k3}, &a3, sizeof a3);",
+                 "            }",
+                 "}",
+                 "#else"]
+        return lines + plain + ["#endif"]
 
 def _id_jacobian(P: Program, bodies: list, gravity, q, qd, qdd):
     """tau (n values) and J (n x 3n values) = [∂tau/∂q, ∂tau/∂qd, M]."""
