@@ -3,7 +3,8 @@
 For each robot (iiwa of GRiDBenchmarks -- https://github.com/robot-acceleration/GRiDBenchmarks, folder
 urdfs/, passed with ``--grid`` -- and UR5, Panda and Talos full v2 of example-robot-data), batches of N =
 1, 16, 256, 4096 random states go through one call of :class:`fmugen.batch.Kernels` with ``threads`` 1 and
-2, against
+2 -- the runtime's loops, and the code generated for the robot (``Kernels.unrolled()``, built before the
+timing) --, against
 
 * a Python loop of Pinocchio calls (``aba``, ``computeABADerivatives``) over the same states -- what a
   Python user of Pinocchio writes; the loop's interpreter cost is part of it, as it is of the user's;
@@ -67,6 +68,7 @@ def measure(path: Path, repeat: int, sizes) -> tuple:
     zero = {p.name: 0.0 for p in robot.parameters if p.name.startswith(("b_", "fc_"))}
     kernels = Kernels.from_robot(robot, values=zero)
     two = Kernels.from_robot(robot, values=zero, threads=2)  # its own worker thread, started once
+    unrolled = {1: kernels.unrolled(threads=1), 2: kernels.unrolled(threads=2)}  # generated code (cached)
     model = pin.buildModelFromUrdf(str(path))
     data = model.createData()
     mp = pinocchio_urdf_map(model, robot)
@@ -105,6 +107,9 @@ def measure(path: Path, repeat: int, sizes) -> tuple:
             contenders[("fd", f"fmugen.batch, threads {th}")] = lambda kern=kern: kern.fd(q, qd, tau)
             contenders[("fd_derivatives", f"fmugen.batch, threads {th}")] = \
                 lambda kern=kern: kern.fd_derivatives(q, qd, tau)
+            contenders[("fd", f"fmugen.batch unrolled, threads {th}")] = lambda u=unrolled[th]: u.fd(q, qd, tau)
+            contenders[("fd_derivatives", f"fmugen.batch unrolled, threads {th}")] = \
+                lambda u=unrolled[th]: u.fd_derivatives(q, qd, tau)
             if pool is not None:
                 contenders[("fd", f"pinocchio.abaInParallel, threads {th}")] = \
                     lambda th=th: pin.abaInParallel(th, pool, Q, V, T, A)
@@ -120,6 +125,8 @@ def measure(path: Path, repeat: int, sizes) -> tuple:
             rows.append((N, what, who, statistics.median(c), statistics.median(w)))
     kernels.close()
     two.close()
+    for u in unrolled.values():
+        u.close()
     return n, rows
 
 

@@ -203,3 +203,50 @@ def test_a_dh_robot_from_its_file_equals_pinocchio_and_values_override():
     assert not np.allclose(heavier.mass_matrix(q), M)
     with pytest.raises(KeyError, match="unknown parameter"):
         Kernels.from_robot(robot, values={"no_such_parameter": 1.0})
+
+
+def test_unrolled_kernels_equal_pinocchio_and_the_loops(robot, tmp_path, monkeypatch):
+    """Kernels.unrolled(): the robot's generated code gives Pinocchio's results and the looped kernels' (to
+    rounding); two threads change nothing to the bit; bad input is named as by the loops; a second build
+    of the same robot loads the cached library without compiling."""
+    from fmugen.batch import unrolled
+
+    monkeypatch.setenv("FMUGEN_CACHE", str(tmp_path))
+    kernels, model, mp = robot
+    data = model.createData()
+    n = kernels.n
+    iv = [m[1] for m in mp]
+    ix = np.ix_(iv, iv)
+    u = kernels.unrolled()
+    q, qd, x = states(n, 40, seed=3)
+    fd, idd = u.fd_derivatives(q, qd, x), u.id_derivatives(q, qd, x)
+    for k in range(0, 40, 13):
+        qp, vp = to_pinocchio(model, mp, q[k], qd[k])
+        xp = to_pinocchio(model, mp, None, x[k])
+        assert rel(u.fd(q, qd, x)[k], pin.aba(model, data, qp, vp, xp)[iv]) < RTOL
+        pin.computeABADerivatives(model, data, qp, vp, xp)
+        for got, ref in zip(fd, (data.ddq[iv], data.ddq_dq[ix], data.ddq_dv[ix], sym(data.Minv)[ix])):
+            assert rel(got[k], ref) < RTOL
+        pin.computeRNEADerivatives(model, data, qp, vp, xp)
+        for got, ref in zip(idd, (data.tau[iv], data.dtau_dq[ix], data.dtau_dv[ix], sym(data.M)[ix])):
+            assert rel(got[k], ref) < RTOL
+    for got, ref in zip(fd + idd, kernels.fd_derivatives(q, qd, x) + kernels.id_derivatives(q, qd, x)):
+        assert got.shape == ref.shape and rel(got, ref) < 1e-12
+    u.threads = 2
+    for a, b in zip(u.fd_derivatives(q, qd, x), fd):
+        assert np.array_equal(a, b)
+    qd[29, 1] = np.inf
+    with pytest.raises(StateError) as e:
+        u.fd_derivatives(q, qd, x)
+    assert e.value.index == 29 and "input" in e.value.reason
+    with pytest.raises(ValueError, match="qdd must be a float64 array"):
+        u.id_derivatives(q, qd, x[:, :-1])
+    u.close()
+
+    def no_compile(*a):
+        raise AssertionError("compiled again")
+
+    monkeypatch.setattr(unrolled, "_compile", no_compile)
+    again = kernels.unrolled()
+    assert rel(again.fd(q[:3], qd[:3], x[:3]), u.fd(q[:3], qd[:3], x[:3])) == 0.0
+    again.close()

@@ -403,5 +403,15 @@ class Kernels:
         self._run("mass_matrix_inverse", _MINV_KIND[method], count, ins, _address(Minv), -1)
         return Minv
 
+    def unrolled(self, threads: Optional[int] = None):
+        """These kernels as code generated for this robot, its numbers folded in
+        (:class:`fmugen.batch.unrolled.UnrolledKernels`: ``fd``, ``fd_derivatives``, ``id_derivatives``, a
+        fraction of the looped kernels' time); generated and compiled on the first call for these numbers
+        (seconds for an arm, up to a minute for a hundred joints), then loaded from fmugen's cache.
+        ``threads``: as this object's by default."""
+        from .unrolled import UnrolledKernels
+
+        return UnrolledKernels(self, self._threads if threads is None else threads)
+
     def __repr__(self):
         return f"Kernels({self.name!r}, n={self.n}, threads={self._threads})"
