@@ -16,9 +16,6 @@ operations in the same order whatever the split, so the results are the same to 
 from __future__ import annotations
 
 import ctypes
-import hashlib
-import os
-import shutil
 import subprocess
 import tempfile
 import threading
@@ -30,20 +27,17 @@ import numpy as np
 import sympy as sp
 
 from ..codegen.chain import NC, robot_tree
+from .common import CC as _CC, StateError, _address, _cache_root, _cached, _compiler_hash
 
 __all__ = ["Kernels", "StateError", "library", "MASS_MATRIX_METHODS"]
 
 _HERE = Path(__file__).resolve().parent
 _RUNTIME = _HERE.parents[1] / "c_runtime"
-_CC = "cc"
 # the flags of the FMU build (fmugen.fmi.build.CFLAGS): the same optimisation as the FMUs the kernels stand beside
 _FLAGS = ("-std=c99", "-O2", "-fPIC", "-shared")
 
 # kinds of batch.c
 _FD, _FD_JAC, _ID, _ID_JAC, _M_COLUMNS, _M_JAC, _MINV_COLUMNS, _MINV_JAC, _M_DIRECT, _MINV_DIRECT = range(10)
-_STATUS = {1: "the mass matrix is not positive definite", 2: "a result is NaN or infinite",
-           3: "an input is NaN or infinite", 4: "unknown kernel (a bug of fmugen.batch)"}
-
 #: ways of :meth:`Kernels.mass_matrix` and :meth:`Kernels.mass_matrix_inverse`: ``"direct"`` (the
 #: default) -- composite rigid bodies for M (``fmugen_chain_mass_matrix``) and the tree factorisation
 #: M = L^T L without fill-in for M^-1 (``fmugen_chain_mass_matrix_inverse``); ``"jacobian"`` -- the third
@@ -57,16 +51,6 @@ _M_KIND = {"direct": _M_DIRECT, "jacobian": _M_JAC, "columns": _M_COLUMNS}
 _MINV_KIND = {"direct": _MINV_DIRECT, "jacobian": _MINV_JAC, "columns": _MINV_COLUMNS}
 
 
-class StateError(ArithmeticError):
-    """A state of a batch where the dynamics fail: ``index`` (0-based row of the inputs) is the first
-    such state, ``reason`` says what failed (mass matrix not positive definite, a NaN or infinite
-    result or input)."""
-
-    def __init__(self, what: str, index: int, status: int):
-        self.index, self.status, self.reason = index, status, _STATUS.get(status, f"status {status}")
-        super().__init__(f"{what}: state {index}: {self.reason}")
-
-
 _lock = threading.Lock()
 _lib = None
 
@@ -76,23 +60,10 @@ def _sources() -> list:
 
 
 def _key() -> str:
-    h = hashlib.sha256()
-    path = shutil.which(_CC) or _CC
-    try:
-        st = os.stat(os.path.realpath(path))
-        h.update(f"{os.path.realpath(path)}\0{st.st_size}\0{st.st_mtime_ns}\0".encode())
-    except OSError:
-        h.update(path.encode())
-    h.update("\0".join(_FLAGS).encode() + b"\1")
+    h = _compiler_hash(_FLAGS)
     for p in _sources():
         h.update(p.name.encode() + b"\0" + p.read_bytes() + b"\1")
     return h.hexdigest()[:32]
-
-
-def _cache_root() -> Optional[Path]:
-    if os.environ.get("FMUGEN_OBJECT_CACHE", "1") == "0":
-        return None
-    return Path(os.environ.get("FMUGEN_CACHE") or Path.home() / ".cache" / "fmugen") / "batch"
 
 
 def _compile(folder: Path) -> Path:
@@ -114,22 +85,7 @@ def library() -> ctypes.CDLL:
         if _lib is not None:
             return _lib
         root = _cache_root()
-        so = None
-        if root is not None:
-            target = root / _key()
-            if not (target / "batch.so").is_file():
-                try:
-                    root.mkdir(parents=True, exist_ok=True)
-                    tmp = Path(tempfile.mkdtemp(prefix=".part-", dir=root))
-                    _compile(tmp)
-                    try:
-                        os.rename(tmp, target)
-                    except OSError:  # another process stored it first
-                        shutil.rmtree(tmp, ignore_errors=True)
-                except OSError:
-                    target = None  # a cache that cannot be written is no error
-            if target is not None and (target / "batch.so").is_file():
-                so = target / "batch.so"
+        so = _cached(root, _key(), _compile) if root is not None else None
         if so is None:
             tmp = Path(tempfile.mkdtemp(prefix="fmugen_batch_"))
             so = _compile(tmp)
@@ -145,19 +101,6 @@ def library() -> ctypes.CDLL:
 
 
 _F64 = np.dtype(np.float64)
-
-
-def _address(a: np.ndarray) -> int:
-    """The data address of an array.  Through the buffer protocol first: a quarter of the cost of
-    ``a.ctypes.data`` or ``a.__array_interface__``, which build objects per call -- and at N = 1 the
-    Python around the C call is most of its cost.  A read-only or empty array takes the slow way."""
-    try:
-        return _addressof(_char.from_buffer(a))
-    except (TypeError, ValueError):
-        return a.__array_interface__["data"][0]
-
-
-_char, _addressof = ctypes.c_char, ctypes.addressof
 
 
 def _method(what: str, method: str):

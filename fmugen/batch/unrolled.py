@@ -19,8 +19,6 @@ temporary folder instead.
 from __future__ import annotations
 
 import ctypes
-import hashlib
-import os
 import shutil
 import subprocess
 import tempfile
@@ -30,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .kernels import StateError, _address, _cache_root, _CC
+from .common import CC as _CC, StateError, _address, _cache_root, _cached, _compiler_hash
 
 __all__ = ["UnrolledKernels"]
 
@@ -88,14 +86,7 @@ def _key(kernels) -> str:
     generated text: generating it takes a second for a large tree, loading the library a millisecond)."""
     from ..codegen import unrolled_aba, unrolled_derivatives
 
-    h = hashlib.sha256()
-    path = shutil.which(_CC) or _CC
-    try:
-        st = os.stat(os.path.realpath(path))
-        h.update(f"{os.path.realpath(path)}\0{st.st_size}\0{st.st_mtime_ns}\0".encode())
-    except OSError:
-        h.update(path.encode())
-    h.update("\0".join(_FLAGS).encode() + b"\1")
+    h = _compiler_hash(_FLAGS)
     for f in (unrolled_aba.__file__, unrolled_derivatives.__file__, __file__):
         h.update(Path(f).read_bytes() + b"\1")
     h.update(np.asarray(kernels.revolute, np.int8).tobytes() + np.asarray(kernels.parents, np.int64).tobytes())
@@ -130,28 +121,11 @@ def _compile(folder: Path, sources: dict) -> Path:
 
 def _library(kernels) -> tuple:
     """(loaded library, its temporary folder or None): from the cache if built before for the same numbers,
-    generators, compiler and flags, else generated and built now and stored by one rename of a complete
-    folder (processes building at once never see half of one)."""
+    generators, compiler and flags, else generated, built and stored now."""
     root = _cache_root()
-    if root is not None:
-        root = root / "unrolled"
-        target = root / _key(kernels)
-        if not (target / "unrolled.so").is_file():
-            try:
-                root.mkdir(parents=True, exist_ok=True)
-                tmp = Path(tempfile.mkdtemp(prefix=".part-", dir=root))
-                try:
-                    _compile(tmp, _sources(kernels))
-                    os.rename(tmp, target)
-                except OSError:  # another process stored it first
-                    shutil.rmtree(tmp, ignore_errors=True)
-                except BaseException:
-                    shutil.rmtree(tmp, ignore_errors=True)
-                    raise
-            except OSError:
-                pass  # a cache that cannot be written is no error
-        if (target / "unrolled.so").is_file():
-            return ctypes.CDLL(str(target / "unrolled.so")), None
+    so = _cached(root / "unrolled", _key(kernels), lambda d: _compile(d, _sources(kernels))) if root else None
+    if so is not None:
+        return ctypes.CDLL(str(so)), None
     tmp = Path(tempfile.mkdtemp(prefix="fmugen_unrolled_batch_"))
     try:
         return ctypes.CDLL(str(_compile(tmp, _sources(kernels)))), tmp
