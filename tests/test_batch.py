@@ -250,3 +250,27 @@ def test_unrolled_kernels_equal_pinocchio_and_the_loops(robot, tmp_path, monkeyp
     again = kernels.unrolled()
     assert rel(again.fd(q[:3], qd[:3], x[:3]), u.fd(q[:3], qd[:3], x[:3])) == 0.0
     again.close()
+
+
+def test_unrolled_kernels_refuse_a_robot_singular_at_every_state(robot, tmp_path, monkeypatch):
+    """A massless, inertia-free leaf makes M singular whatever the state (its pivot folds to 0): the unrolled
+    kernels say so, naming the robot, instead of compiling code that divides by zero; the loops report
+    the states (StateError)."""
+    from fmugen.batch import unrolled
+
+    monkeypatch.setenv("FMUGEN_CACHE", str(tmp_path))
+    kernels, _, _ = robot
+    n = kernels.n
+    lc = kernels.constants
+    leaf = [i for i in range(n) if i not in kernels.parents][0]
+    lc[leaf, 15:26] = 0.0  # mass, centre of mass, inertia, rotor inertia
+    bad = Kernels(kernels.revolute, kernels.parents, lc, kernels.globals[:3], name="massless")
+    with pytest.raises(ValueError, match=r"massless: body \d+: .*not positive"):
+        bad.unrolled()
+    with pytest.raises(StateError):
+        bad.fd(*states(n, 2))
+    monkeypatch.setattr(unrolled, "_CC", "no-such-cc")
+    monkeypatch.setenv("FMUGEN_OBJECT_CACHE", "0")
+    with pytest.raises(RuntimeError, match="no C compiler 'no-such-cc'"):
+        kernels.unrolled()
+    bad.close()

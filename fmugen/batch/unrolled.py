@@ -98,9 +98,12 @@ def _compile(folder: Path, sources: dict) -> Path:
     """Every file compiled at once (the large trees' Jacobians take most of a minute each), then linked."""
     for name, text in sources.items():
         (folder / name).write_text(text)
-    procs = [(name, subprocess.Popen([_CC, *_FLAGS, "-c", "-o", str(folder / (name + ".o")), str(folder / name)],
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
-             for name in sources]
+    try:
+        procs = [(name, subprocess.Popen([_CC, *_FLAGS, "-c", "-o", str(folder / (name + ".o")), str(folder / name)],
+                                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
+                 for name in sources]
+    except FileNotFoundError:
+        raise RuntimeError(f"cannot compile the unrolled kernels: no C compiler {_CC!r} on the PATH") from None
     errors = []
     for name, p in procs:
         _, err = p.communicate()
