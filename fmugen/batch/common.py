@@ -8,6 +8,8 @@ import hashlib
 import os
 import shutil
 import tempfile
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Optional
 
@@ -87,3 +89,55 @@ def _address(a: np.ndarray) -> int:
 
 
 _char, _addressof = ctypes.c_char, ctypes.addressof
+
+
+class Ranges:
+    """Batches cut into ``threads`` contiguous ranges that Python threads run at once (ctypes releases the
+    GIL during a call into C, so the ranges run on separate cores); the first failing state of a batch is
+    raised as :class:`StateError`.  Calls from several threads of the user take turns (the object's work
+    arrays are shared)."""
+
+    _threads, _pool, _busy = 1, None, None
+
+    @property
+    def threads(self) -> int:
+        return self._threads
+
+    @threads.setter
+    def threads(self, k: int):
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
+            raise ValueError(f"threads: a whole number >= 1, got {k!r}")
+        if self._busy is None:  # the constructor sets threads: the lock is there before the first call
+            self._busy = threading.Lock()
+        if int(k) != self._threads:
+            self.close()
+            self._threads = int(k)
+
+    def _ranges(self, what: str, count: int, run):
+        """``run(i, lo, hi) -> (status, index of the failing state)`` over the states lo .. hi - 1 of range i
+        (i: for per-range work arrays), the ranges at once; StateError for the first failing state."""
+        k = min(self._threads, max(count, 1))
+        bounds = [count * i // k for i in range(k + 1)]
+        with self._busy:
+            if k == 1:
+                results = [run(0, 0, count)]
+            else:
+                if self._pool is None:
+                    self._pool = ThreadPoolExecutor(max_workers=self._threads - 1, thread_name_prefix="fmugen-batch")
+                futures = [self._pool.submit(run, i, bounds[i], bounds[i + 1]) for i in range(1, k)]
+                results = [run(0, bounds[0], bounds[1])] + [f.result() for f in futures]
+        for s, index in results:  # in order of the ranges: the first bad state of the batch
+            if s != 0:
+                raise StateError(f"{self.name}: {what}", index, s)
+
+    def close(self):
+        """Stop the worker threads (started by the first call with threads > 1)."""
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:  # interpreter shutdown
+            pass

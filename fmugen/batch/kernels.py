@@ -19,7 +19,6 @@ import ctypes
 import subprocess
 import tempfile
 import threading
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Mapping, Optional
 
@@ -27,7 +26,7 @@ import numpy as np
 import sympy as sp
 
 from ..codegen.chain import NC, robot_tree
-from .common import CC as _CC, StateError, _address, _cache_root, _cached, _compiler_hash
+from .common import CC as _CC, Ranges, StateError, _address, _cache_root, _cached, _compiler_hash
 
 __all__ = ["Kernels", "StateError", "library", "MASS_MATRIX_METHODS"]
 
@@ -115,7 +114,7 @@ def _number(expr, env: dict, what: str) -> float:
     return float(e)
 
 
-class Kernels:
+class Kernels(Ranges):
     """Forward and inverse dynamics, their derivatives and the mass matrix of one robot, for many states
     per call.
 
@@ -149,8 +148,6 @@ class Kernels:
         self._lib = library()
         self._const = (_address(self._jt), _address(self._lc), _address(self._g))
         self._works = {}
-        self._busy = threading.Lock()
-        self._pool = None
         self.threads = threads
 
     @property
@@ -201,34 +198,6 @@ class Kernels:
 
         return cls.from_robot(load_urdf(path, mimic=mimic), values=values, threads=threads)
 
-    # ------------------------------------------------------------ threads
-    @property
-    def threads(self) -> int:
-        return self._threads
-
-    @threads.setter
-    def threads(self, k: int):
-        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
-            raise ValueError(f"threads: a whole number >= 1, got {k!r}")
-        if int(k) == getattr(self, "_threads", None):
-            return
-        self._threads = int(k)
-        if self._pool is not None:
-            self._pool.shutdown()
-            self._pool = None
-
-    def close(self):
-        """Stop the worker threads (started by the first call with threads > 1)."""
-        if self._pool is not None:
-            self._pool.shutdown()
-            self._pool = None
-
-    def __del__(self):
-        try:
-            self.close()
-        except Exception:  # interpreter shutdown
-            pass
-
     # ------------------------------------------------------------ the calls
     def _check(self, what: str, arrays: dict) -> tuple:
         n, out, count = self.n, [], None
@@ -273,29 +242,15 @@ class Kernels:
         else:
             outs = [base] + [base + 8 * count * n * (1 + b * n) for b in range(blocks)] + [None] * (3 - blocks)
             rows = [row_in] + [8 * n * n] * 3
-        k = min(self._threads, max(count, 1))
-        bounds = [count * i // k for i in range(k + 1)]
 
-        def part(i):
-            lo, hi = bounds[i], bounds[i + 1]
+        def part(i, lo, hi):
             bad = ctypes.c_long(-1)
             a = [x and x + lo * row_in for x in ins]
             o = [x and x + lo * r for x, r in zip(outs, rows)]
             s = fn(kind, n, *const, hi - lo, *a, *o, self._work(kind, i), ctypes.byref(bad))
             return s, lo + bad.value
 
-        with self._busy:  # the work arrays are the object's: calls from several threads take turns
-            if k == 1:
-                results = [part(0)]
-            else:
-                if self._pool is None:
-                    self._pool = ThreadPoolExecutor(max_workers=self._threads - 1,
-                                                    thread_name_prefix="fmugen-batch")
-                futures = [self._pool.submit(part, i) for i in range(1, k)]
-                results = [part(0)] + [f.result() for f in futures]
-        for s, index in results:  # in order of the ranges: the first bad state of the batch
-            if s != 0:
-                raise StateError(f"{self.name}: {what}", index, s)
+        self._ranges(what, count, part)
 
     def fd(self, q, qd, tau) -> np.ndarray:
         """qdd = M(q)^-1 (tau - h(q, qd)) per state (N, n): the articulated-body algorithm."""

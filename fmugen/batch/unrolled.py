@@ -22,13 +22,11 @@ import ctypes
 import shutil
 import subprocess
 import tempfile
-import threading
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
-from .common import CC as _CC, StateError, _address, _cache_root, _cached, _compiler_hash
+from .common import CC as _CC, Ranges, _address, _cache_root, _cached, _compiler_hash
 
 __all__ = ["UnrolledKernels"]
 
@@ -137,7 +135,7 @@ def _library(kernels) -> tuple:
         raise
 
 
-class UnrolledKernels:
+class UnrolledKernels(Ranges):
     """``fd``, ``fd_derivatives`` and ``id_derivatives`` of :class:`fmugen.batch.Kernels` for many states per
     call, through code generated for the robot (made by :meth:`fmugen.batch.Kernels.unrolled`).
 
@@ -158,23 +156,7 @@ class UnrolledKernels:
         vp = ctypes.c_void_p
         self._lib.fmugen_ub_rows.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int] + [vp] * 6
         self._lib.fmugen_ub_rows.restype = ctypes.c_int
-        self._busy = threading.Lock()
-        self._pool = None
-        self._threads = 1
         self.threads = threads
-
-    @property
-    def threads(self) -> int:
-        return self._threads
-
-    @threads.setter
-    def threads(self, k: int):
-        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
-            raise ValueError(f"threads: a whole number >= 1, got {k!r}")
-        if int(k) != self._threads and self._pool is not None:
-            self._pool.shutdown()
-            self._pool = None
-        self._threads = int(k)
 
     def _run(self, what: str, kind: int, arrays: dict, jacobian: bool) -> tuple:
         count, ins = self.kernels._check(what, arrays)
@@ -182,28 +164,15 @@ class UnrolledKernels:
         y = np.empty((count, n))
         J = np.empty((count, n, 3 * n)) if jacobian else None
         fn = self._lib.fmugen_ub_rows
-        k = min(self._threads, max(count, 1))
-        bounds = [count * i // k for i in range(k + 1)]
         a, yb, jb = [_address(x) for x in ins], _address(y), J is not None and _address(J)
 
-        def part(i):
-            lo, hi = bounds[i], bounds[i + 1]
+        def part(i, lo, hi):
             bad = ctypes.c_long(-1)
             s = fn(kind, hi - lo, n, *(x + 8 * n * lo for x in a), yb + 8 * n * lo,
                    jb + 8 * 3 * n * n * lo if jb else None, ctypes.byref(bad))
             return s, lo + bad.value
 
-        with self._busy:
-            if k == 1:
-                results = [part(0)]
-            else:
-                if self._pool is None:
-                    self._pool = ThreadPoolExecutor(max_workers=self._threads - 1, thread_name_prefix="fmugen-unrolled")
-                futures = [self._pool.submit(part, i) for i in range(1, k)]
-                results = [part(0)] + [f.result() for f in futures]
-        for s, index in results:  # the first bad state of the batch
-            if s != 0:
-                raise StateError(f"{self.name}: {what} (unrolled)", index, s)
+        self._ranges(f"{what} (unrolled)", count, part)
         return y, J
 
     def fd(self, q, qd, tau) -> np.ndarray:
@@ -224,19 +193,11 @@ class UnrolledKernels:
 
     def close(self):
         """Stop the worker threads; remove the library's temporary folder (without the cache)."""
-        if self._pool is not None:
-            self._pool.shutdown()
-            self._pool = None
+        super().close()
         if self._tmp is not None:
             self._lib = None
             shutil.rmtree(self._tmp, ignore_errors=True)
             self._tmp = None
-
-    def __del__(self):
-        try:
-            self.close()
-        except Exception:  # interpreter shutdown
-            pass
 
     def __repr__(self):
         return f"UnrolledKernels({self.name!r}, n={self.n}, threads={self._threads})"
