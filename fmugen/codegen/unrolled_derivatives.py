@@ -490,9 +490,6 @@ class _DenseProduct:
         for j in range(n):
             assert related[j] == sorted(path[j][1:]) + self.sub[j]
         t = self.start[-1] + 3
-        # the scratch: -∂ID/∂q's and -∂ID/∂qd's entries (each followed by three slots that the last run's
-        # four-row store may overrun), al (12 x n), P, Q (6 x n), [w, dv, S] of each body, the friction's
-        # slopes
         # the spans (rows lo..hi-1), their columns and where their sums start in T (q's, then qd's) and
         # their columns of X in Xc
         self.spans, t0, x0 = [], 0, 0
@@ -501,8 +498,10 @@ class _DenseProduct:
             self.spans.append((lo, hi, cols, t0, x0))
             t0 += 2 * len(cols) * (hi - lo)
             x0 += len(cols) * (hi - lo)
-        # ... the friction's slopes, T (the product's sums, column after column), X's rows (by path) and
-        # X's columns over the spans' rows (zeros off the subtrees)
+        # the scratch: -∂ID/∂q's and -∂ID/∂qd's entries (each followed by three slots that the last run's
+        # four-row store may overrun), al (12 x n), P, Q (6 x n), [w, dv, S] of each body, the friction's
+        # slopes, T (the product's sums, column after column), X's rows (by path) and X's columns over the
+        # spans' rows (zeros off the subtrees; these two where the loop forms M^-1)
         e = 2 * t + 43 * n
         self.at = {"bq": 0, "bd": t, "al": 2 * t, "P": 2 * t + 12 * n, "Q": 2 * t + 18 * n, "ws": 2 * t + 24 * n,
                    "slope": 2 * t + 42 * n, "T": e, "Xp": e + t0, "Xc": e + t0 + self.poff[-1],
@@ -565,16 +564,16 @@ class _DenseProduct:
         lower, upper = self._runs(0), self._runs(1)
         # the lower runs' first entries: start[j] + depth[j] + rank in the subtree
         low = [self.start[j] + self.depth[j] + self.sub[j].index(i) for j, i, _ in lower]
-        lines = [f"static const short lower[{len(lower)}][4] = {{"
+        lines = [f"static const int lower[{len(lower)}][4] = {{"
                  + ", ".join(f"{{{j}, {i}, {m}, {k}}}" for (j, i, m), k in zip(lower, low)) + "};",
-                 f"static const short upper[{len(upper)}][4] = {{"
+                 f"static const int upper[{len(upper)}][4] = {{"
                  + ", ".join(f"{{{j}, {i}, {m}, {self.depth[j]}}}" for j, i, m in upper) + "};",
                  f"double *const bq = w_ + {at['bq']}, *const bd = w_ + {at['bd']};",
                  f"const double *const al = w_ + {at['al']}, *const Pt = w_ + {at['P']}, "
                  f"*const Qt = w_ + {at['Q']};",
                  "/* rows i in the subtree of column j: al_i . [w_j; dv_j] and 2 al_i . dv_j - al_i . S_j */",
                  f"for (int u = 0; u < {len(lower)}; u++) {{",
-                 f"    const int i0 = lower[u][1], len = lower[u][2];",
+                 "    const int i0 = lower[u][1], len = lower[u][2];",
                  f"    const double *W = w_ + {at['ws']} + 18 * lower[u][0];",
                  "    double *oq = bq + lower[u][3], *od = bd + lower[u][3];",
                  "    int t = 0;"]
@@ -638,15 +637,16 @@ class _DenseProduct:
         then T written into J's rows."""
         n = self.n
         rel = ", ".join(str(i) for c in range(n) for i in self.related[c])
+        # joints and columns fit a short; offsets into the entries (about n^2 / 2 on a chain) an int
         lines = [f"static const short rel[{self.start[-1]}] = {{{rel}}};  /* the joints related to each column */",
-                 f"static const short first[{n + 1}] = {{{', '.join(str(x) for x in self.start)}}};",
+                 f"static const int first[{n + 1}] = {{{', '.join(str(x) for x in self.start)}}};",
                  "double *const w_ = fmugen_wb;",
                  f"double *const out = {target} + {base};"]
         lines += self._minv(target, base) if not self.Minv else []
         lines += ["{"] + ["    " + x for x in self._did()] + ["}"]
         for s_, (lo, hi, cols, t0, _) in enumerate(self.spans):
             nb = hi - lo
-            if cols == list(range(cols[0], cols[-1] + 1)):
+            if _gapless(cols):
                 lines += [f"for (int c = {cols[0]}; c <= {cols[-1]}; c++) {{  /* rows {lo}..{hi - 1} */",
                           f"    const int u = c - {cols[0]};"]
             else:  # a branch broken by another
@@ -720,14 +720,14 @@ class _DenseProduct:
             u_of.update({c: u for u, c in enumerate(cols)})
         pcol = [u_of[k] for i in range(n) for k in self.path[i]]
         lines = ["{",
-                 f"    static const short pfirst[{n + 1}] = {{{', '.join(str(x) for x in self.poff)}}};",
+                 f"    static const int pfirst[{n + 1}] = {{{', '.join(str(x) for x in self.poff)}}};",
                  f"    static const short pcol[{len(pcol)}] = {{{', '.join(str(x) for x in pcol)}}};",
                  f"    double *const out2 = {target} + {base + 2 * n};"]
         for s_, (lo, hi, cols, _, x0) in enumerate(self.spans):
             nb, ncols = hi - lo, len(cols)
             src = [self.poff[b] + m for b in cols for m in range(len(self.path[b]))]
             dst = [u_of[k] * nb + b - lo for b in cols for k in self.path[b]]
-            contiguous = cols == list(range(cols[0], cols[-1] + 1))
+            contiguous = _gapless(cols)
             lines += ["    {",
                       f"        double *const Xc = fmugen_wb + {at['Xc'] + x0};  /* rows {lo}..{hi - 1} */",
                       f"        static const int xsrc[{len(src)}] = {{{', '.join(str(x) for x in src)}}};",
@@ -759,11 +759,11 @@ class _DenseProduct:
         ncols = len(cols)
         plain = [f"for (int u = 0; u < {ncols}; u++)" + (f"  /* columns {cols[0]}..{cols[-1]} */" if ncols > 1 else ""),
                  f"    for (int r = 0; r < {nb}; r++) {{",
-                 f"        const int c = {'u + %d' % cols[0] if cols == list(range(cols[0], cols[-1] + 1)) else 'colsT[u]'};",
+                 f"        const int c = {'u + %d' % cols[0] if _gapless(cols) else 'colsT[u]'};",
                  f"        out[{k3} * ({lo} + r) + c] = fmugen_wb[{T} + {nb} * u + r];",
                  f"        out[{k3} * ({lo} + r) + {n} + c] = fmugen_wb[{T + ncols * nb} + {nb} * u + r];",
                  "    }"]
-        if cols != list(range(cols[0], cols[-1] + 1)):
+        if not _gapless(cols):
             return ["{", f"    static const short colsT[{ncols}] = {{{', '.join(str(c) for c in cols)}}};"] + \
                 ["    " + x for x in plain] + ["}"]
         if nb < 4 or cols != list(range(lo, lo + nb)):
@@ -790,6 +790,11 @@ class _DenseProduct:
                  "}",
                  "#else"]
         return lines + plain + ["#endif"]
+
+def _gapless(cols: list) -> bool:
+    """Whether a span's columns are consecutive numbers (a branch numbered without a gap)."""
+    return cols == list(range(cols[0], cols[-1] + 1))
+
 
 def _id_jacobian(P: Program, bodies: list, gravity, q, qd, qdd):
     """tau (n values) and J (n x 3n values) = [∂tau/∂q, ∂tau/∂qd, M]."""
