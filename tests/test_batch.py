@@ -250,6 +250,15 @@ def test_unrolled_kernels_equal_pinocchio_and_the_loops(robot, tmp_path, monkeyp
     again = kernels.unrolled()
     assert rel(again.fd(q[:3], qd[:3], x[:3]), u.fd(q[:3], qd[:3], x[:3])) == 0.0
     again.close()
+    # without the cache: a library in a temporary folder, which a change of threads keeps
+    monkeypatch.undo()
+    monkeypatch.setenv("FMUGEN_OBJECT_CACHE", "0")
+    temp = kernels.unrolled(threads=1)
+    temp.threads = 2
+    assert np.array_equal(temp.fd(q[:5], qd[:5], x[:5]), u.fd(q[:5], qd[:5], x[:5]))
+    folder = temp._tmp
+    temp.close()
+    assert folder is not None and not folder.exists()
 
 
 def test_unrolled_kernels_refuse_a_robot_singular_at_every_state(robot, tmp_path, monkeypatch):

@@ -110,7 +110,7 @@ class Ranges:
         if self._busy is None:  # the constructor sets threads: the lock is there before the first call
             self._busy = threading.Lock()
         if int(k) != self._threads:
-            self.close()
+            self._stop_pool()  # its size was the old count (the rest of the object stays as it is)
             self._threads = int(k)
 
     def _ranges(self, what: str, count: int, run):
@@ -130,11 +130,14 @@ class Ranges:
             if s != 0:
                 raise StateError(f"{self.name}: {what}", index, s)
 
-    def close(self):
-        """Stop the worker threads (started by the first call with threads > 1)."""
+    def _stop_pool(self):
         if self._pool is not None:
             self._pool.shutdown()
             self._pool = None
+
+    def close(self):
+        """Stop the worker threads (started by the first call with threads > 1)."""
+        self._stop_pool()
 
     def __del__(self):
         try:
