@@ -13,8 +13,8 @@ do not change.
 Generating and compiling costs seconds for an arm and up to a minute for a robot of a hundred joints
 (the three files compile at once, one per core); the library is kept in fmugen's cache folder
 (``$FMUGEN_CACHE/batch/unrolled``) under the hash of the robot's numbers, the generators' files, the
-compiler and its flags, so the next process with the same robot loads it at once.  ``FMUGEN_OBJECT_CACHE=0`` compiles into a
-temporary folder instead.
+compiler and its flags, so the next process with the same robot loads it at once.
+``FMUGEN_OBJECT_CACHE=0`` compiles into a temporary folder instead.
 """
 from __future__ import annotations
 
@@ -88,7 +88,8 @@ def _key(kernels) -> str:
     for f in (unrolled_aba.__file__, unrolled_derivatives.__file__, __file__):
         h.update(Path(f).read_bytes() + b"\1")
     h.update(np.asarray(kernels.revolute, np.int8).tobytes() + np.asarray(kernels.parents, np.int64).tobytes())
-    h.update(np.ascontiguousarray(kernels.constants, np.float64).tobytes() + np.asarray(kernels.globals, np.float64).tobytes())
+    h.update(np.ascontiguousarray(kernels.constants, np.float64).tobytes())
+    h.update(np.asarray(kernels.globals, np.float64).tobytes())
     return h.hexdigest()[:32]
 
 
