@@ -75,7 +75,7 @@ _EYE = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
 
 #: M^-1 = X X^T as a loop (:meth:`_DenseProduct._minv`) from this many products of its statements on (the sum
 #: of s (s + 1) / 2 over the bodies, s the size of a body's subtree): Tiago has 7,215 (the loop 0.95x the time),
-#: Talos 2,120 and Atlas 741 (the loop 0.98x and 1.03x), the arms under 200 (1.07x; each timed in one process)
+#: Talos 2,120 and Atlas 741 (the loop 0.98x and 1.03x), the arms under 200 (iiwa: 1.07x; each timed in one process)
 MINV_LOOP_MIN = 4000
 
 
