@@ -28,7 +28,7 @@ def test_equals_pinocchio(name):
     ix = np.ix_(iv, iv)
     n = kernels.n
     gen = from_kernels(kernels, "fd")
-    assert "FMUGEN_UNROLLED_BLOCK_V3 fmugen_unrolled_fd_jacobian_b" in gen.source  # x86-64-v3 and baseline
+    assert "FMUGEN_UNROLLED_BLOCK_V4 fmugen_unrolled_fd_jacobian_b" in gen.source  # x86-64-v4, -v3 and baseline
     fd = CompiledUnrolledJacobian(gen)
     idj = CompiledUnrolledJacobian(from_kernels(kernels, "id"))
     try:
@@ -201,9 +201,10 @@ def test_folded_models_get_unrolled_code_equal_to_the_loops(n):
         assert (f"fmugen_unrolled_{'jacobian' if kind == 'fd' else 'id_jacobian'}_" in folded) == \
             (n <= UNROLLED_JACOBIAN_MAX)
         assert ("fmugen_chain_" in folded) == (n > UNROLLED_JACOBIAN_MAX)
-        # the forward dynamics' and the Jacobians' functions carry the x86-64-v3 clone, the inverse dynamics' not
+        # the forward dynamics' functions carry the x86-64-v3 clone, the Jacobians' the -v3 and -v4 ones, the
+        # inverse dynamics' none
         v3 = "FMUGEN_UNROLLED_BLOCK_V3 fmugen_unrolled_"
-        jac = v3 + ("jacobian_" if kind == "fd" else "id_jacobian_")
+        jac = "FMUGEN_UNROLLED_BLOCK_V4 fmugen_unrolled_" + ("jacobian_" if kind == "fd" else "id_jacobian_")
         assert (jac in folded) == (n <= UNROLLED_JACOBIAN_MAX)
         assert (v3 + "fd_" in folded) == (kind == "fd")
         assert ("FMUGEN_UNROLLED_BLOCK fmugen_unrolled_id_" in folded) == (kind == "id")
@@ -337,8 +338,10 @@ def test_source_independent_of_hash_seed(tmp_path):
 def test_loops_of_every_shape_and_their_plain_c_equal_the_sums():
     """The loops' variants on one branch of nine joints (Panda, with rotor inertia, damping and friction):
     M^-1 from the statements or as the loop X X^T, the product's sums of both kinds in one pass or one
-    kind a pass in chunks of rows (ROWS 8: a pass of eight rows and one of a single row), and each of those
-    in the plain C of a compiler without vector types, against the straight-line sums."""
+    kind a pass in chunks of rows (ROWS 8: a pass of eight rows and one of a single row), each of those
+    in the plain C of a compiler without vector types, and where M^-1 is a loop the AVX-512 variant (eight
+    rows a register; run where the CPU has it) beside the AVX one (FMUGEN_UNROLLED_NARROW), against the
+    straight-line sums."""
     import dataclasses
 
     _, _, kernels, _, _ = robot("panda")
@@ -352,11 +355,16 @@ def test_loops_of_every_shape_and_their_plain_c_equal_the_sums():
         mp.setattr(unrolled_derivatives, "MINV_LOOP_MIN", 0)
         gens.append(unrolled_jacobian(*args))
         mp.setattr(unrolled_derivatives._DenseProduct, "ROWS", 8)
+        mp.setattr(unrolled_derivatives._DenseProduct, "ROWS_WIDE", 8)
         gens.append(unrolled_jacobian(*args))
     assert "Xc[xdst[t]]" in gens[2].source and "FMUGEN_SHUFFLE(a0, a1" in gens[1].source
-    assert gens[3].source.count("for (int t = first[c]; t < first[c + 1]; t++)") == 2 * 2 * 2  # 2 kinds x 2 chunks
+    assert "_product_wide" in gens[2].source and "_product_wide" not in gens[1].source
+    assert "fmugen_v8 x0" in gens[2].source
+    # 2 kinds x 2 chunks, in the vector and the plain branch, in the AVX and the AVX-512 function
+    assert gens[3].source.count("for (int t = first[c]; t < first[c + 1]; t++)") == 2 * 2 * 2 * 2
     gens += [dataclasses.replace(g, source=g.source.replace("#ifdef FMUGEN_UNROLLED_V4", "#if 0")) for g in gens[1:]]
     made = [CompiledUnrolledJacobian(g) for g in gens]
+    made += [CompiledUnrolledJacobian(g, flags=("-O2", "-DFMUGEN_UNROLLED_NARROW")) for g in gens[2:4]]
     try:
         q, qd, x = rng.uniform(-1, 1, (3, n)), rng.uniform(-1, 1, (3, n)), rng.uniform(-3, 3, (3, n))
         ref = made[0].derivatives(q, qd, x)

@@ -277,8 +277,8 @@ def chain_call_lines(st: ChainDynamics, index: int, b_code: list, ind: str) -> t
 #: n) -- and their Jacobians up to this many bodies: there the unrolled Jacobian takes a third of the
 #: loops' time (``--unrolled-only``, one run: iiwa 1.09 against 3.23 µs, HyQ 1.55 against 4.45 µs) for
 #: about a second of gcc.  Larger trees gain as much (Atlas 7.0 against 15.9 µs, Talos 13.6 against
-#: 29.5, Tiago 21.9 against 49.1) but their Jacobians take 7-17 s of gcc (compiled twice, baseline and
-#: x86-64-v3), which an FMU build should not pay unasked: a large tree keeps the loops.
+#: 29.5, Tiago 21.9 against 49.1) but their Jacobians take 7-17 s of gcc (compiled three times: baseline,
+#: x86-64-v3, x86-64-v4), which an FMU build should not pay unasked: a large tree keeps the loops.
 UNROLLED_JACOBIAN_MAX = 12
 
 

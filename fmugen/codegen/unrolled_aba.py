@@ -743,13 +743,20 @@ static inline void fmugen_unrolled_sincos(double x, double *s, double *c)
 #else
 #define FMUGEN_UNROLLED_BLOCK static int
 #endif
-/* the forward dynamics' and the Jacobians' functions twice, for x86-64-v3 (AVX2, FMA: three-operand instructions and fused
- * multiply-adds; iiwa's Jacobian in 9,300 instructions against 16,500) and for the baseline, chosen
- * once by the loader (an ifunc: gcc on glibc); elsewhere the baseline alone */
+/* the forward dynamics' functions twice, for x86-64-v3 (AVX2, FMA: three-operand instructions and fused
+ * multiply-adds; iiwa's Jacobian in 9,300 instructions against 16,500) and for the baseline, the Jacobians'
+ * three times, for x86-64-v4 too (AVX-512's 32 registers: fewer spills, smaller code), chosen once by the
+ * loader (an ifunc: gcc on glibc; gcc 11 without the x86-64-v4 clone); elsewhere the baseline alone */
 #if defined(__GNUC__) && !defined(__clang__) && __GNUC__ >= 11 && defined(__x86_64__) && defined(__GLIBC__)
 #define FMUGEN_UNROLLED_BLOCK_V3 static __attribute__((noinline, target_clones("arch=x86-64-v3", "default"))) int
 #else
 #define FMUGEN_UNROLLED_BLOCK_V3 FMUGEN_UNROLLED_BLOCK
+#endif
+#if defined(__GNUC__) && !defined(__clang__) && __GNUC__ >= 12 && defined(__x86_64__) && defined(__GLIBC__)
+#define FMUGEN_UNROLLED_BLOCK_V4 static __attribute__((noinline, target_clones("arch=x86-64-v4", "arch=x86-64-v3", \
+                                                                             "default"))) int
+#else
+#define FMUGEN_UNROLLED_BLOCK_V4 FMUGEN_UNROLLED_BLOCK_V3
 #endif
 #endif
 """
@@ -758,7 +765,7 @@ _TOKEN = re.compile(r"\bt\d+\b")
 
 
 def emit_c(P: Program, name: str, params: Sequence[str], header: Sequence[str], finish: Sequence[str],
-           static: bool = False, block_statements: int = 200, standalone: bool = True, clones: bool = False,
+           static: bool = False, block_statements: int = 200, standalone: bool = True, clones=False,
            scratch: int = 0, loops: Sequence[tuple] = ()) -> tuple:
     """The live statements of ``P`` as a C file: one function per group of consecutive blocks (about
     ``block_statements`` statements each; not inlined), called in order by the entry function
@@ -767,17 +774,27 @@ def emit_c(P: Program, name: str, params: Sequence[str], header: Sequence[str], 
     thousands of statements makes gcc's register allocator spill at random and take seconds (Atlas:
     10 s at -O2, 136 kB of code); cut, it compiles in a fraction of that.  A statement kept for its
     effect may ``return`` a nonzero status, which the entry function passes on.  The sine-cosine helper
-    is defined once per C file (guarded) and the functions are compiled at -O1 (gcc's options pushed and
-    popped around them), so several such pieces can share a file with other code; ``standalone`` adds
-    the ``#include <math.h>`` a file of its own needs.  ``clones``: each function also compiled for
-    x86-64-v3 and chosen at load time (FMUGEN_UNROLLED_BLOCK_V3; with gcc's FMA contraction, which -O1
-    and -std=c99 leave out): the Jacobians, where it measured 0.70x the baseline's time (iiwa) for twice the
-    compile time, and the forward dynamics, 0.74x (Atlas 2.13 against 2.89 µs, Talos 2.88 against 3.94,
-    timed in one process) for about 1 s more of gcc on a large tree (Talos 2.2 against 1.2 s), paid once
-    per folded build for a saving in every step of its simulations; not the inverse dynamics.
+    is defined once per C file (guarded) and the functions are compiled at -O1 (cloned ones at -Os; gcc's
+    options pushed and popped around them), so several such pieces can share a file with other code; ``standalone`` adds
+    the ``#include <math.h>`` a file of its own needs.  ``clones`` (True or "v4"): each function also
+    compiled for x86-64-v3 and chosen at load time (FMUGEN_UNROLLED_BLOCK_V3; with gcc's FMA contraction,
+    which -O1 and -std=c99 leave out): the forward dynamics, 0.74x (Atlas 2.13 against 2.89 µs, Talos 2.88
+    against 3.94, timed in one process), for about 1 s more of gcc on a large tree, paid once per folded
+    build for a saving in every step of its simulations; not the inverse dynamics.  "v4": for x86-64-v4
+    as well, the three at -Os (FMUGEN_UNROLLED_BLOCK_V4): the Jacobians, where x86-64-v3 measured 0.70x
+    the baseline's time (iiwa), for 1.7x the gcc time of two clones at -O1 (iiwa 2.1 against 1.2 s,
+    Talos 23 against 13 s; the forward dynamics, at 0.08-0.20x ``aba`` already, keep their build time).
+    Why -Os and x86-64-v4: the straight-line code is bound by
+    instruction fetch, and on an Intel Xeon (Sapphire Rapids) the front end streams code from the
+    second-level cache at about 13 bytes a cycle against 32 from the first (32 kB; measured with runs of
+    long and short no-ops), so every byte counts: -Os and AVX-512's 32 registers (fewer spills) shrink
+    iiwa's Jacobian from 48 to 43 kB and take 0.70x (UR5, whose code then fits the first-level cache)
+    to 0.92-0.96x (iiwa, Panda, HyQ, Atlas, Talos) of the time, old and new timed in one process.
 
-    ``loops``: (suffix, body lines) of functions called after the blocks, compiled at -O2 with gcc's
-    vectoriser (dense loops over what the statements stored; the large trees' Jacobian product).  The
+    ``loops``: (suffix, body lines[, AVX-512 body lines]) of functions called after the blocks, compiled at
+    -O2 with gcc's vectoriser (dense loops over what the statements stored; the large trees' Jacobian
+    product); with ``clones``, the third item's function is called instead where the CPU has x86-64-v4
+    (gcc 12 on glibc; compiled out with -DFMUGEN_UNROLLED_NARROW).  The
     statements and the loops reach ``scratch`` doubles of their own as ``fmugen_wb[k]`` (past the work
     array's slots).  Returns (source, statements, functions)."""
     args = [re.split(r"[ *]+", p_.strip())[-1] for p_ in params]
@@ -820,20 +837,21 @@ def emit_c(P: Program, name: str, params: Sequence[str], header: Sequence[str], 
         return t.replace("fmugen_wb[", f"w[{len(slot)} + ")
 
     fn = [f"{name}_b{b}" for b in sorted(by_block)]
+    macro = "FMUGEN_UNROLLED_BLOCK" + ("_V4" if clones == "v4" else "_V3" if clones else "")
     lines = [*header,
              *(["#include <math.h>", ""] if standalone else []),
              "#if defined(__GNUC__) && !defined(__clang__)",
              "/* straight-line code: -O2's passes beyond -O1 (scheduling, PRE, SLP vectorising) measured no faster",
              " * here (Atlas, Talos, iiwa: O1/O2 time 0.94-1.02) and take almost half of gcc's time (Talos: 2.9 s",
-             " * CPU at -O2, 1.8 s at -O1) */",
+             " * CPU at -O2, 1.8 s at -O1); the Jacobians' at -Os: bound by instruction fetch, smaller is faster */",
              "#pragma GCC push_options",
-             "#pragma GCC optimize(\"O1\", \"expensive-optimizations\", \"fp-contract=fast\")" if clones else
-             "#pragma GCC optimize(\"O1\")",
+             f"#pragma GCC optimize(\"{'Os' if clones == 'v4' else 'O1'}\", \"expensive-optimizations\", "
+             "\"fp-contract=fast\")" if clones else "#pragma GCC optimize(\"O1\")",
              "#endif",
              SINCOS_C,
              ""]
     for f, b in zip(fn, sorted(by_block)):
-        lines.append(f"FMUGEN_UNROLLED_BLOCK{'_V3' if clones else ''} {f}({', '.join(params)}, double *w)")
+        lines.append(f"{macro} {f}({', '.join(params)}, double *w)")
         lines.append("{")
         lines.append("    " + " ".join(f"(void){a};" for a in args) + " (void)w;")
         paired = set()
@@ -880,23 +898,46 @@ def emit_c(P: Program, name: str, params: Sequence[str], header: Sequence[str], 
                   "typedef long long fmugen_i4 __attribute__((vector_size(32)));",
                   "#define FMUGEN_SHUFFLE(a, b, i, j, k, l) __builtin_shuffle(a, b, (fmugen_i4){i, j, k, l})",
                   "#endif",
+                  "#endif",
+                  "/* a loop's AVX-512 variant (eight doubles a register, 32 registers), called where the CPU has",
+                  " * x86-64-v4 (gcc 12 on glibc: the test __builtin_cpu_supports(\"x86-64-v4\")) */",
+                  "#if !defined(FMUGEN_UNROLLED_WIDE) && !defined(FMUGEN_UNROLLED_NARROW) && defined(__GNUC__) \\",
+                  "    && !defined(__clang__) && __GNUC__ >= 12 && defined(__x86_64__) && defined(__GLIBC__)",
+                  "typedef double fmugen_v8 __attribute__((vector_size(64), aligned(8)));",
+                  "#define FMUGEN_UNROLLED_WIDE static __attribute__((noinline, target(\"arch=x86-64-v4\"))) int",
                   "#endif"]
-    for suffix, body in loops:
+    wide = {}
+    for suffix, body, *variant in loops:
         fn.append(f"{name}_{suffix}")
-        lines.append(f"FMUGEN_UNROLLED_BLOCK{'_V3' if clones else ''} {fn[-1]}({', '.join(params)}, double *w)")
-        lines.append("{")
-        lines.append("    " + " ".join(f"(void){a};" for a in args) + " (void)w;")
-        lines.append(f"    double *const fmugen_wb = {wb};")
-        lines.extend("    " + x for x in body)
-        lines.append("    return 0;")
-        lines.append("}")
-        lines.append("")
+        heads = [(macro, fn[-1], body)]
+        if variant and clones:
+            wide[fn[-1]] = f"{fn[-1]}_wide"
+            heads.append(("FMUGEN_UNROLLED_WIDE", wide[fn[-1]], variant[0]))
+        for head, f, text in heads:
+            lines += ["#ifdef FMUGEN_UNROLLED_WIDE"] if head == "FMUGEN_UNROLLED_WIDE" else []
+            lines.append(f"{head} {f}({', '.join(params)}, double *w)")
+            lines.append("{")
+            lines.append("    " + " ".join(f"(void){a};" for a in args) + " (void)w;")
+            lines.append(f"    double *const fmugen_wb = {wb};")
+            lines.extend("    " + x for x in text)
+            lines.append("    return 0;")
+            lines.append("}")
+            lines += ["#endif"] if head == "FMUGEN_UNROLLED_WIDE" else []
+            lines.append("")
     lines.append(f"{'static ' if static else ''}int {name}({', '.join(params)})")
     lines.append("{")
     lines.append(f"    double w[{max(len(slot) + scratch, 1)}];")
     lines.append("    int status;")
     for f in fn:
-        lines.append(f"    if ((status = {f}({', '.join(args)}, w))) return status;")
+        call = f"    if ((status = {f}({', '.join(args)}, w))) return status;"
+        if f in wide:
+            pick = f"(__builtin_cpu_supports(\"x86-64-v4\") ? {wide[f]} : {f})"
+            lines += ["#ifdef FMUGEN_UNROLLED_WIDE",
+                      f"    if ((status = {pick}({', '.join(args)}, w)))",
+                      "        return status;",
+                      "#else", call, "#endif"]
+        else:
+            lines.append(call)
     lines.extend("    " + x for x in finish)
     lines.append("    return 0;")
     lines.append("}")

@@ -37,12 +37,13 @@ wrenches not (a model with them keeps the runtime's loops).  :func:`chain_step` 
 generated model calls in place of the runtime (the end-effector position and its derivative added), when
 the robot's numbers are known (:func:`fmugen.codegen.chain.unrolled_choice`).
 
-The Jacobians' functions are compiled twice, for x86-64-v3 (AVX2 and FMA) and for the baseline, and the
-loader picks one (gcc on glibc, :func:`fmugen.codegen.unrolled_aba.emit_c`): the code is bound by
-instruction fetch (iiwa: 100 kB of code, 16,500 instructions, 3,000 of them register copies that
-three-operand AVX instructions do without; 9,300 in the x86-64-v3 build), which takes 0.70x the time.  The forward
+The Jacobians' functions are compiled three times, for x86-64-v4 (AVX-512), x86-64-v3 (AVX2 and FMA) and
+the baseline, and the loader picks one (gcc on glibc, :func:`fmugen.codegen.unrolled_aba.emit_c`): the
+code is bound by instruction fetch (iiwa: 100 kB of code, 16,500 instructions, 3,000 of them register
+copies that three-operand AVX instructions do without; 9,300 in the x86-64-v3 build), which takes 0.70x
+the time; the x86-64-v4 clone at -Os, 43 kB against 48, 0.92x again on an Intel Xeon.  The forward
 dynamics are built so too; the inverse dynamics alone keep the baseline.  Results differ between
-the two builds by rounding (fused multiply-adds), as glibc's own libm does between CPUs.
+the builds by rounding (fused multiply-adds), as glibc's own libm does between CPUs.
 
 Measured (``examples/bench_derivatives.py --unrolled-only``, one run): ∇FD 0.19-0.23x Pinocchio's
 ``computeABADerivatives`` on the arms and HyQ, 0.24x on Atlas, 0.25x on Talos, 0.33-0.35x on Tiago, against
@@ -453,13 +454,17 @@ class _DenseProduct:
     * T into J's rows, four by four through register shuffles: stored straight from the sums, a row of
       J apart, the scalars took a sixth of the loops' instructions.
 
-    gcc vectorises them (AVX2 in the x86-64-v3 build).  Rows of other branches are zeros, stored by
-    statements.  The product as a loop was faster than the sums on every robot measured (µs, both timed
-    in one run per robot: UR5 0.86 against 0.91, iiwa 1.10 against 1.18, Atlas 7.0 against 7.8, Talos 13.0
-    against 20.1, Tiago 22.2 against 44.0), for 0.3-0.6 of the compile time on the large trees (Tiago 16
-    against 62 s) and 0.8-0.9 on the arms.  The passes into T, the transposes and M^-1 as a loop on Tiago
-    against the product's earlier stores and M^-1 as statements: 0.90x the time on Atlas, 0.96x Talos,
-    0.94x Tiago, 0.99x HyQ, the arms within 1.5 % (both timed in one process)."""
+    gcc vectorises them (AVX2 in the x86-64-v3 build).  Where M^-1 is a loop too (Tiago), the loops have
+    an AVX-512 variant, called where the CPU has x86-64-v4: eight rows a register and 32 registers, so a
+    column's sums of both kinds fit one pass up to 64 rows (Tiago's 46: 0.89x the time of the AVX loops,
+    timed in one process); on Atlas, Talos and the arms it measured 1.00-1.03x, and they keep the AVX
+    loops.  Rows of other branches are zeros, stored by statements.  The product as a loop was faster
+    than the sums on every robot measured (µs, both timed in one run per robot: UR5 0.86 against 0.91,
+    iiwa 1.10 against 1.18, Atlas 7.0 against 7.8, Talos 13.0 against 20.1, Tiago 22.2 against 44.0), for
+    0.3-0.6 of the compile time on the large trees (Tiago 16 against 62 s) and 0.8-0.9 on the arms.  The
+    passes into T, the transposes and M^-1 as a loop on Tiago against the product's earlier stores and
+    M^-1 as statements: 0.90x the time on Atlas, 0.96x Talos, 0.94x Tiago, 0.99x HyQ, the arms within
+    1.5 % (both timed in one process)."""
 
     def __init__(self, n: int, X, Minv, related, parts, bodies):
         if any(not b.parent < i for i, b in enumerate(bodies)):
@@ -489,7 +494,7 @@ class _DenseProduct:
         self.sub = [sorted(x) for x in subtree]
         for j in range(n):
             assert related[j] == sorted(path[j][1:]) + self.sub[j]
-        t = self.start[-1] + 3
+        t = self.start[-1] + 7
         # the spans (rows lo..hi-1), their columns and where their sums start in T (q's, then qd's) and
         # their columns of X in Xc
         self.spans, t0, x0 = [], 0, 0
@@ -498,8 +503,8 @@ class _DenseProduct:
             self.spans.append((lo, hi, cols, t0, x0))
             t0 += 2 * len(cols) * (hi - lo)
             x0 += len(cols) * (hi - lo)
-        # the scratch: -∂ID/∂q's and -∂ID/∂qd's entries (each followed by three slots that the last run's
-        # four-row store may overrun), al (12 x n), P, Q (6 x n), [w, dv, S] of each body, the friction's
+        # the scratch: -∂ID/∂q's and -∂ID/∂qd's entries (each followed by seven slots that the last run's
+        # four- or eight-row store may overrun), al (12 x n), P, Q (6 x n), [w, dv, S] of each body, the friction's
         # slopes, T (the product's sums, column after column), X's rows (by path) and X's columns over the
         # spans' rows (zeros off the subtrees; these two where the loop forms M^-1)
         e = 2 * t + 43 * n
@@ -509,7 +514,8 @@ class _DenseProduct:
 
     def emit_args(self, target: str, base: int) -> dict:
         """emit_c's arguments for the loops: the scratch and the loops' function."""
-        return {"scratch": self.at["end"], "loops": [("product", self.loop(target, base))]}
+        wide = [self.loop(target, base, lanes=8)] if not self.Minv else []  # measured: Tiago, not Talos
+        return {"scratch": self.at["end"], "loops": [("product", self.loop(target, base), *wide)]}
 
     def effects(self, P: Program, target: str, base: int):
         """The statements: X's rows, the zero rows of the first 2n columns and the vectors of -∂ID, each
@@ -557,8 +563,8 @@ class _DenseProduct:
                     runs.append([j, i, 1])
         return runs
 
-    def _did(self) -> list:
-        """The loops forming -∂ID's entries (four rows i at a time with the vector type, the rest in
+    def _did(self, lanes: int = 4) -> list:
+        """The loops forming -∂ID's entries (``lanes`` rows i at a time with the vector type, the rest in
         scalars)."""
         n, at = self.n, self.at
         lower, upper = self._runs(0), self._runs(1)
@@ -579,7 +585,7 @@ class _DenseProduct:
                  "    int t = 0;"]
 
         def body(vec: bool, what: str) -> list:
-            ty = "fmugen_v4" if vec else "double"
+            ty = ("fmugen_v8" if lanes == 8 else "fmugen_v4") if vec else "double"
             if vec:
                 ld = (lambda a, k: f"memcpy(&x, {a} + {n * k} + i0 + t, sizeof x);")
             else:
@@ -597,18 +603,18 @@ class _DenseProduct:
                 for k in range(6):
                     ls += [ld("Qt", k), f"sq -= S[{k}] * x;", ld("Pt", k), f"sd -= S[{k}] * x;"]
                 if vec:
-                    ls += ["for (int l = 0; l < 4 && t + l < len; l++) {",
+                    ls += [f"for (int l = 0; l < {lanes} && t + l < len; l++) {{",
                            "    const int e = first[i0 + t + l] + dj;",
                            "    bq[e] = sq[l];", "    bd[e] = sd[l];", "}"]
                 else:
                     ls += ["bq[first[i0 + t] + dj] = sq;", "bd[first[i0 + t] + dj] = sd;"]
             return ls
 
-        # four rows at a time to the end of the run: the lanes past it (rows of other subtrees, or past n
-        # into the next component) land on the run's next entries -- the next run's, the next column's,
-        # written after this one -- or on the three spare slots after the last column (no scalar tail: it
-        # was most of these loops' instructions on the arms)
-        lines += ["#ifdef FMUGEN_UNROLLED_V4", "    for (; t < len; t += 4) {"]
+        # four (eight) rows at a time to the end of the run: the lanes past it (rows of other subtrees, or
+        # past n into the next component) land on the run's next entries -- the next run's, the next
+        # column's, written after this one -- or on the seven spare slots after the last column (no scalar
+        # tail: it was most of these loops' instructions on the arms)
+        lines += ["#ifdef FMUGEN_UNROLLED_V4", f"    for (; t < len; t += {lanes}) {{"]
         lines += ["        " + x for x in body(True, "lower")]
         lines += ["    }", "#else", "    for (; t < len; t++) {"]
         lines += ["        " + x for x in body(False, "lower")]
@@ -624,17 +630,19 @@ class _DenseProduct:
                   "    const int i0 = upper[u][1], len = upper[u][2], dj = upper[u][3];",
                   f"    const double *S = w_ + {at['ws']} + 18 * upper[u][0] + 12;",
                   "    int t = 0;",
-                  "#ifdef FMUGEN_UNROLLED_V4", "    for (; t < len; t += 4) {  /* the lanes past the run not stored */"]
+                  "#ifdef FMUGEN_UNROLLED_V4",
+                  f"    for (; t < len; t += {lanes}) {{  /* the lanes past the run not stored */"]
         lines += ["        " + x for x in body(True, "upper")]
         lines += ["    }", "#else", "    for (; t < len; t++) {"]
         lines += ["        " + x for x in body(False, "upper")]
         lines += ["    }", "#endif", "}"]
         return lines
 
-    def loop(self, target: str, base: int) -> list:
+    def loop(self, target: str, base: int, lanes: int = 4) -> list:
         """The loops' C lines: -∂ID's entries, then the product, one loop per branch span (its length a
         constant) over the span's columns, each column's sums into the scratch T (column after column),
-        then T written into J's rows."""
+        then T written into J's rows.  ``lanes``: the doubles of a register of sums, 4 (AVX) or 8 (the
+        AVX-512 variant, twice the rows per instruction and 32 registers)."""
         n = self.n
         rel = ", ".join(str(i) for c in range(n) for i in self.related[c])
         # joints and columns fit a short; offsets into the entries (about n^2 / 2 on a chain) an int
@@ -642,8 +650,8 @@ class _DenseProduct:
                  f"static const int first[{n + 1}] = {{{', '.join(str(x) for x in self.start)}}};",
                  "double *const w_ = fmugen_wb;",
                  f"double *const out = {target} + {base};"]
-        lines += self._minv(target, base) if not self.Minv else []
-        lines += ["{"] + ["    " + x for x in self._did()] + ["}"]
+        lines += self._minv(target, base, lanes) if not self.Minv else []
+        lines += ["{"] + ["    " + x for x in self._did(lanes)] + ["}"]
         for s_, (lo, hi, cols, t0, _) in enumerate(self.spans):
             nb = hi - lo
             if _gapless(cols):
@@ -655,41 +663,47 @@ class _DenseProduct:
                           f"    const int c = cols{s_}[u];"]
             # a pass holds its sums in registers: both kinds at once up to half of ROWS, else one kind at
             # a time, ROWS rows a pass
-            R = self.ROWS
+            R = self.ROWS if lanes == 4 else self.ROWS_WIDE
             passes = [(("q", "d"), 0, nb)] if 2 * nb <= R else \
                 [((kind,), r0, min(R, nb - r0)) for kind in ("q", "d") for r0 in range(0, nb, R)]
             for kinds, r0, w in passes:
-                lines += ["    " + x for x in self._pass(kinds, lo, r0, w, nb, len(cols), t0)]
+                lines += ["    " + x for x in self._pass(kinds, lo, r0, w, nb, len(cols), t0, lanes)]
             lines += ["}"]
             lines += self._transpose(lo, nb, cols, t0)
         return lines
 
-    #: rows of sums a pass over a column's terms holds in registers: 48, twelve AVX registers
+    #: rows of sums a pass over a column's terms holds in registers: 48, twelve AVX registers; 128 in the
+    #: AVX-512 variant, sixteen of its 32 registers
     ROWS = 48
+    ROWS_WIDE = 128
 
-    def _pass(self, kinds, lo: int, r0: int, w: int, nb: int, ncols: int, t0: int) -> list:
+    def _pass(self, kinds, lo: int, r0: int, w: int, nb: int, ncols: int, t0: int, lanes: int = 4) -> list:
         """Span rows lo + r0 .. lo + r0 + w - 1 of column c (the span's u-th) for each kind ("q": the column
         of ∂qdd/∂q, "d": of ∂qdd/∂qd), summed over the related joints' rows of M^-1, into T."""
         at = self.at
         coef = {"q": "fmugen_wb[t]", "d": f"fmugen_wb[{at['bd']} + t]"}
         dest = {k: f"fmugen_wb + {at['T'] + t0 + (0 if k == 'q' else ncols * nb) + r0} + {nb} * u" for k in kinds}
         return self._sums("first[c]", "first[c + 1]", f"out + {3 * self.n} * rel[t] + {2 * self.n + lo + r0}",
-                          {k: coef[k] for k in kinds}, dest, w)
+                          {k: coef[k] for k in kinds}, dest, w, lanes)
 
     @staticmethod
-    def _sums(t0: str, t1: str, row: str, coef: dict, dest: dict, w: int) -> list:
+    def _sums(t0: str, t1: str, row: str, coef: dict, dest: dict, w: int, lanes: int = 4) -> list:
         """For each kind k of ``coef``: the sum over t = t0 .. t1 - 1 of coef[k] times the w doubles at
-        ``row`` (C expressions of t), stored at ``dest[k]``: with gcc's and clang's vector types four rows a
-        register (the rows past the last four: one more register overlapping the one before, or scalars
-        below four rows), else plain loops.  At most 12 registers of sums: a pass of the loop over t."""
+        ``row`` (C expressions of t), stored at ``dest[k]``: with gcc's and clang's vector types ``lanes``
+        rows a register (the rows past the last ones: one more register overlapping the one before; below
+        8 rows four a register, below four scalars), else plain loops.  A pass of the loop over t holds at
+        most ROWS (ROWS_WIDE) rows of sums."""
         kinds = list(coef)
-        nv = w // 4
-        regs = [4 * k for k in range(nv)] + ([w - 4] if nv and w % 4 else [])
+        if w < lanes:
+            lanes = 4
+        nv = w // lanes
+        regs = [lanes * k for k in range(nv)] + ([w - lanes] if nv and w % lanes else [])
+        vt = "fmugen_v8" if lanes == 8 else "fmugen_v4"
         head = [f"    for (int t = {t0}; t < {t1}; t++) {{", f"        const double *m = {row};"]
         head += [f"        const double b{k} = {coef[k]};" for k in kinds]
         vec = ["#ifdef FMUGEN_UNROLLED_V4", "{"]
         if regs:
-            vec += ["    fmugen_v4 " + ", ".join(f"{k}{j} = {{0.0}}" for k in kinds for j in range(len(regs))) + ", x;"]
+            vec += [f"    {vt} " + ", ".join(f"{k}{j} = {{0.0}}" for k in kinds for j in range(len(regs))) + ", x;"]
             vec += head + [f"        memcpy(&x, m + {a}, sizeof x);" + "".join(f" {k}{j} += b{k} * x;" for k in kinds)
                            for j, a in enumerate(regs)]
             vec += ["    }"] + [f"    memcpy({dest[k]} + {a}, &{k}{j}, sizeof {k}{j});"
@@ -706,7 +720,7 @@ class _DenseProduct:
         vec += [f"    for (int r = 0; r < {w}; r++) {{ " + " ".join(f"({dest[k]})[r] = {k}[r];" for k in kinds) + " }"]
         return vec + ["}", "#endif"]
 
-    def _minv(self, target: str, base: int) -> list:
+    def _minv(self, target: str, base: int, lanes: int = 4) -> list:
         """M^-1 = X X^T into J's last n columns: per span, X's columns over the span's rows (zeros off the
         subtrees) from its rows by path, then column b of M^-1 (row b: M^-1 is symmetric) the sum of
         X[b][k] times column k over the joints k on b's path, ROWS rows a pass; entries outside a row's span
@@ -743,11 +757,12 @@ class _DenseProduct:
                 lines.append(f"            memset(out2 + {k3} * c, 0, {lo} * sizeof(double));")
             if hi < n:
                 lines.append(f"            memset(out2 + {k3} * c + {hi}, 0, {n - hi} * sizeof(double));")
-            for r0 in range(0, nb, self.ROWS):
-                w = min(self.ROWS, nb - r0)
+            R = self.ROWS if lanes == 4 else self.ROWS_WIDE
+            for r0 in range(0, nb, R):
+                w = min(R, nb - r0)
                 lines += ["            " + x for x in self._sums(
                     "pfirst[c]", "pfirst[c + 1]", f"Xc + {nb} * pcol[t] + {r0}", {"x": f"fmugen_wb[{at['Xp']} + t]"},
-                    {"x": f"out2 + {k3} * c + {lo + r0}"}, w)]
+                    {"x": f"out2 + {k3} * c + {lo + r0}"}, w, lanes)]
             lines += ["        }", "    }"]
         return lines + ["}"]
 
@@ -869,7 +884,7 @@ def unrolled_jacobian(revolute: Sequence[bool], parents: Sequence[int], constant
     params = tuple(f"const double *{a}" for a in ins) + (f"double *{out}", "double *J")
     source, count, nblocks = emit_c(P, name, params, header,
                                     [f"for (int i = 0; i < {n}; i++)", f"    if (!isfinite({out}[i])) return 2;"],
-                                    static=static, block_statements=block_statements, clones=True,
+                                    static=static, block_statements=block_statements, clones="v4",
                                     **(dense.emit_args("J", 0) if dense else {}))
     return UnrolledJacobian(name, n, source, count, nblocks, kind)
 
@@ -970,7 +985,8 @@ def chain_step(kind: str, revolute: Sequence[bool], parents: Sequence[int], cons
               " * (its numbers folded into the code) */"]
     source, count, nblocks = emit_c(P, name, ("const double *q", "const double *qd", "const double *u", "double *x"),
                                     header, [f"for (int i = 0; i < {n}; i++)", "    if (!isfinite(x[i])) return 2;"],
-                                    static=True, standalone=False, clones=kind != "id",
+                                    static=True, standalone=False,
+                                    clones="v4" if kind in ("jacobian", "id_jacobian") else kind == "fd",
                                     **(dense.emit_args("x", n) if dense else {}))
     return UnrolledJacobian(name, n, source, count, nblocks, kind)
 
