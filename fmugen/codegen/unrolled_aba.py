@@ -801,9 +801,16 @@ def emit_c(P: Program, name: str, params: Sequence[str], header: Sequence[str], 
     stmts = P.live()
     home = {st[0]: st[3] for st in stmts if st[0] is not None}
 
+    def ref(v: str, blk: int) -> str:
+        if v in home and home[v] != blk:
+            if v in slot:
+                return f"w[{slot[v]}]"
+            if v in alias:
+                return alias[v]
+        return v
+
     def text_in(t: str, blk: int) -> str:
-        return _TOKEN.sub(lambda m: f"w[{slot[m.group(0)]}]" if m.group(0) in slot and home[m.group(0)] != blk
-                          else m.group(0), t)
+        return _TOKEN.sub(lambda m: ref(m.group(0), blk), t)
 
     # consecutive blocks merged up to about ``block_statements`` statements: a call per body and pass
     # costs more than it saves on a small robot
@@ -823,6 +830,21 @@ def emit_c(P: Program, name: str, params: Sequence[str], header: Sequence[str], 
         for d in deps:
             if d in home and home[d] != blk and d not in slot:
                 slot[d] = len(slot)
+    # a value that an effect of its own group stores anyway (an output, the loops' scratch) is read there by
+    # the later groups, not stored to a slot as well: the code is bound by instruction fetch, and a store is
+    # seven bytes (iiwa's Jacobian: 150 of its 540 slots)
+    outs = [a for p_, a in zip(params, args) if not p_.strip().startswith("const")] + ["fmugen_wb"]
+    store = re.compile(r"^(%s)\[([0-9 +]+)\] = (-?)(t\d+);$" % "|".join(map(re.escape, outs)))
+    written, alias = {}, {}
+    for name_, text, deps, blk in stmts:
+        m = store.match(text) if name_ is None else None
+        if m:
+            at = (m.group(1), m.group(2).replace(" ", ""))
+            written[at] = written.get(at, 0) + 1
+            if m.group(4) in slot and m.group(4) not in alias and home[m.group(4)] == blk:
+                alias[m.group(4)] = (*at, m.group(3) == "-")
+    alias = {v: a for v, a in alias.items() if written[a[:2]] == 1}  # a place written once
+    slot = {d: i for i, d in enumerate(d for d in slot if d not in alias)}
     by_block = {}
     for st in stmts:
         by_block.setdefault(st[3], []).append(st)
@@ -832,6 +854,9 @@ def emit_c(P: Program, name: str, params: Sequence[str], header: Sequence[str], 
         if name_ and text[:4] in ("sin(", "cos("):
             trig.setdefault((blk, text[4:-1]), {})[text[:3]] = name_
     wb = f"w + {len(slot)}"  # the statements' and loops' own scratch
+    for v, (arr, at, neg) in alias.items():
+        place = f"w[{len(slot)} + {at}]" if arr == "fmugen_wb" else f"{arr}[{at}]"
+        alias[v] = f"(-{place})" if neg else place
 
     def scratch_in(t: str) -> str:
         return t.replace("fmugen_wb[", f"w[{len(slot)} + ")
