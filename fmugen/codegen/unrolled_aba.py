@@ -768,35 +768,33 @@ def emit_c(P: Program, name: str, params: Sequence[str], header: Sequence[str], 
            static: bool = False, block_statements: int = 200, standalone: bool = True, clones=False,
            scratch: int = 0, loops: Sequence[tuple] = ()) -> tuple:
     """The live statements of ``P`` as a C file: one function per group of consecutive blocks (about
-    ``block_statements`` statements each; not inlined), called in order by the entry function
-    ``int name(params)``, which then runs the ``finish`` lines and returns 0.  A value used by a later
-    group goes through the work array ``w``, so each function has short live ranges: one function of
-    thousands of statements makes gcc's register allocator spill at random and take seconds (Atlas:
-    10 s at -O2, 136 kB of code); cut, it compiles in a fraction of that.  A statement kept for its
-    effect may ``return`` a nonzero status, which the entry function passes on.  The sine-cosine helper
-    is defined once per C file (guarded) and the functions are compiled at -O1 (cloned ones at -Os; gcc's
-    options pushed and popped around them), so several such pieces can share a file with other code; ``standalone`` adds
-    the ``#include <math.h>`` a file of its own needs.  ``clones`` (True or "v4"): each function also
-    compiled for x86-64-v3 and chosen at load time (FMUGEN_UNROLLED_BLOCK_V3; with gcc's FMA contraction,
-    which -O1 and -std=c99 leave out): the forward dynamics, 0.74x (Atlas 2.13 against 2.89 µs, Talos 2.88
-    against 3.94, timed in one process), for about 1 s more of gcc on a large tree, paid once per folded
-    build for a saving in every step of its simulations; not the inverse dynamics.  "v4": for x86-64-v4
-    as well, the three at -Os (FMUGEN_UNROLLED_BLOCK_V4): the Jacobians, where x86-64-v3 measured 0.70x
-    the baseline's time (iiwa), for 1.7x the gcc time of two clones at -O1 (iiwa 2.1 against 1.2 s,
-    Talos 23 against 13 s; the forward dynamics, at 0.08-0.20x ``aba`` already, keep their build time).
-    Why -Os and x86-64-v4: the straight-line code is bound by
-    instruction fetch, and on an Intel Xeon (Sapphire Rapids) the front end streams code from the
-    second-level cache at about 13 bytes a cycle against 32 from the first (32 kB; measured with runs of
-    long and short no-ops), so every byte counts: -Os and AVX-512's 32 registers (fewer spills) shrink
-    iiwa's Jacobian from 48 to 43 kB and take 0.70x (UR5, whose code then fits the first-level cache)
-    to 0.92-0.96x (iiwa, Panda, HyQ, Atlas, Talos) of the time, old and new timed in one process.
+    ``block_statements`` statements each; not inlined), called in order by the entry function ``int
+    name(params)``, which then runs the ``finish`` lines and returns 0.  A value used by a later group goes
+    through the work array ``w``, so each function has short live ranges: one function of thousands of
+    statements makes gcc's register allocator spill at random and take seconds (Atlas: 10 s at -O2, 136 kB of
+    code); cut, it compiles in a fraction of that.  A statement kept for its effect may ``return`` a nonzero
+    status, which the entry function passes on.  The sine-cosine helper is defined once per C file (guarded) and
+    the functions are compiled at -O1 (the Jacobians' at -Os; gcc's options pushed and popped around them), so
+    several such pieces can share a file with other code; ``standalone`` adds the ``#include <math.h>`` a file
+    of its own needs.  ``clones`` (True or "v4"): each function also compiled for x86-64-v3 and chosen at load
+    time (FMUGEN_UNROLLED_BLOCK_V3; with gcc's FMA contraction, which -O1 and -std=c99 leave out): the forward
+    dynamics, 0.74x (Atlas 2.13 against 2.89 µs, Talos 2.88 against 3.94, timed in one process), for about 1 s
+    more of gcc on a large tree, paid once per folded build for a saving in every step of its simulations; not
+    the inverse dynamics.  "v4": for x86-64-v4 as well, the three at -Os (FMUGEN_UNROLLED_BLOCK_V4): the
+    Jacobians, where x86-64-v3 measured 0.70x the baseline's time (iiwa), for 1.7x the gcc time of two clones at
+    -O1 (iiwa 2.1 against 1.2 s, Talos 23 against 13 s; the forward dynamics, at 0.08-0.20x ``aba`` already,
+    keep their build time). Why -Os and x86-64-v4: the straight-line code is bound by instruction fetch, and on
+    an Intel Xeon (Sapphire Rapids) the front end streams code from the second-level cache at about 13 bytes a
+    cycle against 32 from the first (32 kB; measured with runs of long and short no-ops), so every byte counts:
+    -Os and AVX-512's 32 registers (fewer spills) shrink iiwa's Jacobian from 48 to 43 kB and take 0.70x (UR5,
+    whose code then fits the first-level cache) to 0.92-0.96x (iiwa, Panda, HyQ, Atlas, Talos) of the time, old
+    and new timed in one process.
 
-    ``loops``: (suffix, body lines[, AVX-512 body lines]) of functions called after the blocks, compiled at
-    -O2 with gcc's vectoriser (dense loops over what the statements stored; the large trees' Jacobian
-    product); with ``clones``, the third item's function is called instead where the CPU has x86-64-v4
-    (gcc 12 on glibc; compiled out with -DFMUGEN_UNROLLED_NARROW).  The
-    statements and the loops reach ``scratch`` doubles of their own as ``fmugen_wb[k]`` (past the work
-    array's slots).  Returns (source, statements, functions)."""
+    ``loops``: (suffix, body lines[, AVX-512 body lines]) of functions called after the blocks, compiled at -O2
+    with gcc's vectoriser (dense loops over what the statements stored; the large trees' Jacobian product); with
+    ``clones``, the third item's function is called instead where the CPU has x86-64-v4 (gcc 12 on glibc;
+    compiled out with -DFMUGEN_UNROLLED_NARROW).  The statements and the loops reach ``scratch`` doubles of
+    their own as ``fmugen_wb[k]`` (past the work array's slots).  Returns (source, statements, functions)."""
     args = [re.split(r"[ *]+", p_.strip())[-1] for p_ in params]
     stmts = P.live()
     home = {st[0]: st[3] for st in stmts if st[0] is not None}
@@ -832,7 +830,7 @@ def emit_c(P: Program, name: str, params: Sequence[str], header: Sequence[str], 
                 slot[d] = len(slot)
     # a value that an effect of its own group stores anyway (an output, the loops' scratch) is read there by
     # the later groups, not stored to a slot as well: the code is bound by instruction fetch, and a store is
-    # seven bytes (iiwa's Jacobian: 150 of its 540 slots)
+    # seven bytes (iiwa's Jacobian: 124 of its 543 slots)
     outs = [a for p_, a in zip(params, args) if not p_.strip().startswith("const")] + ["fmugen_wb"]
     store = re.compile(r"^(%s)\[([0-9 +]+)\] = (-?)(t\d+);$" % "|".join(map(re.escape, outs)))
     written, alias = {}, {}
