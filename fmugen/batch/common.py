@@ -15,6 +15,8 @@ from typing import Optional
 
 import numpy as np
 
+from ..cache import compiled_cache, hash_compiler
+
 __all__ = ["StateError"]
 
 CC = "cc"
@@ -34,23 +36,15 @@ class StateError(ArithmeticError):
 
 
 def _compiler_hash(flags) -> "hashlib._Hash":
-    """A sha256 begun with the compiler (its resolved path, size and time) and ``flags``: a library's key
-    changes with the compiler that built it."""
+    """A sha256 begun with the compiler and ``flags``: a library's key changes with the compiler that
+    built it."""
     h = hashlib.sha256()
-    path = shutil.which(CC) or CC
-    try:
-        st = os.stat(os.path.realpath(path))
-        h.update(f"{os.path.realpath(path)}\0{st.st_size}\0{st.st_mtime_ns}\0".encode())
-    except OSError:
-        h.update(path.encode())
-    h.update("\0".join(flags).encode() + b"\1")
+    hash_compiler(h, CC, flags)
     return h
 
 
 def _cache_root() -> Optional[Path]:
-    if os.environ.get("FMUGEN_OBJECT_CACHE", "1") == "0":
-        return None
-    return Path(os.environ.get("FMUGEN_CACHE") or Path.home() / ".cache" / "fmugen") / "batch"
+    return compiled_cache("batch")
 
 
 def _cached(root: Path, key: str, build) -> Optional[Path]:

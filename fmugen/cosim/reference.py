@@ -43,6 +43,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
+from ..cache import cache_home
 from .errors import CosimError
 from .system import ReferenceProblem
 
@@ -74,8 +75,7 @@ class ReferenceSolution:
 
 
 def cache_dir() -> Path:
-    root = os.environ.get("FMUGEN_CACHE")
-    return Path(root) / "reference" if root else Path.home() / ".cache" / "fmugen" / "reference"
+    return cache_home() / "reference"
 
 
 def _column_map(problem: ReferenceProblem) -> list:

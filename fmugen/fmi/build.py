@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Optional, Sequence, Union
 
 from .. import __version__
+from ..cache import compiled_cache, hash_compiler
 from ..codegen.c_code import GUID_PLACEHOLDER, c_identifier, deterministic_guid, generate_c
 from ..codegen.model import SymbolicModel
 from ..errors import IDENTIFIER_PATTERN, MAX_IDENTIFIER_LENGTH, FmugenError
@@ -375,9 +376,7 @@ def _supervise(pending: list, running: list, width: int, cwd: Path, what: str, b
 def object_cache_dir() -> Optional[Path]:
     """Where compiled runtime objects are kept (``$FMUGEN_CACHE/objects``, default
     ``~/.cache/fmugen/objects``); None when ``FMUGEN_OBJECT_CACHE=0``."""
-    if os.environ.get("FMUGEN_OBJECT_CACHE", "1") == "0":
-        return None
-    return Path(os.environ.get("FMUGEN_CACHE") or Path.home() / ".cache" / "fmugen") / "objects"
+    return compiled_cache("objects")
 
 
 def _runtime_key(cc: str, flags: list, src: Path, runtime: list, target: str = "") -> str:
@@ -386,13 +385,7 @@ def _runtime_key(cc: str, flags: list, src: Path, runtime: list, target: str = "
     the build folder but model.c."""
     h = hashlib.sha256()
     h.update(f"target {target}\0".encode())
-    path = shutil.which(cc) or cc
-    try:
-        st = os.stat(os.path.realpath(path))
-        h.update(f"{os.path.realpath(path)}\0{st.st_size}\0{st.st_mtime_ns}\0".encode())
-    except OSError:
-        h.update(path.encode())
-    h.update("\0".join(flags).encode() + b"\1")
+    hash_compiler(h, cc, flags)
     for p in sorted(src.iterdir()):
         if p.name != "model.c" and p.suffix in (".c", ".h"):
             h.update(p.name.encode() + b"\0" + p.read_bytes() + b"\1")

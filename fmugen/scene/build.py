@@ -33,6 +33,7 @@ from typing import Optional
 import numpy as np
 
 from .. import __version__
+from ..cache import cache_home
 from .errors import SceneError
 
 
@@ -102,7 +103,7 @@ class Progress:
 
 
 def cache_dir() -> Path:
-    return Path(os.environ.get("FMUGEN_CACHE") or Path.home() / ".cache" / "fmugen")
+    return cache_home()
 
 
 @lru_cache(maxsize=1)
