@@ -13,8 +13,8 @@ import pytest
 from erd_robots import ROBOTS
 from erd_robots import rel as _rel
 from erd_robots import robot as _robot
-from fmugen.codegen.unrolled_aba import (SINCOS_C, CompiledUnrolledFD, Program, Var, evaluate_numeric,
-                                         from_kernels, unrolled_fd)
+from fmugen.codegen.unrolled_aba import (SINCOS_C, WINDOW, CompiledUnrolledFD, Program, Var, _windows,
+                                         evaluate_numeric, from_kernels, unrolled_fd)
 
 
 def test_folding():
@@ -32,6 +32,50 @@ def test_folding():
     P.effect(f"out = {a.name};", [a])
     P.sop([(x, y)])  # unused
     assert [s[0] for s in P.live()] == [a.name, None]
+
+
+def test_windows_reach_the_same_entries():
+    """emit_c's windows: every access rewritten through a pointer reaches the entry it did, within a one-byte
+    displacement, the pointer inside the entries used (C allows no pointer past an array); read-only arrays
+    through const pointers; rarely used entries left alone."""
+    import re
+
+    rng = np.random.default_rng(3)
+    body = [f"    const double t{i} = w[{rng.integers(0, 400)}] * q[{rng.integers(0, 9)}] + w[100 + {rng.integers(0, 60)}];"
+            for i in range(300)] + [f"    J[{k}] = t{k};" for k in range(0, 200, 3)] + ["    w[5000] = t1;"]
+    out = _windows(body, {"q": False, "w": True, "J": True}, count=12, min_uses=4)
+    ptr = {}
+    while re.match(r"    (const )?double \*fmugen_p", out[2 * len(ptr)]):  # a pointer, the macro keeping it opaque
+        m = re.fullmatch(r"    (const )?double \*(fmugen_p\d+) = (\w+) \+ (\d+);", out[2 * len(ptr)])
+        assert m and out[2 * len(ptr) + 1] == f"    FMUGEN_UNROLLED_WINDOW({m.group(2)});"
+        assert bool(m.group(1)) == (m.group(3) == "q")
+        ptr[m.group(2)] = (m.group(3), int(m.group(4)))
+    assert 1 <= len(ptr) <= 12
+    rest = out[2 * len(ptr):]
+    assert len(rest) == len(body)
+    spelled = re.compile(r"(fmugen_p\d+)\[(-?\d+)\]|\b(q|w|J)\[(\d+)(?: \+ (\d+))?\]")
+
+    def entries(line):
+        got = []
+        for m in spelled.finditer(line):
+            if m.group(1):
+                arr, mid = ptr[m.group(1)]
+                off = int(m.group(2))
+                assert -WINDOW // 2 <= off < WINDOW // 2  # a one-byte displacement of 8-byte entries
+                got.append((arr, mid + off))
+            else:
+                got.append((m.group(3), int(m.group(4)) + int(m.group(5) or 0)))
+        return got
+
+    used = {}
+    for old, new in zip(body, rest):
+        assert entries(new) == entries(old) and spelled.sub("", new) == spelled.sub("", old)
+        for arr, k in entries(old):
+            used.setdefault(arr, set()).add(k)
+    for arr, mid in ptr.values():
+        assert min(used[arr]) <= mid <= max(used[arr])
+    assert "w[5000]" in rest[-1]  # used once: not worth a window
+    assert _windows(["    x = 1.0;"], {"w": True}) == ["    x = 1.0;"]
 
 
 def test_inline_sincos(tmp_path):
