@@ -13,8 +13,8 @@ import pytest
 from erd_robots import ROBOTS
 from erd_robots import rel as _rel
 from erd_robots import robot as _robot
-from fmugen.codegen.unrolled_aba import (SINCOS_C, WINDOW, CompiledUnrolledFD, Program, Var, _windows,
-                                         evaluate_numeric, from_kernels, unrolled_fd)
+from fmugen.codegen.unrolled_aba import (SINCOS_C, WINDOW, CompiledUnrolledFD, Program, Var, _pressure_order,
+                                         _windows, evaluate_numeric, from_kernels, unrolled_fd)
 
 
 def test_folding():
@@ -76,6 +76,41 @@ def test_windows_reach_the_same_entries():
         assert min(used[arr]) <= mid <= max(used[arr])
     assert "w[5000]" in rest[-1]  # used once: not worth a window
     assert _windows(["    x = 1.0;"], {"w": True}) == ["    x = 1.0;"]
+
+
+def _most_live(stmts) -> int:
+    """The most values of the function live at once: defined, and used by a statement still to come."""
+    last = {}
+    for i, (_, _, deps, _) in enumerate(stmts):
+        for d in deps:
+            last[d] = i
+    live, most = set(), 0
+    for i, (name, _, deps, _) in enumerate(stmts):
+        live -= {d for d in deps if last.get(d) == i}
+        if name is not None and name in last:
+            live.add(name)
+        most = max(most, len(live))
+    return most
+
+
+def test_pressure_order():
+    """emit_c's statement order: a permutation in which every statement follows what it reads and the effects
+    keep their order, holding fewer values live than the order of emission (a body's vectors one after the
+    other, each summed at the end)."""
+    stmts = []
+    for v in range(4):  # four vectors of 6 products each, then their sums, an effect per sum
+        stmts += [(f"a{v}_{k}", "", (f"in{k}",), 0) for k in range(6)]
+    for v in range(4):
+        stmts.append((f"s{v}", "", tuple(f"a{v}_{k}" for k in range(6)), 0))
+        stmts.append((None, "", (f"s{v}",), 0))
+    stmts.append((None, "", ("s0", "s3"), 0))
+    out = _pressure_order(stmts)
+    assert sorted(map(repr, out)) == sorted(map(repr, stmts))
+    pos = {st[0]: i for i, st in enumerate(out) if st[0] is not None}
+    for i, st in enumerate(out):
+        assert all(pos.get(d, -1) < i for d in st[2])
+    assert [st for st in out if st[0] is None] == [st for st in stmts if st[0] is None]
+    assert _most_live(stmts) == 24 and _most_live(out) <= 8
 
 
 def test_inline_sincos(tmp_path):

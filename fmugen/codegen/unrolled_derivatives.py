@@ -45,9 +45,10 @@ the time; the x86-64-v4 clone at -Os, 43 kB against 48, 0.92x again on an Intel 
 dynamics are built so too; the inverse dynamics alone keep the baseline.  Results differ between
 the builds by rounding (fused multiply-adds), as glibc's own libm does between CPUs.
 
-Measured (``examples/bench_derivatives.py --unrolled-only``, one run): ∇FD 0.19-0.23x Pinocchio's
-``computeABADerivatives`` on the arms and HyQ, 0.24x on Atlas, 0.25x on Talos, 0.33-0.35x on Tiago, against
-0.53-0.74x for the loops; with the product as straight-line sums Talos and Tiago were at 0.36x and
+Measured (``examples/bench_derivatives.py --unrolled-only``, an AMD EPYC, with :func:`emit_c`'s windows
+and statement order): ∇FD 0.19-0.23x Pinocchio's ``computeABADerivatives`` on the arms, 0.21-0.27x on
+HyQ, Atlas and Talos, 0.29-0.30x on Tiago, against 0.47-0.78x for the loops (Talos 0.35x while a
+neighbour loads the host); with the product as straight-line sums Talos and Tiago were at 0.36x and
 0.70x and compiled for 25 and 65 s, now 12 and 17 s.  That is still long for an FMU build, so models
 beyond ``UNROLLED_JACOBIAN_MAX`` bodies (:mod:`fmugen.codegen.chain`) keep the loops.
 
@@ -885,7 +886,7 @@ def unrolled_jacobian(revolute: Sequence[bool], parents: Sequence[int], constant
     source, count, nblocks = emit_c(P, name, params, header,
                                     [f"for (int i = 0; i < {n}; i++)", f"    if (!isfinite({out}[i])) return 2;"],
                                     static=static, block_statements=block_statements, clones="v4",
-                                    **(dense.emit_args("J", 0) if dense else {}))
+                                    schedule=kind == "fd", **(dense.emit_args("J", 0) if dense else {}))
     return UnrolledJacobian(name, n, source, count, nblocks, kind)
 
 
@@ -987,6 +988,7 @@ def chain_step(kind: str, revolute: Sequence[bool], parents: Sequence[int], cons
                                     header, [f"for (int i = 0; i < {n}; i++)", "    if (!isfinite(x[i])) return 2;"],
                                     static=True, standalone=False,
                                     clones="v4" if kind in ("jacobian", "id_jacobian") else kind == "fd",
+                                    schedule=kind in ("fd", "jacobian"),
                                     **(dense.emit_args("x", n) if dense else {}))
     return UnrolledJacobian(name, n, source, count, nblocks, kind)
 
