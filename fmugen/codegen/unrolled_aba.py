@@ -60,6 +60,7 @@ as the runtime does.
 from __future__ import annotations
 
 import collections
+import heapq
 import math
 import re
 from dataclasses import dataclass
@@ -853,23 +854,31 @@ def _pressure_order(stmts: list) -> list:
     nxt_effect = {a: b for a, b in zip(effects, effects[1:])}
     for i in effects[1:]:
         waiting[i] += 1
-    ready = {i for i, w_ in enumerate(waiting) if w_ == 0}
-    out = []
+    # score: the live ranges a statement ends, less one if its value is used later; it only grows, as the
+    # other users of an operand are placed (a heap of (-score, index), stale entries skipped)
+    own = [1 if st[0] is not None and st[0] in left else 0 for st in stmts]
+    freed = [sum(1 for d in o if left[d] == 1) for o in ops]
+    ready = [(own[i] - freed[i], i) for i, w_ in enumerate(waiting) if w_ == 0]
+    heapq.heapify(ready)
+    out, placed = [], [False] * len(stmts)
     while ready:
-        def score(i):
-            st = stmts[i]
-            freed = sum(1 for d in ops[i] if left[d] == 1)
-            return (freed - (1 if st[0] is not None and left.get(st[0], 0) else 0), -i)
-        i = max(ready, key=score)
-        ready.discard(i)
+        key, i = heapq.heappop(ready)
+        if placed[i] or key != own[i] - freed[i]:
+            continue
+        placed[i] = True
         out.append(stmts[i])
         for d in ops[i]:
             left[d] -= 1
+            if left[d] == 1:  # its last user now ends it
+                j = next(j for j in users[d] if not placed[j])
+                freed[j] += 1
+                if waiting[j] == 0:
+                    heapq.heappush(ready, (own[j] - freed[j], j))
         done = users.get(stmts[i][0], []) if stmts[i][0] is not None else []
         for j in done + ([nxt_effect[i]] if i in nxt_effect else []):
             waiting[j] -= 1
             if waiting[j] == 0:
-                ready.add(j)
+                heapq.heappush(ready, (own[j] - freed[j], j))
     assert len(out) == len(stmts)
     return out
 
