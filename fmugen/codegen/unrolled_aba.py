@@ -883,7 +883,6 @@ def _pressure_order(stmts: list) -> list:
     return out
 
 
-
 def emit_c(P: Program, name: str, params: Sequence[str], header: Sequence[str], finish: Sequence[str],
            static: bool = False, block_statements: int = 200, standalone: bool = True, clones=False,
            scratch: int = 0, loops: Sequence[tuple] = (), windows: bool = True, schedule: bool = True) -> tuple:
