@@ -780,13 +780,14 @@ WINDOW = 32
 
 def _windows(body: list, arrays: Mapping[str, bool], count: int = 12, min_uses: int = 4) -> list:
     """``body`` (a block function's lines) with its constant-index accesses to ``arrays`` (name: written by
-    the function) rewritten through at most ``count`` window pointers, each the middle of the WINDOW
-    entries the most accesses not yet covered fall into (greedy; a window of fewer than ``min_uses`` is not
-    worth its register and its lea); the declarations first.
+    the function) rewritten through at most ``count`` window pointers, one for each run of WINDOW entries
+    that the most accesses not yet covered fall into (greedy; a window of fewer than ``min_uses`` is not
+    worth its register and its lea), the pointer in the run's middle or at its last entry used; the
+    declarations first.
 
-    Why: the straight-line code is bound by instruction fetch, and an access to the work array beyond its
-    first 16 entries carries a four-byte displacement (Panda's Jacobian: 3,150 of them, 28 of its 61 kB in
-    the x86-64-v3 build); through a window it carries one.  Panda's code: 54 kB against 61, 0.83x the time;
+    Why: the straight-line code is bound by instruction fetch, and an access to an array (the work array
+    above all, J) beyond its first 16 entries carries a four-byte displacement (Panda's Jacobian: 3,150 of
+    them, 28 of its 61 kB in the x86-64-v3 build); through a window it carries one.  Panda's code: 54 kB against 61, 0.83x the time;
     iiwa 0.86x (old and new timed in one process, AMD EPYC)."""
     ref = re.compile(r"\b((%s)\[(\d+)(?: \+ (\d+))?\])" % "|".join(map(re.escape, arrays)))
     text = "\n".join(body)
@@ -841,7 +842,7 @@ def _pressure_order(stmts: list) -> list:
     more values than the 16 vector registers, so gcc spills (iiwa's Jacobian: 2,030 stack accesses, 14 of
     its 42 kB).  Reordered, 1,410 (40 kB); Atlas 10,300 against 6,500.  Timed against the order of emission
     in one process (AMD EPYC): ∇FD 0.92x Atlas, 0.96x HyQ and Talos, 0.97x iiwa, 0.98x UR5 and Tiago, 1.00x
-    Panda; FD 0.94-0.98x; ∇ID 0.97-1.07x, so the inverse dynamics' Jacobian keeps the order of emission."""
+    Panda; FD 0.94-0.97x; ∇ID 0.97-1.07x, so the inverse dynamics' Jacobian keeps the order of emission."""
     defined = {st[0] for st in stmts if st[0] is not None}
     ops = [[d for d in dict.fromkeys(st[2]) if d in defined] for st in stmts]
     users, left = {}, {}

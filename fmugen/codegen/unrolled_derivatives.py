@@ -664,7 +664,7 @@ class _DenseProduct:
                           f"    const int c = cols{s_}[u];"]
             # a pass holds its sums in registers: both kinds at once up to half of ROWS, else one kind at
             # a time, ROWS rows a pass
-            R = self.ROWS if lanes == 4 else self.ROWS_WIDE
+            R = self._rows(lanes)
             passes = [(("q", "d"), 0, nb)] if 2 * nb <= R else \
                 [((kind,), r0, min(R, nb - r0)) for kind in ("q", "d") for r0 in range(0, nb, R)]
             for kinds, r0, w in passes:
@@ -677,6 +677,10 @@ class _DenseProduct:
     #: AVX-512 variant, sixteen of its 32 registers
     ROWS = 48
     ROWS_WIDE = 128
+
+    def _rows(self, lanes: int) -> int:
+        """The rows of sums a pass holds with registers of ``lanes`` doubles."""
+        return self.ROWS if lanes == 4 else self.ROWS_WIDE
 
     def _pass(self, kinds, lo: int, r0: int, w: int, nb: int, ncols: int, t0: int, lanes: int = 4) -> list:
         """Span rows lo + r0 .. lo + r0 + w - 1 of column c (the span's u-th) for each kind ("q": the column
@@ -758,7 +762,7 @@ class _DenseProduct:
                 lines.append(f"            memset(out2 + {k3} * c, 0, {lo} * sizeof(double));")
             if hi < n:
                 lines.append(f"            memset(out2 + {k3} * c + {hi}, 0, {n - hi} * sizeof(double));")
-            R = self.ROWS if lanes == 4 else self.ROWS_WIDE
+            R = self._rows(lanes)
             for r0 in range(0, nb, R):
                 w = min(R, nb - r0)
                 lines += ["            " + x for x in self._sums(
